@@ -1,0 +1,69 @@
+"""SDINS and control-system telemetry from the true flight: noise and faults.
+
+Every random draw comes from its own child of one ``numpy.random.SeedSequence``
+so a seed reproduces a flight exactly and changing one fault setting does not
+reshuffle the noise of the others.
+"""
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+
+from aerosid.simulation.case import FaultSpec, SensorSpec
+
+RAW_COLUMNS = ["t_s", "ax_m_s2", "ay_m_s2", "az_m_s2", "p_rad_s", "q_rad_s", "r_rad_s",
+               "d1_rad", "d2_rad", "d3_rad", "d4_rad", "V_m_s", "h_m"]
+IMU_COLUMNS = RAW_COLUMNS[1:7]
+
+
+def noisy_channels(clean: dict[str, np.ndarray], spec: SensorSpec, rng: np.random.Generator) -> dict[str, np.ndarray]:
+    """Add white Gaussian noise of the configured 1-sigma to every channel."""
+    sigma = dict(zip(IMU_COLUMNS, (*spec.accel_noise_m_s2, *spec.gyro_noise_rad_s)))
+    sigma.update({f"d{i}_rad": spec.fin_noise_rad for i in range(1, 5)})
+    sigma.update({"V_m_s": spec.V_noise_m_s, "h_m": spec.h_noise_m})
+    n = len(clean["t_s"])
+    out = {"t_s": clean["t_s"].copy()}
+    for col in RAW_COLUMNS[1:]:
+        out[col] = clean[col] + sigma[col] * rng.standard_normal(n)
+    return out
+
+
+def dropout_mask(t: np.ndarray, spec: FaultSpec, rng: np.random.Generator) -> np.ndarray:
+    """Bursts of loss of all channels: a Poisson process of starts with uniform lengths."""
+    duration = t[-1] - t[0]
+    n_bursts = rng.poisson(spec.dropout_rate_per_s * duration)
+    mask = np.zeros(len(t), dtype=bool)
+    starts = rng.uniform(t[0], t[-1], n_bursts)
+    lengths = rng.uniform(*spec.dropout_length_s, n_bursts)
+    for s, length in zip(starts, lengths):
+        mask |= (t >= s) & (t < s + length)
+    return mask
+
+
+def sync_gap_mask(t: np.ndarray, spec: FaultSpec) -> np.ndarray:
+    start = t[0] + spec.sync_gap_at * (t[-1] - t[0])
+    return (t >= start) & (t < start + spec.sync_gap_s)
+
+
+def apply_faults(noisy: dict[str, np.ndarray], sigma_imu: np.ndarray, spec: FaultSpec,
+                 rng_drop: np.random.Generator, rng_out: np.random.Generator):
+    """Returns (telemetry frame, fault masks frame on the full grid)."""
+    t = noisy["t_s"]
+    n = len(t)
+    drop = dropout_mask(t, spec, rng_drop)
+    as_nan = drop & (rng_drop.uniform(size=n) < spec.dropout_nan_fraction)
+    sync = sync_gap_mask(t, spec)
+    missing_row = (drop & ~as_nan) | sync
+    masks = {"t_s": t, "dropout": drop | sync, "dropout_missing_row": missing_row, "dropout_nan": as_nan & ~sync,
+             "sync_gap": sync}
+    data = {k: v.copy() for k, v in noisy.items()}
+    for j, col in enumerate(IMU_COLUMNS):
+        hit = rng_out.uniform(size=n) < spec.outlier_probability
+        size = rng_out.uniform(*spec.outlier_size_sigma, n) * sigma_imu[j]
+        sign = np.where(rng_out.uniform(size=n) < 0.5, -1.0, 1.0)
+        data[col] = np.where(hit, data[col] + sign * size, data[col])
+        masks[f"outlier_{col}"] = hit & ~(drop | sync)
+    for col in RAW_COLUMNS[1:]:
+        data[col][masks["dropout_nan"]] = np.nan
+    frame = pd.DataFrame({c: data[c] for c in RAW_COLUMNS})[~missing_row].reset_index(drop=True)
+    return frame, pd.DataFrame(masks)

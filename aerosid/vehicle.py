@@ -1,0 +1,204 @@
+"""Vehicle descriptions: mass properties, reference geometry, sensors, fin mixing,
+and the preflight aerodynamic model, read from a TOML file.
+
+Built-in vehicles live in ``aerosid/data/<name>/vehicle.toml``; a path to any
+other TOML file with the same layout works too.
+"""
+from __future__ import annotations
+
+import math
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from aerosid.rigid_body import InertiaConstants, inertia_constants
+
+DATA_DIR = Path(__file__).parent / "data"
+
+
+class VehicleError(ValueError):
+    """A vehicle file is missing a value or holds a non-physical one."""
+
+    def __init__(self, file: str, key: str, message: str):
+        self.file, self.key = file, key
+        super().__init__(f"{file}: [{key}] {message}")
+
+
+@dataclass(frozen=True)
+class PreflightAero:
+    """Preflight aerodynamic coefficients, SI per radian, nose moment reference.
+
+    Pitch/yaw fin derivatives are per radian of delta_p/2 and delta_y/2 (per
+    "pair"); Cl_delta_r per radian of delta_r = d1+d2+d3+d4.
+    """
+
+    CN_alpha: float
+    Cm_alpha_nose: float
+    CN_delta_p: float
+    Cm_delta_p_nose: float
+    CN_0: float
+    Cm_0_nose: float
+    CY_delta_y: float
+    Cn_delta_y_nose: float
+    Cl_0: float
+    Cl_alpha_r: float
+    Cl_cos4phi: float
+    Cl_delta_r: float
+    CA_0: float
+    CA_alpha2: float
+    mach_breakpoints: tuple[float, ...]
+    slope_factor: tuple[float, ...]
+
+    def slope_multiplier(self, mach):
+        """Mach multiplier on the normal-force and pitching-moment slopes [-]."""
+        return np.interp(mach, self.mach_breakpoints, self.slope_factor)
+
+
+@dataclass(frozen=True)
+class Vehicle:
+    """A flight vehicle. Masses [kg], inertias [kg m^2], lengths [m], areas [m^2]."""
+
+    name: str
+    description: str
+    mass_kg: float
+    Ixx_kg_m2: float
+    Iyy_kg_m2: float
+    Izz_kg_m2: float
+    Ixz_kg_m2: float
+    S_m2: float
+    d_m: float
+    x_cg_m: float
+    accel_offset_m: tuple[float, float, float]
+    mixing: tuple[tuple[float, ...], ...]
+    fin_limit_rad: float
+    mach_reference: float
+    database_path: Path
+    preflight: PreflightAero
+    source: str = field(default="<memory>", compare=False)
+
+    @property
+    def inertia(self) -> InertiaConstants:
+        return inertia_constants(self.Ixx_kg_m2, self.Iyy_kg_m2, self.Izz_kg_m2, self.Ixz_kg_m2)
+
+    @property
+    def xcg_over_d(self) -> float:
+        return self.x_cg_m / self.d_m
+
+    def mix(self, d1, d2, d3, d4):
+        """Fin deflections [rad] -> (delta_r, delta_p, delta_y) [rad] (seed Table 1)."""
+        m = self.mixing
+        fins = (d1, d2, d3, d4)
+        return tuple(sum(m[i][j] * fins[j] for j in range(4)) for i in range(3))
+
+    def unmix(self, delta_r, delta_p, delta_y):
+        """(delta_r, delta_p, delta_y) [rad] -> fin deflections d1..d4 [rad] (minimum-norm)."""
+        pinv = np.linalg.pinv(np.asarray(self.mixing))
+        cmd = np.array([delta_r, delta_p, delta_y], dtype=float)
+        return tuple(pinv @ cmd)
+
+    def summary(self) -> str:
+        p = self.preflight
+        deg = math.pi / 180.0
+        rows = [
+            f"vehicle {self.name}: {self.description}",
+            f"  mass {self.mass_kg:g} kg; Ixx {self.Ixx_kg_m2:g}, Iyy {self.Iyy_kg_m2:g}, "
+            f"Izz {self.Izz_kg_m2:g}, Ixz {self.Ixz_kg_m2:g} kg m^2",
+            f"  S {self.S_m2:.4f} m^2, d {self.d_m:g} m, x_cg {self.x_cg_m:g} m (x_cg/d {self.xcg_over_d:.3f})",
+            f"  accelerometer offset from CG {self.accel_offset_m} m",
+            f"  preflight at M {self.mach_reference}: CN_alpha {p.CN_alpha * deg:.4f}/deg, "
+            f"Cm_alpha(nose) {p.Cm_alpha_nose * deg:.4f}/deg, CN_delta_p {p.CN_delta_p * deg:.5f}/deg pair, "
+            f"Cm_delta_p(nose) {p.Cm_delta_p_nose * deg:.5f}/deg pair",
+        ]
+        return "\n".join(rows)
+
+
+_REQUIRED = {
+    "mass": ["mass_kg", "Ixx_kg_m2", "Iyy_kg_m2", "Izz_kg_m2", "Ixz_kg_m2"],
+    "reference": ["S_m2", "d_m", "x_cg_m"],
+    "sensors": ["accel_offset_m"],
+    "controls": ["mixing", "fin_limit_rad"],
+    "aero": ["database", "mach_reference"],
+}
+
+
+def builtin_vehicles() -> list[str]:
+    return sorted(p.parent.name for p in DATA_DIR.glob("*/vehicle.toml"))
+
+
+def resolve_vehicle_path(name_or_path: str | Path) -> Path:
+    """A built-in vehicle name (``seed-rlv``) or a path to a vehicle TOML file."""
+    candidate = DATA_DIR / str(name_or_path) / "vehicle.toml"
+    if candidate.is_file():
+        return candidate
+    path = Path(name_or_path)
+    if path.is_file():
+        return path
+    raise VehicleError(str(name_or_path), "-", f"no such vehicle file or built-in vehicle "
+                       f"(built-in: {', '.join(builtin_vehicles())})")
+
+
+def load_vehicle(name_or_path: str | Path = "seed-rlv") -> Vehicle:
+    """Read and check a vehicle description; raises VehicleError naming file and key."""
+    path = resolve_vehicle_path(name_or_path)
+    src = str(path)
+    try:
+        doc = tomllib.loads(path.read_text())
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+        raise VehicleError(src, "-", f"not valid TOML: {exc}") from exc
+    for section, keys in _REQUIRED.items():
+        if section not in doc:
+            raise VehicleError(src, section, "section missing")
+        for key in keys:
+            if key not in doc[section]:
+                raise VehicleError(src, f"{section}.{key}", "value missing")
+    m, ref = doc["mass"], doc["reference"]
+
+    def positive(section, key):
+        value = doc[section][key]
+        if not isinstance(value, (int, float)) or not math.isfinite(value) or value <= 0:
+            raise VehicleError(src, f"{section}.{key}", f"must be a positive number, got {value!r}")
+        return float(value)
+
+    mass = positive("mass", "mass_kg")
+    Ixx, Iyy, Izz = (positive("mass", k) for k in ("Ixx_kg_m2", "Iyy_kg_m2", "Izz_kg_m2"))
+    Ixz = float(m["Ixz_kg_m2"])
+    if Ixx * Izz - Ixz**2 <= 0:
+        raise VehicleError(src, "mass.Ixz_kg_m2",
+                           f"Gamma = Ixx*Izz - Ixz^2 = {Ixx * Izz - Ixz**2:g} <= 0: not a physical inertia")
+    # the triangle inequality for principal inertias (of the pitch-plane pair)
+    if Iyy > Ixx + Izz or Ixx > Iyy + Izz or Izz > Ixx + Iyy:
+        raise VehicleError(src, "mass", f"inertias Ixx={Ixx}, Iyy={Iyy}, Izz={Izz} violate the triangle inequality")
+    S, d = positive("reference", "S_m2"), positive("reference", "d_m")
+    offset = doc["sensors"]["accel_offset_m"]
+    if len(offset) != 3:
+        raise VehicleError(src, "sensors.accel_offset_m", "needs three numbers (x, y, z) [m]")
+    mixing = doc["controls"]["mixing"]
+    if len(mixing) != 3 or any(len(row) != 4 for row in mixing):
+        raise VehicleError(src, "controls.mixing", "needs 3 rows (roll, pitch, yaw) of 4 fin weights")
+    pre = doc["aero"].get("preflight", {})
+    names = [f.name for f in PreflightAero.__dataclass_fields__.values()]
+    missing = [n for n in names if n not in pre]
+    if missing:
+        raise VehicleError(src, "aero.preflight", f"missing {', '.join(missing)}")
+    preflight = PreflightAero(**{n: (tuple(pre[n]) if isinstance(pre[n], list) else float(pre[n])) for n in names})
+    return Vehicle(
+        name=str(doc.get("name", path.parent.name)),
+        description=str(doc.get("description", "")),
+        mass_kg=mass,
+        Ixx_kg_m2=Ixx,
+        Iyy_kg_m2=Iyy,
+        Izz_kg_m2=Izz,
+        Ixz_kg_m2=Ixz,
+        S_m2=S,
+        d_m=d,
+        x_cg_m=float(ref["x_cg_m"]),
+        accel_offset_m=tuple(float(v) for v in offset),
+        mixing=tuple(tuple(float(v) for v in row) for row in mixing),
+        fin_limit_rad=positive("controls", "fin_limit_rad"),
+        mach_reference=float(doc["aero"]["mach_reference"]),
+        database_path=path.parent / doc["aero"]["database"],
+        preflight=preflight,
+        source=src,
+    )

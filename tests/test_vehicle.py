@@ -1,0 +1,44 @@
+import numpy as np
+import pytest
+
+from aerosid.aerodb import AeroDatabase
+from aerosid.aerodb_build import build_text
+from aerosid.vehicle import VehicleError, load_vehicle
+
+
+def test_builtin_database_file_matches_its_generator():
+    veh = load_vehicle("seed-rlv")
+    assert veh.database_path.read_text() == build_text("seed-rlv")
+
+
+def test_database_interpolates_the_seed_table_3_slope_at_mach_12_4():
+    veh = load_vehicle("seed-rlv")
+    db = AeroDatabase.load(veh.database_path)
+    a = np.deg2rad(np.array([0.5, 1.6, 3.0]))
+    np.testing.assert_allclose(db.cn_r(a, 12.4) / np.rad2deg(a), 0.0305, rtol=1e-9)
+    np.testing.assert_allclose(db.cm_r_nose(a, 12.4) / np.rad2deg(a), -0.0578, rtol=1e-9)
+
+
+def test_fin_mixing_round_trip():
+    veh = load_vehicle("seed-rlv")
+    fins = veh.unmix(0.01, 0.2, -0.05)
+    np.testing.assert_allclose(veh.mix(*fins), (0.01, 0.2, -0.05), atol=1e-15)
+    # seed Table 1: delta_p = -d2 + d4
+    assert veh.mix(0.0, -0.1, 0.0, 0.1)[1] == pytest.approx(0.2)
+
+
+@pytest.mark.parametrize("edit, key", [
+    (("Ixx_kg_m2 = 220.0", "Ixx_kg_m2 = -220.0"), "mass.Ixx_kg_m2"),
+    (("Ixz_kg_m2 = 12.0", "Ixz_kg_m2 = 800.0"), "mass.Ixz_kg_m2"),
+    (("mass_kg = 1500.0\n", ""), "mass.mass_kg"),
+    (("S_m2 = 0.7853981633974483", "S_m2 = 0"), "reference.S_m2"),
+])
+def test_bad_vehicle_file_names_file_and_key(tmp_path, edit, key):
+    src = load_vehicle("seed-rlv").source
+    text = open(src).read()
+    assert edit[0] in text
+    bad = tmp_path / "vehicle.toml"
+    bad.write_text(text.replace(edit[0], edit[1]))
+    with pytest.raises(VehicleError) as err:
+        load_vehicle(bad)
+    assert str(bad) in str(err.value) and key in str(err.value)
