@@ -1,0 +1,103 @@
+"""A small, safe expression language for model terms.
+
+Terms are written over the flight signals (``alpha``, ``q_hat``, ``mach``,
+``delta_p`` …, see ``aerosid.effects``) with numbers, ``+ - * / **``, unary
+minus, parentheses and a whitelist of element-wise functions.  An expression is
+parsed with Python's ``ast`` in ``eval`` mode and then *interpreted* node by node
+here: nothing is ever compiled or executed, so attribute access, subscripts,
+comprehensions, lambdas, names outside the signal list and calls outside the
+whitelist are rejected with a message that says where.
+"""
+from __future__ import annotations
+
+import ast
+from typing import Mapping
+
+import numpy as np
+
+FUNCTIONS = {
+    "sin": np.sin, "cos": np.cos, "tan": np.tan, "arctan": np.arctan, "tanh": np.tanh,
+    "exp": np.exp, "log": np.log, "sqrt": np.sqrt, "abs": np.abs, "sign": np.sign,
+}
+_BINARY = {ast.Add: np.add, ast.Sub: np.subtract, ast.Mult: np.multiply, ast.Div: np.divide, ast.Pow: np.power}
+_UNARY = {ast.USub: np.negative, ast.UAdd: np.positive}
+MAX_LENGTH = 500
+
+
+class ExpressionError(ValueError):
+    """A term that is not valid in the expression language."""
+
+    def __init__(self, expression: str, message: str, column: int | None = None):
+        self.expression, self.column = expression, column
+        where = f" at column {column + 1}" if column is not None else ""
+        super().__init__(f"bad term {expression!r}{where}: {message}")
+
+
+def parse(expression: str, signals: set[str] | frozenset[str]) -> ast.Expression:
+    """Parse and check an expression against the allowed signal names; returns the tree."""
+    if not isinstance(expression, str) or not expression.strip():
+        raise ExpressionError(str(expression), "empty expression")
+    if len(expression) > MAX_LENGTH:
+        raise ExpressionError(expression[:40] + "...", f"longer than {MAX_LENGTH} characters")
+    try:
+        tree = ast.parse(expression.strip(), mode="eval")
+    except SyntaxError as exc:
+        raise ExpressionError(expression, f"syntax error ({exc.msg})", (exc.offset or 1) - 1) from None
+    _check(tree.body, expression, frozenset(signals))
+    return tree
+
+
+def _check(node: ast.AST, text: str, signals: frozenset[str]) -> None:
+    col = getattr(node, "col_offset", None)
+    if isinstance(node, ast.Constant):
+        if isinstance(node.value, bool) or not isinstance(node.value, (int, float)):
+            raise ExpressionError(text, f"only numbers are allowed as constants, not {node.value!r}", col)
+    elif isinstance(node, ast.Name):
+        if node.id not in signals:
+            known = ", ".join(sorted(signals))
+            raise ExpressionError(text, f"unknown name {node.id!r}; available signals: {known}", col)
+    elif isinstance(node, ast.BinOp):
+        if type(node.op) not in _BINARY:
+            raise ExpressionError(text, f"operator {type(node.op).__name__} is not allowed (use + - * / **)", col)
+        _check(node.left, text, signals)
+        _check(node.right, text, signals)
+    elif isinstance(node, ast.UnaryOp):
+        if type(node.op) not in _UNARY:
+            raise ExpressionError(text, f"operator {type(node.op).__name__} is not allowed", col)
+        _check(node.operand, text, signals)
+    elif isinstance(node, ast.Call):
+        if not isinstance(node.func, ast.Name) or node.func.id not in FUNCTIONS:
+            name = node.func.id if isinstance(node.func, ast.Name) else ast.unparse(node.func)
+            raise ExpressionError(text, f"call of {name!r} is not allowed; functions: {', '.join(FUNCTIONS)}", col)
+        if node.keywords or len(node.args) != 1:
+            raise ExpressionError(text, f"{node.func.id}() takes exactly one argument", col)
+        _check(node.args[0], text, signals)
+    elif isinstance(node, ast.Attribute):
+        raise ExpressionError(text, "attribute access is not allowed", col)
+    else:
+        raise ExpressionError(text, f"{type(node).__name__} is not allowed in a term", col)
+
+
+def _eval(node: ast.AST, values: Mapping[str, np.ndarray]):
+    if isinstance(node, ast.Constant):
+        return float(node.value)
+    if isinstance(node, ast.Name):
+        return np.asarray(values[node.id], dtype=float)
+    if isinstance(node, ast.BinOp):
+        return _BINARY[type(node.op)](_eval(node.left, values), _eval(node.right, values))
+    if isinstance(node, ast.UnaryOp):
+        return _UNARY[type(node.op)](_eval(node.operand, values))
+    if isinstance(node, ast.Call):
+        return FUNCTIONS[node.func.id](_eval(node.args[0], values))
+    raise AssertionError(f"unchecked node {type(node).__name__}")  # parse() rejects everything else
+
+
+def evaluate(expression: str, values: Mapping[str, np.ndarray], length: int | None = None) -> np.ndarray:
+    """Evaluate an expression on named arrays; a constant expression broadcasts to `length`."""
+    tree = parse(expression, frozenset(values))
+    with np.errstate(all="ignore"):
+        out = np.asarray(_eval(tree.body, values), dtype=float)
+    if out.ndim == 0:
+        n = length if length is not None else len(next(iter(values.values())))
+        out = np.full(n, float(out))
+    return out

@@ -1,0 +1,48 @@
+"""From a smoothed segment to the flight data the regression reads (method.md §7–§10):
+air data, flight coefficients, fin mixing, and alpha/beta from the database."""
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+
+from aerosid.aerodb import AeroDatabase
+from aerosid.flight_coefficients import flight_coefficients
+from aerosid.inversion import invert_alpha_beta
+from aerosid.vehicle import Vehicle
+
+FIN_COLUMNS = ("d1_rad", "d2_rad", "d3_rad", "d4_rad")
+
+
+def build_flight_data(smoothed: pd.DataFrame, measured: pd.DataFrame, vehicle: Vehicle, db: AeroDatabase,
+                      flight: str = "flight") -> pd.DataFrame:
+    """smoothed: a SmoothedSegment frame; measured: the preprocessed rows of the same
+    segment (same t_s), whose ``*_clean`` columns give fins, V and h.  Rows where V, h
+    or a fin is unavailable (inside an unfilled gap) are left out."""
+    t = smoothed["t_s"].to_numpy()
+    if len(measured) != len(t) or not np.allclose(measured["t_s"].to_numpy(), t, atol=1e-9, rtol=0):
+        raise ValueError("smoothed and measured frames are not on the same time grid")
+    clean = {c: measured[f"{c}_clean"].to_numpy(dtype=float) for c in (*FIN_COLUMNS, "V_m_s", "h_m")}
+    ok = np.all(np.isfinite(np.column_stack(list(clean.values()))), axis=1) & (clean["V_m_s"] > 0)
+    s = smoothed.loc[ok].reset_index(drop=True)
+    fins = [clean[c][ok] for c in FIN_COLUMNS]
+    V, h = clean["V_m_s"][ok], clean["h_m"][ok]
+    delta_r, delta_p, delta_y = (np.asarray(x) for x in vehicle.mix(*fins))
+    acc = s[["X1_m_s2", "Y1_m_s2", "Z1_m_s2"]].to_numpy()
+    ang = s[["L1_rad_s2", "M1_rad_s2", "N1_rad_s2"]].to_numpy()
+    acc_sig = s[["sigma_X1_m_s2", "sigma_Y1_m_s2", "sigma_Z1_m_s2"]].to_numpy()
+    ang_sig = s[["sigma_L1_rad_s2", "sigma_M1_rad_s2", "sigma_N1_rad_s2"]].to_numpy()
+    fc = flight_coefficients(vehicle, V, h, acc, ang, acc_sig, ang_sig)
+    inv = invert_alpha_beta(fc.CN, fc.CY, fc.air.mach, delta_p, delta_y, db, vehicle.preflight)
+    return pd.DataFrame({
+        "t_s": s["t_s"].to_numpy(),
+        "flight": flight,
+        "segment": s["segment"].to_numpy(),
+        "V_m_s": V, "h_m": h,
+        "rho_kg_m3": fc.air.rho_kg_m3, "mach": fc.air.mach, "qbar_pa": fc.air.qbar_pa,
+        "CA": fc.CA, "CY": fc.CY, "CN": fc.CN, "Cl": fc.Cl, "Cm": fc.Cm, "Cn": fc.Cn,
+        **{f"sigma_{k}": v for k, v in fc.sigma.items()},
+        "alpha_rad": inv.alpha_rad, "beta_rad": inv.beta_rad,
+        "alpha_r_rad": inv.alpha_r_rad, "phi_r_rad": inv.phi_r_rad, "inversion_J": inv.J,
+        "delta_p_rad": delta_p, "delta_y_rad": delta_y, "delta_r_rad": delta_r,
+        "p_rad_s": s["p_rad_s"].to_numpy(), "q_rad_s": s["q_rad_s"].to_numpy(), "r_rad_s": s["r_rad_s"].to_numpy(),
+    })

@@ -1,0 +1,140 @@
+"""Model specifications: which terms each channel's linear model holds.
+
+A term is ``NAME = EXPRESSION`` (expression in ``aerosid.expressions`` over the
+signals below) or the bare name of a catalogue effect (``pitch_damping``), which
+brings its own coefficient name and term.  The defaults are method.md §11.
+
+Spec files are TOML, one table per channel::
+
+    [Cm]
+    terms = ["Cm_0 = 1", "Cm_alpha = alpha", "Cm_delta_p = delta_p/2", "pitch_damping"]
+"""
+from __future__ import annotations
+
+import tomllib
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from aerosid.effects import CATALOGUE
+from aerosid.expressions import ExpressionError, evaluate, parse
+
+SIGNALS = ("alpha", "beta", "alpha_r", "phi_r", "mach", "V", "qbar", "delta_p", "delta_y", "delta_r",
+           "p", "q", "r", "p_hat", "q_hat", "r_hat", "t")
+CHANNELS = ("CN", "Cm", "CY", "Cn", "Cl")
+
+
+class ModelSpecError(ValueError):
+    """A model specification that cannot be used; names the file and the term."""
+
+
+@dataclass(frozen=True)
+class Term:
+    coefficient: str
+    expression: str
+    effect: str | None = None  # the catalogue effect it came from, if any
+
+
+@dataclass(frozen=True)
+class ChannelModel:
+    channel: str
+    terms: tuple[Term, ...]
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        return tuple(t.coefficient for t in self.terms)
+
+    def regressors(self, signals: dict[str, np.ndarray]) -> pd.DataFrame:
+        n = len(signals["alpha"])
+        return pd.DataFrame({t.coefficient: evaluate(t.expression, signals, n) for t in self.terms})
+
+    def with_term(self, term: Term) -> "ChannelModel":
+        if term.coefficient in self.names:
+            return self
+        return ChannelModel(self.channel, self.terms + (term,))
+
+
+DEFAULT_TERMS = {
+    "CN": ["CN_0 = 1", "CN_alpha = alpha", "CN_delta_p = delta_p/2"],
+    "Cm": ["Cm_0 = 1", "Cm_alpha = alpha", "Cm_delta_p = delta_p/2"],
+    "CY": ["CY_0 = 1", "CY_beta = beta", "CY_delta_y = delta_y/2"],
+    "Cn": ["Cn_0 = 1", "Cn_beta = beta", "Cn_delta_y = delta_y/2"],
+    "Cl": ["Cl_0 = 1", "Cl_alpha_r = alpha_r", "Cl_cos4phi = cos(4*phi_r)", "Cl_delta_r = delta_r"],
+}
+
+
+def parse_term(text: str, channel: str, source: str = "<memory>") -> Term:
+    """``NAME = EXPR`` or a catalogue effect name (its channel must match)."""
+    text = text.strip()
+    if "=" not in text:
+        effect = CATALOGUE.get(text)
+        if effect is None:
+            raise ModelSpecError(f"{source}: [{channel}] term {text!r} is neither 'NAME = EXPRESSION' nor a "
+                                 f"catalogue effect ({', '.join(CATALOGUE)})")
+        if effect.channel != channel:
+            raise ModelSpecError(f"{source}: [{channel}] effect {text!r} belongs to channel {effect.channel}")
+        return Term(effect.coefficient, effect.term, effect.name)
+    name, _, expr = text.partition("=")
+    name = name.strip()
+    if not name.isidentifier():
+        raise ModelSpecError(f"{source}: [{channel}] coefficient name {name!r} is not a plain identifier")
+    try:
+        parse(expr, frozenset(SIGNALS))
+    except ExpressionError as exc:
+        raise ModelSpecError(f"{source}: [{channel}] {name}: {exc}") from exc
+    return Term(name, expr.strip())
+
+
+def default_models() -> dict[str, ChannelModel]:
+    return {ch: ChannelModel(ch, tuple(parse_term(t, ch, "<default>") for t in terms))
+            for ch, terms in DEFAULT_TERMS.items()}
+
+
+def load_models(path: str | Path, base: dict[str, ChannelModel] | None = None) -> dict[str, ChannelModel]:
+    """Read a TOML spec; channels it does not mention keep `base` (default: the defaults)."""
+    src = str(path)
+    try:
+        doc = tomllib.loads(Path(path).read_text())
+    except FileNotFoundError:
+        raise ModelSpecError(f"{src}: no such model specification file") from None
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+        raise ModelSpecError(f"{src}: not valid TOML ({exc})") from exc
+    models = dict(base or default_models())
+    for channel, table in doc.items():
+        if channel not in CHANNELS:
+            raise ModelSpecError(f"{src}: unknown channel [{channel}]; channels: {', '.join(CHANNELS)}")
+        terms = table.get("terms") if isinstance(table, dict) else None
+        if not isinstance(terms, list) or not terms or not all(isinstance(t, str) for t in terms):
+            raise ModelSpecError(f"{src}: [{channel}] needs terms = [\"NAME = EXPRESSION\", ...]")
+        parsed = tuple(parse_term(t, channel, src) for t in terms)
+        names = [t.coefficient for t in parsed]
+        dup = {n for n in names if names.count(n) > 1}
+        if dup:
+            raise ModelSpecError(f"{src}: [{channel}] coefficient(s) {sorted(dup)} appear twice")
+        models[channel] = ChannelModel(channel, parsed)
+    return models
+
+
+def models_to_toml(models: dict[str, ChannelModel]) -> str:
+    lines = []
+    for ch, m in models.items():
+        terms = ", ".join(f'"{t.effect}"' if t.effect else f'"{t.coefficient} = {t.expression}"' for t in m.terms)
+        lines.append(f"[{ch}]\nterms = [{terms}]\n")
+    return "\n".join(lines)
+
+
+def signals_from_flight_data(fd: pd.DataFrame, d_m: float) -> dict[str, np.ndarray]:
+    """The named signals of a FlightData frame (SI, radians)."""
+    V = fd["V_m_s"].to_numpy(float)
+    p, q, r = (fd[c].to_numpy(float) for c in ("p_rad_s", "q_rad_s", "r_rad_s"))
+    return {
+        "alpha": fd["alpha_rad"].to_numpy(float), "beta": fd["beta_rad"].to_numpy(float),
+        "alpha_r": fd["alpha_r_rad"].to_numpy(float), "phi_r": fd["phi_r_rad"].to_numpy(float),
+        "mach": fd["mach"].to_numpy(float), "V": V, "qbar": fd["qbar_pa"].to_numpy(float),
+        "delta_p": fd["delta_p_rad"].to_numpy(float), "delta_y": fd["delta_y_rad"].to_numpy(float),
+        "delta_r": fd["delta_r_rad"].to_numpy(float), "p": p, "q": q, "r": r,
+        "p_hat": p * d_m / (2 * V), "q_hat": q * d_m / (2 * V), "r_hat": r * d_m / (2 * V),
+        "t": fd["t_s"].to_numpy(float),
+    }

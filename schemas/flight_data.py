@@ -1,0 +1,52 @@
+"""Pandera model of the flight data the regression reads: air data, flight
+coefficients (moments about the CG), recovered alpha/beta and the controls,
+pooled over the segments of a flight (or of several flights)."""
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+import pandera.pandas as pa
+from pandera.typing import Series
+
+
+def _f(unit: str, description: str = "", **checks) -> object:
+    return pa.Field(metadata={"unit": unit, "description": description}, **checks)
+
+
+class FlightData(pa.DataFrameModel):
+    t_s: Series[float] = _f("s")
+    flight: Series[str] = _f("-", "flight identifier")
+    segment: Series[str] = _f("-", "segment id within the flight")
+    V_m_s: Series[float] = _f("m/s", "navigation speed", gt=0)
+    h_m: Series[float] = _f("m", "altitude", ge=-5000, le=81000)
+    rho_kg_m3: Series[float] = _f("kg/m^3", "US-1976 density", gt=0)
+    mach: Series[float] = _f("-", "Mach number", gt=0)
+    qbar_pa: Series[float] = _f("Pa", "dynamic pressure", gt=0)
+    CA: Series[float] = _f("-", "axial force coefficient")
+    CY: Series[float] = _f("-", "side force coefficient (+ right)")
+    CN: Series[float] = _f("-", "normal force coefficient (+ up, = -C_z)")
+    Cl: Series[float] = _f("-", "rolling moment coefficient")
+    Cm: Series[float] = _f("-", "pitching moment coefficient about the CG")
+    Cn: Series[float] = _f("-", "yawing moment coefficient about the CG")
+    sigma_CN: Series[float] = _f("-", "1-sigma of CN from the smoother", ge=0)
+    sigma_Cm: Series[float] = _f("-", "1-sigma of Cm from the smoother", ge=0)
+    alpha_rad: Series[float] = _f("rad", "angle of attack from the database inversion", ge=-1.6, le=1.6)
+    beta_rad: Series[float] = _f("rad", "sideslip from the database inversion", ge=-1.6, le=1.6)
+    alpha_r_rad: Series[float] = _f("rad", "total angle of attack", ge=0, le=3.2)
+    phi_r_rad: Series[float] = _f("rad", "aerodynamic roll angle", ge=-3.2, le=3.2)
+    inversion_J: Series[float] = _f("-", "residual cost of the inversion", ge=0)
+    delta_p_rad: Series[float] = _f("rad", "pitch deflection -d2+d4 (models use delta_p/2)")
+    delta_y_rad: Series[float] = _f("rad", "yaw deflection -d1+d3 (models use delta_y/2)")
+    delta_r_rad: Series[float] = _f("rad", "roll deflection d1+d2+d3+d4")
+    p_rad_s: Series[float] = _f("rad/s", "smoothed roll rate")
+    q_rad_s: Series[float] = _f("rad/s", "smoothed pitch rate")
+    r_rad_s: Series[float] = _f("rad/s", "smoothed yaw rate")
+
+    class Config:
+        strict = False
+        coerce = False
+
+    @pa.dataframe_check(name="all_finite")
+    def _finite(cls, df: pd.DataFrame) -> pd.Series:
+        num = df.select_dtypes(include=[np.number])
+        return pd.Series(np.all(np.isfinite(num.to_numpy(dtype=float)), axis=1), index=df.index)
