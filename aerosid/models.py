@@ -77,7 +77,7 @@ def parse_term(text: str, channel: str, source: str = "<memory>") -> Term:
             raise ModelSpecError(f"{source}: [{channel}] effect {text!r} belongs to channel {effect.channel}")
         return Term(effect.coefficient, effect.term, effect.name)
     name, _, expr = text.partition("=")
-    name = name.strip()
+    name, expr = name.strip(), expr.strip()
     if not name.isidentifier():
         raise ModelSpecError(f"{source}: [{channel}] coefficient name {name!r} is not a plain identifier")
     try:
