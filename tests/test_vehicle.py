@@ -30,7 +30,7 @@ def test_fin_mixing_round_trip():
 @pytest.mark.parametrize("edit, key", [
     (("Ixx_kg_m2 = 220.0", "Ixx_kg_m2 = -220.0"), "mass.Ixx_kg_m2"),
     (("Ixz_kg_m2 = 12.0", "Ixz_kg_m2 = 800.0"), "mass.Ixz_kg_m2"),
-    (("mass_kg = 1500.0\n", ""), "mass.mass_kg"),
+    (("mass_kg = 1100.0\n", ""), "mass.mass_kg"),
     (("S_m2 = 0.7853981633974483", "S_m2 = 0"), "reference.S_m2"),
 ])
 def test_bad_vehicle_file_names_file_and_key(tmp_path, edit, key):

@@ -1,0 +1,95 @@
+"""Regression stage: fit each channel's model to the flight data (method.md §11).
+
+Produces the coefficients table (``coefficients.parquet``) and a Table-3-style
+report: preflight vs flight estimate vs sigma (coloured-residual corrected, and
+plain least squares) vs F, printed per degree as the seed does.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import pandas as pd
+
+from aerosid.aeromodel import AeroModel
+from aerosid.models import ChannelModel, default_models, signals_from_flight_data
+from aerosid.regression import LinearFit, fit_linear
+from aerosid.vehicle import Vehicle
+
+#: Coefficients that are slopes per radian (printed per degree); the rest are per unit term.
+ANGLE_TERMS = ("alpha", "beta", "alpha_r", "delta_p/2", "delta_y/2", "delta_r")
+
+
+@dataclass(frozen=True)
+class Identification:
+    """Fits per channel on the samples inside the Mach window."""
+
+    fits: dict  # channel -> LinearFit
+    models: dict  # channel -> ChannelModel
+    references: dict  # coefficient -> preflight value about the CG (per rad)
+    n_samples: int
+    mach_window: tuple[float, float]
+
+    def table(self, alpha: float = 0.05) -> pd.DataFrame:
+        """The coefficients.parquet rows."""
+        rows = []
+        for channel, fit in self.fits.items():
+            for rec in fit.as_records(alpha):
+                ident = bool(np.isfinite(rec["estimate"]))
+                rows.append({
+                    "channel": channel, "coefficient": rec["coefficient"],
+                    "estimate": float(rec["estimate"]), "std_error": float(rec["std_error"]),
+                    "std_error_ols": float(rec["std_error_ols"]), "ci_low": float(rec["ci_low"]),
+                    "ci_high": float(rec["ci_high"]), "reference": float(self.references.get(rec["coefficient"], np.nan)),
+                    "t_value": float(rec["t_value"]), "p_value": float(rec["p_value"]),
+                    "identifiable": ident,
+                    "expression": next((t.expression for t in self.models[channel].terms
+                                        if t.coefficient == rec["coefficient"]), ""),
+                })
+        return pd.DataFrame(rows)
+
+    def summary(self) -> str:
+        """Seed Table 3 style: per degree (per degree pair for fins) where the term is an angle."""
+        lines = [f"Regression on {self.n_samples} samples, Mach {self.mach_window[0]:.2f}..{self.mach_window[1]:.2f}; "
+                 "moments about the CG; angle slopes per degree (fins per degree pair)",
+                 f"{'coefficient':<20}{'preflight':>12}{'estimate':>12}{'sigma':>11}{'sigma OLS':>11}"
+                 f"{'95% interval':>26}"]
+        tab = self.table()
+        for channel, fit in self.fits.items():
+            lines.append(f"[{channel}]  F = {fit.f_stat:,.0f} (corrected {fit.f_stat_corrected:,.1f}), "
+                         f"R^2 = {fit.r2:.4f}, PSE = {fit.pse:.3g}, condition number {fit.condition_number:.1f}")
+            for _, row in tab[tab.channel == channel].iterrows():
+                k = math.pi / 180 if row["expression"].replace(" ", "") in ANGLE_TERMS else 1.0
+                lines.append(f"  {row['coefficient']:<18}{row['reference'] * k:>12.5g}{row['estimate'] * k:>12.5g}"
+                             f"{row['std_error'] * k:>11.2g}{row['std_error_ols'] * k:>11.2g}"
+                             f"   [{row['ci_low'] * k:.5g}, {row['ci_high'] * k:.5g}]")
+            for i, w in enumerate(fit.warnings, 1):
+                lines.append(f"  warning [{i}] {w}")
+        return "\n".join(lines)
+
+
+def mach_window_mask(mach: np.ndarray, reference: float, half_width: float | None) -> np.ndarray:
+    if half_width is None:
+        return np.ones(len(mach), dtype=bool)
+    return np.abs(mach - reference) <= half_width
+
+
+def identify(flight_data: pd.DataFrame, vehicle: Vehicle, models: dict[str, ChannelModel] | None = None,
+             mach_half_width: float | None = 0.5, cov: str = "morelli_klein") -> Identification:
+    """Fit every channel's model on the samples with |M - M_ref| <= mach_half_width."""
+    models = models or default_models()
+    fd = flight_data.sort_values(["flight", "t_s"], kind="stable").reset_index(drop=True)
+    mask = mach_window_mask(fd["mach"].to_numpy(), vehicle.mach_reference, mach_half_width)
+    fd = fd.loc[mask].reset_index(drop=True)
+    if len(fd) < 50:
+        raise ValueError(f"only {len(fd)} samples inside Mach {vehicle.mach_reference} ± {mach_half_width}: "
+                         "too few to fit the models")
+    signals = signals_from_flight_data(fd, vehicle.d_m)
+    fits: dict[str, LinearFit] = {}
+    for channel, model in models.items():
+        X = model.regressors(signals)
+        fits[channel] = fit_linear(fd[channel].to_numpy(float), X, names=model.names, channel=channel, cov=cov)
+    refs = AeroModel.preflight(vehicle).linear_truth()
+    window = (float(fd["mach"].min()), float(fd["mach"].max()))
+    return Identification(fits, dict(models), refs, len(fd), window)

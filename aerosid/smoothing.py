@@ -1,0 +1,64 @@
+"""Smoothing stage: a preprocessed segment -> smoothed states with sigma (method.md §2–§6).
+
+A thin adapter between the preprocessed telemetry frame (``*_clean`` columns and
+quality flags) and ``aerosid.estimation.smooth_flight``; it builds the
+``SmoothedSegment`` frame (schemas/smoothed.py).
+"""
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+
+import numpy as np
+import pandas as pd
+
+from aerosid.estimation import EBMOptions, EBMResult, smooth_flight
+from aerosid.preprocess import usable_mask
+from aerosid.vehicle import Vehicle
+from schemas.smoothed import RATE_DERIVATIVE_COLUMNS, STATE_COLUMNS
+
+IMU_CHANNELS = ("ax_m_s2", "ay_m_s2", "az_m_s2", "p_rad_s", "q_rad_s", "r_rad_s")
+SmoothingOptions = EBMOptions
+
+
+@dataclass(frozen=True)
+class SmoothedSegmentResult:
+    segment_id: str
+    frame: pd.DataFrame
+    result: EBMResult
+
+    def nis_record(self) -> str:
+        r = self.result
+        return json.dumps({"mean_nis_filter": r.mean_nis_filter, "mean_nis_smoother": r.mean_nis_smoother,
+                           "band": list(r.nis_band), "R_sigma": list(map(float, r.R_sigma))})
+
+
+def smooth_segment_frame(rows: pd.DataFrame, vehicle: Vehicle, options: EBMOptions | None = None,
+                         segment_id: str = "seg00") -> SmoothedSegmentResult:
+    """Run the EKF + MBF smoother over one segment of a preprocessed frame."""
+    t = rows["t_s"].to_numpy(dtype=float)
+    z = rows[[f"{c}_clean" for c in IMU_CHANNELS]].to_numpy(dtype=float)
+    valid = usable_mask(rows, list(IMU_CHANNELS)) & np.isfinite(z)
+    if not valid.any():
+        raise ValueError(f"segment {segment_id}: no usable IMU sample ({len(rows)} rows, all dropout or flagged)")
+    filled = pd.DataFrame(z).interpolate(limit_direction="both").to_numpy()
+    res = smooth_flight(t, np.where(valid, z, np.nan), valid,
+                        (vehicle.Ixx_kg_m2, vehicle.Iyy_kg_m2, vehicle.Izz_kg_m2, vehicle.Ixz_kg_m2),
+                        vehicle.accel_offset_m, z_filled=filled, options=options)
+    data = {"t_s": t, "segment": np.full(len(t), segment_id, dtype=object)}
+    for j, name in enumerate(res.state_names):
+        data[STATE_COLUMNS[name]] = res.x_smooth[:, j]
+    for j, name in enumerate(res.state_names):
+        data[f"sigma_{STATE_COLUMNS[name]}"] = res.sigma_smooth[:, j]
+    angacc, angacc_sigma = res.angular_acceleration()
+    for j, col in enumerate(RATE_DERIVATIVE_COLUMNS):
+        data[col] = angacc[:, j]
+        data[f"sigma_{col}"] = angacc_sigma[:, j]
+    data["nis_filter"] = res.nis_filter
+    data["nis_smoother"] = res.nis_smoother
+    data["updated"] = res.used.any(axis=1)
+    for j, m in enumerate(res.meas_names):
+        data[f"gated_{m}"] = res.gate_flags[:, j]
+    frame = pd.DataFrame(data)
+    frame["segment"] = frame["segment"].astype(str)
+    return SmoothedSegmentResult(segment_id, frame, res)
