@@ -86,5 +86,90 @@ def simulate(case_name, effects, seed, out_dir, duration, rate, no_faults, list_
         click.echo(f"  wrote {path}")
 
 
+def _hermetic_defaults() -> None:
+    """Prefect without a server: its ephemeral mode; no analytics call leaves the machine."""
+    import os
+
+    os.environ.setdefault("PREFECT_SERVER_ANALYTICS_ENABLED", "false")
+    os.environ.setdefault("PREFECT_LOGGING_LEVEL", "INFO")
+
+
+@main.command()
+@click.argument("telemetry", type=click.Path(exists=True, dir_okay=False, path_type=Path))
+@click.option("--vehicle", default="seed-rlv", show_default=True, metavar="NAME_OR_FILE",
+              help="Built-in vehicle name or a vehicle TOML file.")
+@click.option("--out", "out_dir", required=True, type=click.Path(file_okay=False, path_type=Path),
+              help="Run folder: every stage's Parquet, coefficients.parquet, run.json, ledger.jsonl.")
+@click.option("--flight", default=None, help="Flight identifier (default: from the file name).")
+@click.option("--window", "windows", multiple=True, nargs=2, type=float, metavar="T0 T1",
+              help="Only this time window [s] (repeatable: each window is a phase/segment).")
+@click.option("--model", "model_spec", type=click.Path(exists=True, dir_okay=False), default=None,
+              help="Model specification TOML (default: the seed's linear models).")
+@click.option("--mach-half-width", type=float, default=0.5, show_default=True,
+              help="Regress on samples with |M - M_ref| <= this (M_ref from the vehicle file).")
+def run(telemetry, vehicle, out_dir, flight, windows, model_spec, mach_half_width):
+    """Run the whole pipeline on one telemetry file (Prefect flow process_flight).
+
+    \b
+    Stages: preprocess -> split into segments at long gaps -> EKF + MBF smoother
+    per segment -> air data, coefficients, alpha/beta inversion -> regression.
+    Needs no Prefect server (ephemeral mode). Re-running with the same inputs and
+    code reuses every stage's output; the ledger (RUN_DIR/ledger.jsonl) records all.
+    """
+    _hermetic_defaults()
+    from aerosid.preprocess import TelemetryError
+    from aerosid.vehicle import VehicleError
+    from flows.pipeline import process_flight
+
+    try:
+        summary = process_flight(str(telemetry), str(out_dir), vehicle=vehicle, flight=flight,
+                                 windows=[list(w) for w in windows] or None,
+                                 model_spec=str(model_spec) if model_spec else None,
+                                 mach_half_width=mach_half_width)
+    except (TelemetryError, VehicleError, ValueError) as exc:
+        raise click.ClickException(str(exc)) from exc
+    click.echo(f"flight {summary['flight']}: {summary['status']}; segments ok "
+               f"{[d['segment'] for d in summary['segments_ok']]}, failed {summary['segments_failed']}")
+    if "coefficients" in summary:
+        import pandas as pd
+
+        from aerosid.identify import format_table
+
+        click.echo(format_table(pd.read_parquet(summary["coefficients"]["path"])))
+        click.echo(f"wrote {out_dir}/coefficients.parquet, run.json, ledger.jsonl")
+    if summary["status"] == "failed":
+        raise click.ClickException("no segment could be processed; see the ledger")
+
+
+@main.command()
+@click.argument("file", type=click.Path(exists=True, dir_okay=False, path_type=Path))
+def audit(file):
+    """Trace FILE back to its raw telemetry and parameters through the ledger.
+
+    Looks for ledger.jsonl in FILE's folder and its parents, finds the stage
+    execution that wrote FILE's exact content (SHA-256), then follows its inputs.
+    """
+    import json as _json
+
+    from aerosid.provenance import sha256_file
+    from tasks import ledger
+
+    sha = sha256_file(file)
+    for led in ledger.find_ledgers(file.parent):
+        chain = ledger.trace(ledger.read(led), sha)
+        if chain:
+            click.echo(f"{file} (sha256 {sha[:16]}…), ledger {led}")
+            for depth, rec in chain:
+                pad = "  " * depth
+                click.echo(f"{pad}<- stage {rec['stage']} [{rec['status']}] flight {rec['flight']} "
+                           f"{rec.get('segment') or ''} run {rec['run_id']} at {rec['time_utc']} code {rec['code_version']}")
+                click.echo(f"{pad}   params {_json.dumps(rec.get('params'), sort_keys=True, default=str)}")
+                for inp in rec.get("inputs", []):
+                    click.echo(f"{pad}   input {inp['path']} sha256 {inp['sha256'][:16]}…")
+            return
+    raise click.ClickException(f"{file}: no ledger record produced this content (sha256 {sha[:16]}…); "
+                               "was it written by aerosid, or modified since?")
+
+
 if __name__ == "__main__":  # pragma: no cover
     sys.exit(main())

@@ -46,27 +46,36 @@ class Identification:
                     "identifiable": ident,
                     "expression": next((t.expression for t in self.models[channel].terms
                                         if t.coefficient == rec["coefficient"]), ""),
+                    "f_stat": float(fit.f_stat), "f_stat_corrected": float(fit.f_stat_corrected),
+                    "r2": float(fit.r2), "pse": float(fit.pse), "rms_residual": float(fit.rms_residual),
+                    "condition_number": float(fit.condition_number), "n_obs": int(fit.n_obs),
+                    "n_eff": float(fit.n_eff), "warnings": " | ".join(fit.warnings),
                 })
         return pd.DataFrame(rows)
 
     def summary(self) -> str:
-        """Seed Table 3 style: per degree (per degree pair for fins) where the term is an angle."""
-        lines = [f"Regression on {self.n_samples} samples, Mach {self.mach_window[0]:.2f}..{self.mach_window[1]:.2f}; "
-                 "moments about the CG; angle slopes per degree (fins per degree pair)",
-                 f"{'coefficient':<20}{'preflight':>12}{'estimate':>12}{'sigma':>11}{'sigma OLS':>11}"
-                 f"{'95% interval':>26}"]
-        tab = self.table()
-        for channel, fit in self.fits.items():
-            lines.append(f"[{channel}]  F = {fit.f_stat:,.0f} (corrected {fit.f_stat_corrected:,.1f}), "
-                         f"R^2 = {fit.r2:.4f}, PSE = {fit.pse:.3g}, condition number {fit.condition_number:.1f}")
-            for _, row in tab[tab.channel == channel].iterrows():
-                k = math.pi / 180 if row["expression"].replace(" ", "") in ANGLE_TERMS else 1.0
-                lines.append(f"  {row['coefficient']:<18}{row['reference'] * k:>12.5g}{row['estimate'] * k:>12.5g}"
-                             f"{row['std_error'] * k:>11.2g}{row['std_error_ols'] * k:>11.2g}"
-                             f"   [{row['ci_low'] * k:.5g}, {row['ci_high'] * k:.5g}]")
-            for i, w in enumerate(fit.warnings, 1):
-                lines.append(f"  warning [{i}] {w}")
-        return "\n".join(lines)
+        head = (f"Regression on {self.n_samples} samples, Mach {self.mach_window[0]:.2f}..{self.mach_window[1]:.2f}")
+        return head + "\n" + format_table(self.table())
+
+
+def format_table(table: pd.DataFrame) -> str:
+    """Seed Table 3 style text of a coefficients table: preflight vs estimate vs sigma
+    (corrected and plain OLS) vs F; angle slopes per degree (fins per degree pair)."""
+    lines = ["moments about the CG; angle slopes per degree (fin slopes per degree pair)",
+             f"{'coefficient':<20}{'preflight':>12}{'estimate':>12}{'sigma':>11}{'sigma OLS':>11}{'95% interval':>26}"]
+    for channel, rows in table.groupby("channel", sort=False):
+        first = rows.iloc[0]
+        lines.append(f"[{channel}]  F = {first['f_stat']:,.0f} (corrected {first['f_stat_corrected']:,.1f}), "
+                     f"R^2 = {first['r2']:.4f}, PSE = {first['pse']:.3g}, condition number "
+                     f"{first['condition_number']:.1f}, N = {first['n_obs']} (effective {first['n_eff']:.0f})")
+        for _, row in rows.iterrows():
+            k = math.pi / 180 if row["expression"].replace(" ", "") in ANGLE_TERMS else 1.0
+            lines.append(f"  {row['coefficient']:<18}{row['reference'] * k:>12.5g}{row['estimate'] * k:>12.5g}"
+                         f"{row['std_error'] * k:>11.2g}{row['std_error_ols'] * k:>11.2g}"
+                         f"   [{row['ci_low'] * k:.5g}, {row['ci_high'] * k:.5g}]")
+        for i, w in enumerate(w for w in first["warnings"].split(" | ") if w):
+            lines.append(f"  warning [{i + 1}] {w}")
+    return "\n".join(lines)
 
 
 def mach_window_mask(mach: np.ndarray, reference: float, half_width: float | None) -> np.ndarray:

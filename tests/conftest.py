@@ -7,3 +7,19 @@ from aerosid.simulation import load_case, simulate
 def reference_flight():
     """The seed-rlv reference flight, seed 0 (90 s at 100 Hz)."""
     return simulate(load_case("seed-rlv"), seed=0)
+
+
+@pytest.fixture(scope="session")
+def prefect_harness(tmp_path_factory):
+    """Prefect hermetically: a temporary PREFECT_HOME, no API URL, analytics off."""
+    import os
+
+    home = tmp_path_factory.mktemp("prefect-home")
+    os.environ["PREFECT_HOME"] = str(home)
+    os.environ.pop("PREFECT_API_URL", None)
+    os.environ["PREFECT_SERVER_ANALYTICS_ENABLED"] = "false"
+    os.environ["PREFECT_LOGGING_LEVEL"] = "WARNING"
+    from prefect.testing.utilities import prefect_test_harness
+
+    with prefect_test_harness():
+        yield home

@@ -1,0 +1,159 @@
+"""Prefect flows of aerosid: process_flight, reprocess_inbox, retry_failed, campaign.
+
+Flows hold the order of work only; every number is computed in ``aerosid`` and
+every file is read and written by ``tasks``.
+"""
+from __future__ import annotations
+
+import fcntl
+import os
+import time
+from contextlib import contextmanager
+from pathlib import Path
+
+from prefect import flow, get_run_logger
+
+from aerosid.provenance import sha256_file
+from flows.steps import FlightJob, check_flight_id, flight_id_from_path, run_flights
+from tasks import ledger
+from tasks.ledger import LEDGER_NAME
+
+
+@flow(name="process-flight", log_prints=True)
+def process_flight(telemetry: str, out_dir: str, vehicle: str = "seed-rlv", flight: str | None = None,
+                   windows: list | None = None, model_spec: str | None = None,
+                   preprocess_params: dict | None = None, smoothing_options: dict | None = None,
+                   mach_half_width: float | None = 0.5) -> dict:
+    """One telemetry file -> segments -> every stage -> coefficients (and run.json, ledger)."""
+    job = FlightJob(str(telemetry), str(out_dir), check_flight_id(flight or flight_id_from_path(telemetry)),
+                    vehicle, windows, model_spec, preprocess_params or {}, smoothing_options or {}, mach_half_width)
+    return run_flights([job])[0]
+
+
+@flow(name="campaign", log_prints=True)
+def campaign(telemetry_files: list[str], out_root: str, vehicle: str = "seed-rlv",
+             smoothing_options: dict | None = None, mach_half_width: float | None = 0.5) -> list[dict]:
+    """Many flights; their segments are submitted together so that a Dask task runner
+    (see ``campaign_runner``) spreads them over workers."""
+    jobs = []
+    for path in telemetry_files:
+        fid = flight_id_from_path(path)
+        jobs.append(FlightJob(str(path), str(Path(out_root) / fid), fid, vehicle,
+                              smoothing_options=smoothing_options or {}, mach_half_width=mach_half_width,
+                              ledger_path=str(Path(out_root) / LEDGER_NAME)))
+    return run_flights(jobs)
+
+
+def campaign_runner(dask_address: str | None = None, n_workers: int | None = None):
+    """The campaign flow on Dask when given a scheduler address or a worker count,
+    on the default task runner otherwise."""
+    if dask_address is None and not n_workers:
+        return campaign
+    from prefect_dask import DaskTaskRunner
+
+    runner = (DaskTaskRunner(address=dask_address) if dask_address
+              else DaskTaskRunner(cluster_kwargs={"n_workers": int(n_workers), "threads_per_worker": 1,
+                                                  "processes": True, "dashboard_address": None}))
+    return campaign.with_options(task_runner=runner)
+
+
+# ----------------------------------------------------------------------- inbox
+STATE_FILE = "run.json"
+
+
+def _stable(path: Path, wait_s: float) -> bool:
+    """A file still being written changes size or mtime within wait_s."""
+    a = path.stat()
+    time.sleep(wait_s)
+    b = path.stat()
+    return (a.st_size, a.st_mtime_ns) == (b.st_size, b.st_mtime_ns) and a.st_size > 0
+
+
+@contextmanager
+def _claim(lock_path: Path):
+    """Exclusive, non-blocking claim of a flight: yields True if this process holds it."""
+    lock_path.parent.mkdir(parents=True, exist_ok=True)
+    fd = os.open(lock_path, os.O_RDWR | os.O_CREAT, 0o644)
+    try:
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            yield False
+            return
+        try:
+            yield True
+        finally:
+            fcntl.flock(fd, fcntl.LOCK_UN)
+    finally:
+        os.close(fd)
+
+
+def _last_processed_sha(records: list[dict], flight: str) -> str | None:
+    for rec in reversed(records):
+        if rec.get("flight") == flight and rec.get("stage") == "preprocess" and rec.get("status") in ("ok", "reused"):
+            return rec["inputs"][0]["sha256"]
+    return None
+
+
+@flow(name="reprocess-inbox", log_prints=True)
+def reprocess_inbox(inbox: str, out_root: str, vehicle: str = "seed-rlv", pattern: str = "*.parquet",
+                    settle_s: float = 0.5) -> dict:
+    """Process every telemetry file in `inbox` that is new or whose content changed
+    (by SHA-256, not by name or time); skip the rest.  Files still being written
+    (size or mtime changing over settle_s, or hidden/temporary names) wait for the
+    next scan; a flight another run is processing is skipped (a file lock)."""
+    logger = get_run_logger()
+    root = Path(out_root)
+    led = root / LEDGER_NAME
+    files = sorted(p for p in Path(inbox).glob(pattern) if p.is_file() and not p.name.startswith("."))
+    report = {"processed": [], "unchanged": [], "busy": [], "not_ready": [], "failed": []}
+    if not files:
+        logger.info("inbox %s: no telemetry files matching %s", inbox, pattern)
+    for path in files:
+        flight = flight_id_from_path(path)
+        if not _stable(path, settle_s):
+            report["not_ready"].append(str(path))
+            continue
+        sha = sha256_file(path)
+        if _last_processed_sha(ledger.read(led), flight) == sha:
+            ledger.append(led, {"run_id": "inbox", "flight": flight, "segment": "", "stage": "inbox",
+                                "status": "unchanged", "inputs": [{"path": str(path), "sha256": sha}],
+                                "outputs": [], "error": None})
+            report["unchanged"].append(flight)
+            continue
+        with _claim(root / ".locks" / f"{flight}.lock") as mine:
+            if not mine:
+                report["busy"].append(flight)
+                continue
+            if _last_processed_sha(ledger.read(led), flight) == sha:  # done by a concurrent run meanwhile
+                report["unchanged"].append(flight)
+                continue
+            job = FlightJob(str(path), str(root / flight), flight, vehicle, ledger_path=str(led))
+            summary = run_flights([job])[0]
+            (report["processed"] if summary["status"] != "failed" else report["failed"]).append(flight)
+    logger.info("inbox scan: %s", {k: len(v) for k, v in report.items()})
+    return report
+
+
+@flow(name="retry-failed", log_prints=True)
+def retry_failed(out_root: str) -> dict:
+    """Re-run the flights whose latest smoothing of some segment failed, as recorded in
+    the ledger(s) under out_root.  Every other stage reuses its cached output (same
+    inputs, same code), so only the failed segments are computed again."""
+    import json
+
+    root = Path(out_root)
+    latest: dict[tuple, dict] = {}
+    ledgers = [root / LEDGER_NAME] + [p for p in root.glob(f"*/{LEDGER_NAME}")]
+    for led in ledgers:
+        for rec in ledger.read(led):
+            if rec.get("stage") == "smooth":
+                latest[(str(led), rec["flight"], rec["segment"])] = rec
+    failed = {(led, flight) for (led, flight, _), rec in latest.items() if rec["status"] == "failed"}
+    results = []
+    for led, flight in sorted(failed):
+        run_dir = Path(led).parent if Path(led).parent.joinpath(STATE_FILE).exists() else root / flight
+        state = json.loads((run_dir / STATE_FILE).read_text())
+        job = FlightJob(**{**state["job"], "ledger_path": led})
+        results.append(run_flights([job])[0])
+    return {"retried": [r["flight"] for r in results], "results": results}

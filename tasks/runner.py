@@ -1,0 +1,109 @@
+"""The common shape of a stage execution: hash the inputs, reuse a valid cached
+output, or compute, validate and write atomically; record it in the ledger.
+
+No numerics here: ``produce`` is a closure that calls the core.
+"""
+from __future__ import annotations
+
+import json
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable
+
+import pandas as pd
+import pandera.pandas as pa
+from pyarrow.lib import ArrowException
+
+from aerosid.io import read_parquet_metadata, write_parquet_atomic
+from aerosid.preprocess.errors import TelemetryError
+from aerosid.provenance import code_version, params_hash, sha256_file
+from schemas.telemetry import validate
+from tasks import ledger
+
+
+class StageFailed(RuntimeError):
+    """A stage failed for a numerical or data reason (not retried; the ledger has it)."""
+
+
+@dataclass(frozen=True)
+class StageContext:
+    """Where the ledger is and what this execution belongs to."""
+
+    ledger_path: str
+    run_id: str
+    flight: str
+    segment: str = ""
+
+
+@dataclass(frozen=True)
+class Produced:
+    """What a stage computed: the frame to write and numbers for the ledger."""
+
+    frame: pd.DataFrame
+    metadata: dict
+    rows_in: int
+    flagged_rows: int = 0
+    note: str = ""
+
+
+def read_validated(path: str | Path, schema: type[pa.DataFrameModel]) -> pd.DataFrame:
+    """Read a Parquet file and validate it; unreadable files name themselves."""
+    try:
+        frame = pd.read_parquet(path)
+    except (OSError, ArrowException, ValueError) as exc:
+        if isinstance(exc, FileNotFoundError):
+            raise
+        raise TelemetryError(f"not a readable Parquet file ({type(exc).__name__}: {exc})", file=str(path)) from exc
+    return validate(frame, schema, str(path))
+
+
+def cache_key(stage: str, input_hashes: list[str], params: dict) -> str:
+    return params_hash({"stage": stage, "inputs": input_hashes, "params": params, "code": code_version()})
+
+
+def execute(stage: str, ctx: StageContext, inputs: list[str | Path], output: str | Path, params: dict,
+            schema: type[pa.DataFrameModel], produce: Callable[[], Produced]) -> dict:
+    """Run one stage execution; returns a small JSON-able dict (path, sha256, status, rows)."""
+    output = Path(output)
+    in_hashes = [sha256_file(p) for p in inputs]
+    key = cache_key(stage, in_hashes, params)
+    base = {"run_id": ctx.run_id, "flight": ctx.flight, "segment": ctx.segment, "stage": stage,
+            "inputs": [{"path": str(p), "sha256": h} for p, h in zip(inputs, in_hashes)],
+            "params": params, "params_sha256": params_hash(params), "code_version": code_version(),
+            "cache_key": key}
+    started = time.perf_counter()
+    if output.is_file():
+        try:
+            cached = read_parquet_metadata(output).get("aerosid.cache_key") == key
+        except (OSError, ArrowException):
+            cached = False
+        if cached:
+            meta = read_parquet_metadata(output)
+            out = {"path": str(output), "sha256": sha256_file(output)}
+            ledger.append(ctx.ledger_path, {**base, "status": "reused", "outputs": [out],
+                                            "rows_in": int(meta.get("aerosid.rows_in", -1)),
+                                            "rows_out": int(meta.get("aerosid.rows_out", -1)),
+                                            "flagged_rows": int(meta.get("aerosid.flagged_rows", 0)),
+                                            "error": None, "duration_s": time.perf_counter() - started})
+            return {**out, "status": "reused", "stage": stage, "segment": ctx.segment}
+    try:
+        produced = produce()
+        metadata = {**{k: (v if isinstance(v, str) else json.dumps(v)) for k, v in produced.metadata.items()},
+                    "aerosid.kind": stage, "aerosid.cache_key": key, "aerosid.code_version": code_version(),
+                    "aerosid.params": json.dumps(params, sort_keys=True, default=str),
+                    "aerosid.rows_in": str(produced.rows_in), "aerosid.rows_out": str(len(produced.frame)),
+                    "aerosid.flagged_rows": str(produced.flagged_rows)}
+        write_parquet_atomic(produced.frame, output, metadata=metadata,
+                             check=lambda tmp: validate(pd.read_parquet(tmp), schema, str(output)))
+    except Exception as exc:
+        ledger.append(ctx.ledger_path, {**base, "status": "failed", "outputs": [], "rows_in": None, "rows_out": None,
+                                        "flagged_rows": None, "error": f"{type(exc).__name__}: {exc}",
+                                        "duration_s": time.perf_counter() - started})
+        raise
+    out = {"path": str(output), "sha256": sha256_file(output)}
+    ledger.append(ctx.ledger_path, {**base, "status": "ok", "outputs": [out], "rows_in": produced.rows_in,
+                                    "rows_out": len(produced.frame), "flagged_rows": produced.flagged_rows,
+                                    "error": None, "note": produced.note,
+                                    "duration_s": time.perf_counter() - started})
+    return {**out, "status": "ok", "stage": stage, "segment": ctx.segment, "note": produced.note}
