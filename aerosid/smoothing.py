@@ -27,6 +27,17 @@ class SmoothedSegmentResult:
     frame: pd.DataFrame
     result: EBMResult
 
+    def divergence_note(self) -> str:
+        """Where the filter's windowed NIS left its band (sample times) [s]."""
+        r = self.result
+        idx = np.asarray(r.divergence_samples, dtype=int)
+        if idx.size == 0:
+            return "no divergence"
+        times = r.t_s[idx]
+        return (f"NIS far outside its band at {idx.size} samples, t = {times[0]:.2f}..{times[-1]:.2f} s "
+                f"(first samples {idx[:5].tolist()}); mean NIS filter {r.mean_nis_filter:.2f}, "
+                f"band {r.nis_band[0]:.2f}..{r.nis_band[1]:.2f}")
+
     def nis_record(self) -> str:
         r = self.result
         return json.dumps({"mean_nis_filter": r.mean_nis_filter, "mean_nis_smoother": r.mean_nis_smoother,

@@ -80,7 +80,7 @@ def smooth_segment_task(pre_path: str, run_dir: str, ctx: StageContext, segment:
         rows = pre.iloc[segment["start"]:segment["stop"]].reset_index(drop=True)
         smoothed = smooth_segment_frame(rows, load_vehicle(vehicle), SmoothingOptions(**options), segment["segment_id"])
         if smoothed.result.diverged:
-            raise StageFailed(f"segment {segment['segment_id']}: filter diverged; {smoothed.result.divergence_note()}")
+            raise StageFailed(f"segment {segment['segment_id']}: filter diverged: {smoothed.divergence_note()}")
         return Produced(smoothed.frame, {"aerosid.nis": smoothed.nis_record()}, rows_in=len(rows),
                         flagged_rows=int(smoothed.result.gate_flags.any(axis=1).sum()),
                         note=smoothed.result.summary())

@@ -1,0 +1,49 @@
+"""The whole method in memory, without orchestration: raw telemetry -> coefficients.
+
+The Prefect flow (flows/pipeline.py) runs exactly these stage functions, one task
+each, with Parquet files in between; this function is the reference it must
+reproduce (a test checks that it does, to the last bit).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import pandas as pd
+
+from aerosid.aerodb import AeroDatabase
+from aerosid.flight_data import build_flight_data
+from aerosid.identify import Identification, identify
+from aerosid.models import ChannelModel
+from aerosid.preprocess import PreprocessParams, PreprocessResult, preprocess
+from aerosid.segments import split_segments
+from aerosid.smoothing import SmoothedSegmentResult, SmoothingOptions, smooth_segment_frame
+from aerosid.vehicle import Vehicle
+
+
+@dataclass(frozen=True)
+class EBMRun:
+    preprocessed: PreprocessResult
+    smoothed: tuple[SmoothedSegmentResult, ...]
+    flight_data: pd.DataFrame
+    identification: Identification
+
+    def summary(self) -> str:
+        return "\n\n".join([self.preprocessed.summary(), *(s.result.summary() for s in self.smoothed),
+                            self.identification.summary()])
+
+
+def process_telemetry(raw: pd.DataFrame, vehicle: Vehicle, *, flight: str = "flight", windows=None,
+                      models: dict[str, ChannelModel] | None = None, preprocess_params: dict | None = None,
+                      smoothing_options: dict | None = None, mach_half_width: float | None = 0.5,
+                      min_segment_s: float = 5.0, source: str = "<memory>") -> EBMRun:
+    pre = preprocess(raw, PreprocessParams(**(preprocess_params or {})), source=source)
+    segments = split_segments(pre.frame["t_s"].to_numpy(), list(pre.long_gaps), windows, min_segment_s)
+    db = AeroDatabase.load(vehicle.database_path)
+    smoothed, parts = [], []
+    for seg in segments:
+        rows = pre.frame.iloc[seg.start:seg.stop].reset_index(drop=True)
+        sm = smooth_segment_frame(rows, vehicle, SmoothingOptions(**(smoothing_options or {})), seg.segment_id)
+        smoothed.append(sm)
+        parts.append(build_flight_data(sm.frame, rows, vehicle, db, flight))
+    fd = pd.concat(parts, ignore_index=True)
+    return EBMRun(pre, tuple(smoothed), fd, identify(fd, vehicle, models, mach_half_width))
