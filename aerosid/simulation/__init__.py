@@ -101,11 +101,22 @@ def _controller(case: SimulationCase):
     ap, veh = case.autopilot, case.vehicle
     limit = veh.fin_limit_rad
 
+    gamma_integral = [0.0, 0.0]  # integral of the flight-path error [rad s], time of the last call [s]
+
     def control(t: float, x: np.ndarray):
         q0, q1, q2, q3 = x[6:10]
         p, q, r = x[10:13]
         phi = math.atan2(2 * (q0 * q1 + q2 * q3), 1 - 2 * (q1 * q1 + q2 * q2))
-        dp_half = ap["delta_p_half_trim_rad"] + schedule(t, case.pitch_plan, case.period_s, case.ramp_s) - ap["kq"] * q
+        # guidance: a slow PI loop on the flight-path angle following a gently
+        # descending command, so that long flights glide instead of diving in
+        gamma = math.asin(-x[5] / math.sqrt(x[3] ** 2 + x[4] ** 2 + x[5] ** 2))
+        gamma_cmd = max(ap["gamma_floor_rad"], case.gamma0_rad - ap["gamma_rate_rad_s"] * t)
+        err = gamma_cmd - gamma
+        gamma_integral[0] += err * (t - gamma_integral[1])
+        gamma_integral[1] = t
+        guidance = ap["kgamma"] * err + ap["kgamma_i"] * gamma_integral[0]
+        dp_half = (ap["delta_p_half_trim_rad"] + guidance + schedule(t, case.pitch_plan, case.period_s, case.ramp_s)
+                   - ap["kq"] * q)
         phi_cmd = schedule(t, case.roll_plan, case.period_s, case.ramp_s)
         dr = ap["kphi"] * (phi - phi_cmd) + ap["kp"] * p
         dy_half = schedule(t, case.yaw_plan, case.period_s, case.ramp_s) - ap["kr"] * r

@@ -145,5 +145,6 @@ def integrate(plant: Plant, x0: np.ndarray, t: np.ndarray, controller) -> tuple[
             k4 = plant.derivative(x + h * k3, u)
             x = x + (h / 6.0) * (k1 + 2 * k2 + 2 * k3 + k4)
         if not np.all(np.isfinite(x)) or -x[2] < 0:
-            raise RuntimeError(f"simulation left the envelope at t = {t[k + 1]:.2f} s (h = {-x[2]:.0f} m)")
+            raise RuntimeError(f"simulation left the envelope at t = {t[k + 1]:.2f} s (h = {-x[2]:.0f} m): "
+                               "the unpowered glide has run out of energy; shorten --duration")
     return states, controls
