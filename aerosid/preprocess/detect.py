@@ -1,0 +1,202 @@
+"""Vectorised per-channel detectors (pure numpy/pandas functions on 1-D arrays).
+
+All functions take a channel's values on the uniform grid (``float64``, NaN where
+there is no usable value yet) and return boolean masks or scale estimates of the
+same length.  No Python loop runs per sample.
+"""
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+
+#: The one-sided spike test (next to a gap or the record edge) uses this multiple
+#: of the threshold: it cannot see whether a deviation returns.
+ONE_SIDED_FACTOR = 1.5
+
+#: Gaussian consistency factor of the MAD (sigma = MAD_TO_SIGMA * MAD).
+MAD_TO_SIGMA = 1.482602218505602
+
+
+def runs(mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Maximal runs of True in a 1-D bool array: ``(starts, ends)``, ends exclusive."""
+    m = np.asarray(mask, dtype=bool)
+    if m.size == 0:
+        empty = np.zeros(0, dtype=np.int64)
+        return empty, empty
+    d = np.diff(np.concatenate(([0], m.view(np.int8), [0])))
+    return np.flatnonzero(d == 1), np.flatnonzero(d == -1)
+
+
+def mark_runs(n: int, starts: np.ndarray, ends: np.ndarray) -> np.ndarray:
+    """Bool array of length ``n``, True inside the (non-overlapping) runs [start, end)."""
+    d = np.zeros(n + 1, dtype=np.int64)
+    np.add.at(d, starts, 1)
+    np.add.at(d, ends, -1)
+    return np.cumsum(d[:-1]) > 0
+
+
+def frozen_mask(x: np.ndarray, min_run: int) -> np.ndarray:
+    """True at the repeats of a stuck value.
+
+    A run of at least ``min_run`` consecutive grid samples with bit-identical finite
+    values is a frozen (stuck) sensor; the run's first sample (the last genuine
+    update) stays unflagged, the repeats are flagged.  NaN breaks a run.
+    """
+    x = np.asarray(x, dtype=np.float64)
+    n = x.size
+    if n < 2 or min_run < 2:
+        return np.zeros(n, dtype=bool)
+    same = np.zeros(n, dtype=bool)  # same[k]: x[k] repeats x[k-1]
+    same[1:] = (x[1:] == x[:-1]) & np.isfinite(x[1:])
+    starts, ends = runs(same)
+    keep = (ends - starts + 1) >= min_run  # identical samples = repeats + the first one
+    return mark_runs(n, starts[keep], ends[keep])
+
+
+def quantum(x: np.ndarray) -> float:
+    """Smallest non-zero step between consecutive finite samples (0 if none).
+
+    For quantised telemetry this is the least significant bit; for continuous data it
+    is tiny and harmless.  Used as a floor of the noise scale.
+    """
+    d = np.abs(np.diff(x))
+    d = d[np.isfinite(d) & (d > 0)]
+    return float(d.min()) if d.size else 0.0
+
+
+def noise_scale(x: np.ndarray, window: int, floor: float) -> tuple[np.ndarray, float]:
+    """Local robust noise standard deviation of ``x`` and its whole-record value.
+
+    The noise is seen through the second difference ``e_k = x_k - (x_{k-1}+x_{k+1})/2``
+    (variance 1.5 sigma^2 for white noise; a signal below a few Hz at >= 50 Hz barely
+    contributes).  sigma = 1.4826 median|e| / sqrt(1.5), the median taken over a
+    centred rolling window of ``window`` samples (spikes and steps, a few large
+    ``e`` each, do not move it).  Where the window holds too few values the
+    whole-record estimate is used.  Both are floored at ``floor``.
+    """
+    x = np.asarray(x, dtype=np.float64)
+    n = x.size
+    e = np.full(n, np.nan)
+    if n >= 3:
+        e[1:-1] = np.abs(x[1:-1] - 0.5 * (x[:-2] + x[2:]))
+    factor = MAD_TO_SIGMA / np.sqrt(1.5)
+    finite = e[np.isfinite(e)]
+    global_sigma = float(np.median(finite)) * factor if finite.size else float("nan")
+    if not np.isfinite(global_sigma):
+        global_sigma = floor
+    global_sigma = max(global_sigma, floor)
+    window = max(3, min(int(window), n))
+    local = pd.Series(e).rolling(window, center=True, min_periods=max(3, window // 5)).median().to_numpy()
+    local = local * factor
+    local = np.where(np.isfinite(local), local, global_sigma)
+    return np.maximum(local, floor), global_sigma
+
+
+def spike_mask(x: np.ndarray, half_window: int, sigma: np.ndarray, threshold: float) -> np.ndarray:
+    """Isolated spikes: samples that *both* neighbourhoods, left and right, reject.
+
+    With h = ``half_window`` and window medians (NaN skipped)
+
+        L1 = median x[k-h .. k-1],  L2 = median x[k-2h .. k-h-1],  L3 = median x[k-3h .. k-2h-1]
+        R1 = median x[k+1 .. k+h],  R2, R3 likewise to the right,
+
+    each side predicts x_k by linear extrapolation of its two nearest medians (window
+    centres at distance c = (h+1)/2 and c + h), ``P_L = (1 + w) L1 - w L2`` with
+    w = c/h (1.5 L1 - 0.5 L2 for large h), likewise ``P_R`` (exact on a ramp or a
+    pull-up; the medians make it blind to other spikes).  x_k is an outlier when it
+    lies on the *same side* of both predictions, each by more than the margin
+    ``threshold * sigma_k`` (+ a curvature allowance, below).
+
+    * A step (a level change that persists) agrees with one side, so its samples are
+      never flagged however large the step: "a spike returns".  Within about 2h
+      samples of a step the step itself widens the margin (see below), so a spike
+      there may be missed.
+    * Runs of up to about h/2 adjacent spikes are caught; a genuine pulse must last
+      longer than about h/2 samples.
+    * Curvature: on a parabola of curvature kappa both predictions miss by
+      -kappa c (c + h) / 2.  The signed estimate of that miss,
+      ``A = c (c+h) / (2h (2c+h)) (L2 + R2 - L1 - R1)`` (3/16 (...) for large h;
+      one-sided ``c (c+h) / (2 h^2) (L1 - 2 L2 + L3)``), only ever *widens* the
+      margin, on the side where the true value may lie beyond the predictions:
+      up-margin + max(A, 0), down-margin + max(-A, 0).  It never narrows it, because next to a step or a
+      ramp's corner c is unreliable.
+    * A window median needs at least 0.6 h values.  When one side cannot extrapolate
+      (record edge, next to a gap) the test is one-sided: it needs the other side's
+      three windows at least 80 % filled, uses ``ONE_SIDED_FACTOR`` times the
+      threshold and that side's own curvature allowance, and the few (>= 3) nearest
+      values on the short side, if any, must disagree as well.  In a short island
+      between gaps (no side can extrapolate) x must lie beyond both nearest medians
+      (>= 3 values each, no extrapolation) by ``ONE_SIDED_FACTOR`` times the
+      threshold.  Otherwise the sample is not tested (never flagged).
+    * Dynamics much faster than h samples with a large overshoot (e.g. a 10 Hz
+      actuator sampled at 100 Hz) look like a short spike burst and can be flagged.
+    """
+    x = np.asarray(x, dtype=np.float64)
+    n = x.size
+    if n < 3:
+        return np.zeros(n, dtype=bool)
+    h = max(1, int(half_window))
+    few = min(3, h)
+    need = max(few, int(np.ceil(0.6 * h)))
+    full = max(need, int(np.ceil(0.8 * h)))
+    s = pd.Series(x)
+    # roll[j] = median and cnt[j] = number of finite values of x[j-h+1 .. j]
+    roll_few = s.rolling(h, min_periods=few).median()
+    cnt = s.notna().astype(np.int64).rolling(h, min_periods=1).sum()
+    roll = roll_few.where(cnt >= need)
+
+    def med(shift: int, series=roll) -> np.ndarray:
+        return series.shift(shift).to_numpy()
+
+    def filled(shift: int) -> np.ndarray:
+        return cnt.shift(shift).fillna(0).to_numpy() >= full
+
+    n1_l, n1_r = med(1, roll_few), med(-h, roll_few)  # nearest windows, >= 3 values
+    l1, l2, l3 = med(1), med(h + 1), med(2 * h + 1)
+    r1, r2, r3 = med(-h), med(-2 * h), med(-3 * h)
+    # window centres: nearest at distance c = (h+1)/2 from k, the next at c + h, ...
+    c = 0.5 * (h + 1)
+    w = c / h                                        # linear extrapolation weight
+    k_two = c * (c + h) / (2.0 * h * (2.0 * c + h))  # -> 3/16 for large h
+    k_one = c * (c + h) / (2.0 * h * h)              # -> 3/8 for large h
+    with np.errstate(invalid="ignore"):
+        p_l = (1.0 + w) * l1 - w * l2
+        p_r = (1.0 + w) * r1 - w * r2
+        corr_two = k_two * (l2 + r2 - l1 - r1)
+        corr_l = k_one * (l1 - 2 * l2 + l3)
+        corr_r = k_one * (r1 - 2 * r2 + r3)
+    ok_l = np.isfinite(p_l)
+    ok_r = np.isfinite(p_r)
+    two = ok_l & ok_r
+    trust_l = ok_l & np.isfinite(corr_l) & filled(1) & filled(h + 1) & filled(2 * h + 1)
+    trust_r = ok_r & np.isfinite(corr_r) & filled(-h) & filled(-2 * h) & filled(-3 * h)
+    only_l = ~ok_r & trust_l
+    only_r = ~ok_l & trust_r
+    corr = np.where(two, corr_two, np.where(only_l, corr_l, np.where(only_r, corr_r, 0.0)))
+    corr = np.where(np.isfinite(corr), corr, 0.0)
+    base = np.where(two, threshold, ONE_SIDED_FACTOR * threshold) * sigma
+    # The curvature estimate only ever widens the margin, on the side where the true
+    # value may lie beyond the prediction (never narrows it: next to a step or a
+    # ramp's corner the estimate is unreliable).
+    margin_up = base + np.maximum(corr, 0.0)
+    margin_dn = base + np.maximum(-corr, 0.0)
+    with np.errstate(invalid="ignore"):
+        up_l, dn_l = x - p_l > margin_up, p_l - x > margin_dn
+        up_r, dn_r = x - p_r > margin_up, p_r - x > margin_dn
+        # one-sided: the other side's few nearest values, if any, must not agree either
+        limit = threshold * sigma
+        gup_r = ~np.isfinite(n1_r) | (x - n1_r > limit)
+        gdn_r = ~np.isfinite(n1_r) | (n1_r - x > limit)
+        gup_l = ~np.isfinite(n1_l) | (x - n1_l > limit)
+        gdn_l = ~np.isfinite(n1_l) | (n1_l - x > limit)
+    # a short island between gaps: no side can extrapolate; both nearest medians must
+    # disagree, in the same direction, by the one-sided margin
+    island = ~two & ~only_l & ~only_r & np.isfinite(n1_l) & np.isfinite(n1_r)
+    with np.errstate(invalid="ignore"):
+        wide = ONE_SIDED_FACTOR * threshold * sigma
+        island_out = ((x - n1_l > wide) & (x - n1_r > wide)) | ((n1_l - x > wide) & (n1_r - x > wide))
+    out = ((two & ((up_l & up_r) | (dn_l & dn_r)))
+           | (only_l & ((up_l & gup_r) | (dn_l & gdn_r)))
+           | (only_r & ((up_r & gup_l) | (dn_r & gdn_l)))
+           | (island & island_out))
+    return out & np.isfinite(x)
