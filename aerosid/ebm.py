@@ -16,7 +16,7 @@ from aerosid.identify import Identification, identify
 from aerosid.models import ChannelModel
 from aerosid.preprocess import PreprocessParams, PreprocessResult, preprocess
 from aerosid.segments import split_segments
-from aerosid.smoothing import SmoothedSegmentResult, SmoothingOptions, smooth_segment_frame
+from aerosid.smoothing import SmoothedSegmentResult, smooth_segment_frame
 from aerosid.vehicle import Vehicle
 
 
@@ -42,7 +42,7 @@ def process_telemetry(raw: pd.DataFrame, vehicle: Vehicle, *, flight: str = "fli
     smoothed, parts = [], []
     for seg in segments:
         rows = pre.frame.iloc[seg.start:seg.stop].reset_index(drop=True)
-        sm = smooth_segment_frame(rows, vehicle, SmoothingOptions(**(smoothing_options or {})), seg.segment_id)
+        sm = smooth_segment_frame(rows, vehicle, smoothing_options, seg.segment_id)
         smoothed.append(sm)
         parts.append(build_flight_data(sm.frame, rows, vehicle, db, flight))
     fd = pd.concat(parts, ignore_index=True)

@@ -18,7 +18,6 @@ from aerosid.vehicle import Vehicle
 from schemas.smoothed import RATE_DERIVATIVE_COLUMNS, STATE_COLUMNS
 
 IMU_CHANNELS = ("ax_m_s2", "ay_m_s2", "az_m_s2", "p_rad_s", "q_rad_s", "r_rad_s")
-SmoothingOptions = EBMOptions
 
 
 @dataclass(frozen=True)
@@ -44,9 +43,16 @@ class SmoothedSegmentResult:
                            "band": list(r.nis_band), "R_sigma": list(map(float, r.R_sigma))})
 
 
-def smooth_segment_frame(rows: pd.DataFrame, vehicle: Vehicle, options: EBMOptions | None = None,
+def smoothing_options(vehicle: Vehicle, overrides: dict | None = None) -> EBMOptions:
+    """The vehicle file's smoother defaults ([estimation]) with the caller's overrides on top."""
+    merged = {**vehicle.estimation, **(overrides or {})}
+    return EBMOptions(**{k: (tuple(v) if isinstance(v, list) else v) for k, v in merged.items()})
+
+
+def smooth_segment_frame(rows: pd.DataFrame, vehicle: Vehicle, options: dict | None = None,
                          segment_id: str = "seg00") -> SmoothedSegmentResult:
-    """Run the EKF + MBF smoother over one segment of a preprocessed frame."""
+    """Run the EKF + MBF smoother over one segment of a preprocessed frame;
+    options: EBMOptions fields overriding the vehicle's [estimation] defaults."""
     t = rows["t_s"].to_numpy(dtype=float)
     z = rows[[f"{c}_clean" for c in IMU_CHANNELS]].to_numpy(dtype=float)
     valid = usable_mask(rows, list(IMU_CHANNELS)) & np.isfinite(z)
@@ -55,7 +61,7 @@ def smooth_segment_frame(rows: pd.DataFrame, vehicle: Vehicle, options: EBMOptio
     filled = pd.DataFrame(z).interpolate(limit_direction="both").to_numpy()
     res = smooth_flight(t, np.where(valid, z, np.nan), valid,
                         (vehicle.Ixx_kg_m2, vehicle.Iyy_kg_m2, vehicle.Izz_kg_m2, vehicle.Ixz_kg_m2),
-                        vehicle.accel_offset_m, z_filled=filled, options=options)
+                        vehicle.accel_offset_m, z_filled=filled, options=smoothing_options(vehicle, options))
     data = {"t_s": t, "segment": np.full(len(t), segment_id, dtype=object)}
     for j, name in enumerate(res.state_names):
         data[STATE_COLUMNS[name]] = res.x_smooth[:, j]

@@ -76,6 +76,7 @@ class Vehicle:
     mach_reference: float
     database_path: Path
     preflight: PreflightAero
+    estimation: dict = field(default_factory=dict)  # smoother option defaults for this vehicle (EBMOptions names)
     source: str = field(default="<memory>", compare=False)
 
     @property
@@ -200,5 +201,6 @@ def load_vehicle(name_or_path: str | Path = "seed-rlv") -> Vehicle:
         mach_reference=float(doc["aero"]["mach_reference"]),
         database_path=path.parent / doc["aero"]["database"],
         preflight=preflight,
+        estimation={k: (tuple(v) if isinstance(v, list) else v) for k, v in doc.get("estimation", {}).items()},
         source=src,
     )

@@ -19,7 +19,7 @@ from aerosid.identify import identify
 from aerosid.models import load_models
 from aerosid.preprocess import PreprocessParams, preprocess
 from aerosid.segments import split_segments
-from aerosid.smoothing import SmoothingOptions, smooth_segment_frame
+from aerosid.smoothing import smooth_segment_frame
 from aerosid.vehicle import load_vehicle
 from schemas.coefficients import Coefficients
 from schemas.flight_data import FlightData
@@ -78,7 +78,7 @@ def smooth_segment_task(pre_path: str, run_dir: str, ctx: StageContext, segment:
     def produce() -> Produced:
         pre = read_validated(pre_path, PreprocessedTelemetry)
         rows = pre.iloc[segment["start"]:segment["stop"]].reset_index(drop=True)
-        smoothed = smooth_segment_frame(rows, load_vehicle(vehicle), SmoothingOptions(**options), segment["segment_id"])
+        smoothed = smooth_segment_frame(rows, load_vehicle(vehicle), options, segment["segment_id"])
         if smoothed.result.diverged:
             raise StageFailed(f"segment {segment['segment_id']}: filter diverged: {smoothed.divergence_note()}")
         return Produced(smoothed.frame, {"aerosid.nis": smoothed.nis_record()}, rows_in=len(rows),

@@ -55,14 +55,27 @@ class EBMOptions:
     segment_length: samples between covariance checkpoints of the compiled
     smoother (memory vs recomputation); spectrum_kappa: significance of a signal
     bin (noise-floor multiples); divergence_window_s [s] and
-    divergence_probability: windowed NIS test flagging divergence;
+    divergence_probability: windowed NIS test flagging samples; the segment
+    counts as diverged when the flagged samples form a run of at least
+    divergence_min_s [s] or exceed divergence_max_fraction of the samples (a
+    short NIS excursion at a sharp manoeuvre is reported, not fatal);
+    q_scale_bounds: the range auto-tuning may move Q within, relative to its
+    spectral estimate (mean NIS is set mostly by R; letting Q wander far to
+    hit a tight band trades lag for NIS and biases the smoothed derivatives);
+    q_chain_scale: multipliers of the spectral intensities of the X, Y, Z, L, M,
+    N chains.  The angular-acceleration chains are estimated from the gyros'
+    fourth-derivative spectrum, which is noise-dominated above ~1 Hz, so their
+    spectral intensity comes out too small and the smoothed L, M, N are
+    attenuated (on seed-rlv: M1 gain 0.93, L1 0.73-0.84, biasing C_m and C_l
+    slopes by -5 % and -20 %).  A vehicle file may set its own (seed-rlv:
+    (1, 1, 1, 1000, 3, 3), calibrated on simulated flights, docs/estimation.md);
     q_scale, r_scale: initial scalings.
     """
 
     f_max_hz: float = 4.0
     gate_probability: float | None = 1e-6
     auto_tune: bool = True
-    tune_r: bool = False
+    tune_r: bool = True
     max_tuning_iterations: int = 12
     nis_tolerance: float = 0.5
     use_numba: bool = True
@@ -70,6 +83,10 @@ class EBMOptions:
     spectrum_kappa: float = 15.0
     divergence_window_s: float = 1.0
     divergence_probability: float = 1e-6
+    divergence_min_s: float = 3.0
+    divergence_max_fraction: float = 0.10
+    q_scale_bounds: tuple = (0.5, 2.0)
+    q_chain_scale: tuple = (1.0, 1.0, 1.0, 1.0, 1.0, 1.0)
     q_scale: float = 1.0
     r_scale: float = 1.0
 
@@ -211,6 +228,20 @@ def chi2_band(dof: np.ndarray) -> tuple[float, float, float]:
     target = float(d.mean())
     half = 1.96 * math.sqrt(2.0 * float(d.sum())) / d.size
     return target, target - half, target + half
+
+
+def longest_run(flags: np.ndarray) -> int:
+    """Length of the longest run of True in a boolean array."""
+    if not flags.any():
+        return 0
+    edges = np.diff(np.concatenate([[0], flags.astype(np.int8), [0]]))
+    return int(np.max(np.flatnonzero(edges == -1) - np.flatnonzero(edges == 1)))
+
+
+def _diverged(dflag: np.ndarray, run, dt: float, opt) -> bool:
+    if not (np.all(np.isfinite(run.x_smooth)) and np.all(np.isfinite(run.sigma_smooth))):
+        return True
+    return bool(longest_run(dflag) * dt >= opt.divergence_min_s or dflag.mean() > opt.divergence_max_fraction)
 
 
 def divergence_flags(nis: np.ndarray, dof: np.ndarray, window: int, prob: float) -> np.ndarray:
@@ -377,6 +408,7 @@ def smooth_flight(t_s, z, valid, inertia_kg_m2, sensor_offset_m, z_filled=None,
         q_chain0[3 + i] = float(sum(Binv[i, j] ** 2 * spg[j].q for j in range(3)))
         ms3[i] = float(sum(Binv[i, j] ** 2 * spg[j].ms_derivative for j in range(3)))
         fband[3 + i] = spg[i].f_max_hz
+    q_chain0 = q_chain0 * np.asarray(opt.q_chain_scale, dtype=float)
     x0, P0, _ = initial_state(t_s, z, cand, model, sig_disp, l3_var=ms3)
 
     gate = chi2.isf(opt.gate_probability, 1) if opt.gate_probability else np.inf
@@ -426,6 +458,9 @@ def smooth_flight(t_s, z, valid, inertia_kg_m2, sensor_offset_m, z_filled=None,
         q_new = q_scale * step
         if lo_q > 0 and hi_q < np.inf and not (lo_q < q_new < hi_q):
             q_new = math.sqrt(lo_q * hi_q)
+        q_new = float(np.clip(q_new, *opt.q_scale_bounds))
+        if q_new == q_scale and r_change < 0.01:  # Q at a bound and R settled: stop
+            break
         q_scale = q_new
         r_fac = r_new
 
@@ -453,5 +488,5 @@ def smooth_flight(t_s, z, valid, inertia_kg_m2, sensor_offset_m, z_filled=None,
         q_chain=q_chain0 * q_scale, Q_diag=np.diag(Qd).copy(), f_band_hz=fband, x0=x0,
         P0_diag=np.diag(P0).copy(), gate_flags=run.gated, used=run.used, chan_nis_filter=cf,
         chan_nis_smoother=cs, tuning_history=tuple(history),
-        diverged=bool(dflag.mean() > 0.01), divergence_samples=div_idx,
+        diverged=_diverged(dflag, run, dt, opt), divergence_samples=div_idx,
         angacc=run.angacc, angacc_sigma=run.angacc_sigma)
