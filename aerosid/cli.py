@@ -94,6 +94,29 @@ def _hermetic_defaults() -> None:
     os.environ.setdefault("PREFECT_LOGGING_LEVEL", "INFO")
 
 
+class _NoTraceback:
+    """A logging filter: Prefect logs a failed run with its traceback; the CLI turns the
+    errors it expects into one clear message, so the log keeps only the message line
+    (AEROSID_TRACEBACK=1 keeps the traceback, for debugging)."""
+
+    @staticmethod
+    def filter(record) -> bool:
+        record.exc_info, record.exc_text = None, None
+        return True
+
+
+def _quiet_run_tracebacks() -> None:
+    import logging
+    import os
+
+    if os.environ.get("AEROSID_TRACEBACK"):
+        return
+    for name in ("prefect.flow_runs", "prefect.task_runs"):
+        logger = logging.getLogger(name)
+        if not any(isinstance(f, _NoTraceback) for f in logger.filters):
+            logger.addFilter(_NoTraceback())
+
+
 @main.command()
 @click.argument("telemetry", type=click.Path(exists=True, dir_okay=False, path_type=Path))
 @click.option("--vehicle", default="seed-rlv", show_default=True, metavar="NAME_OR_FILE",
@@ -119,15 +142,25 @@ def run(telemetry, vehicle, out_dir, flight, windows, model_spec, mach_half_widt
     _hermetic_defaults()
     from aerosid.preprocess import TelemetryError
     from aerosid.vehicle import VehicleError
-    from flows.pipeline import process_flight
 
     try:
+        _preflight(telemetry, vehicle, model_spec)  # bad input fails here, before Prefect starts
+        from flows.pipeline import process_flight
+        from flows.steps import check_flight_id
+
+        if flight is not None:
+            check_flight_id(flight)
+        _quiet_run_tracebacks()
         summary = process_flight(str(telemetry), str(out_dir), vehicle=vehicle, flight=flight,
                                  windows=[list(w) for w in windows] or None,
                                  model_spec=str(model_spec) if model_spec else None,
                                  mach_half_width=mach_half_width)
     except (TelemetryError, VehicleError, ValueError) as exc:
         raise click.ClickException(str(exc)) from exc
+    except OSError as exc:  # read-only or full output folder, a vanished file
+        where = f" ({exc.filename})" if exc.filename else ""
+        raise click.ClickException(f"cannot write the run folder {out_dir}: {exc.strerror or exc}{where}; "
+                                   "earlier outputs are left as they were") from exc
     click.echo(f"flight {summary['flight']}: {summary['status']}; segments ok "
                f"{[d['segment'] for d in summary['segments_ok']]}, failed {summary['segments_failed']}")
     if "coefficients" in summary:
@@ -138,7 +171,45 @@ def run(telemetry, vehicle, out_dir, flight, windows, model_spec, mach_half_widt
         click.echo(format_table(pd.read_parquet(summary["coefficients"]["path"])))
         click.echo(f"wrote {out_dir}/coefficients.parquet, run.json, ledger.jsonl")
     if summary["status"] == "failed":
-        raise click.ClickException("no segment could be processed; see the ledger")
+        reasons = "; ".join(f"{f['segment']}: {f['error']}" for f in summary["segments_failed"])
+        raise click.ClickException(f"{telemetry}: no segment could be processed ({reasons or 'no segment'}); "
+                                   f"see {out_dir}/ledger.jsonl")
+
+
+def _preflight(telemetry: Path, vehicle: str, model_spec: str | None) -> None:
+    """Cheap checks of the inputs before any flow starts: the telemetry file is
+    readable Parquet that follows RawTelemetry, has rows and no channel without a
+    single value; the vehicle file and the model specification load."""
+    import numpy as np
+    import pyarrow.parquet as pq
+
+    from aerosid.models import load_models
+    from aerosid.preprocess import TelemetryError
+    from aerosid.vehicle import load_vehicle
+    from schemas.telemetry import CHANNELS, RAW_COLUMNS, RawTelemetry, sentinel_mask
+    from tasks.runner import read_validated
+
+    try:
+        frame = read_validated(telemetry, RawTelemetry)
+    except TelemetryError as exc:
+        if exc.column in RAW_COLUMNS and "column_in_dataframe" in exc.reason:
+            extra = [c for c in pq.read_schema(telemetry).names if c not in RAW_COLUMNS]
+            if extra:
+                raise TelemetryError(f"{exc.reason}; columns outside the contract {extra}: misnamed? "
+                                     f"(the raw contract is {list(RAW_COLUMNS)})", file=exc.file,
+                                     column=exc.column, rows=exc.rows) from None
+        raise
+    if len(frame) == 0:
+        raise TelemetryError("no rows: nothing to process", file=str(telemetry))
+    for c in CHANNELS:
+        x = frame[c].to_numpy()
+        if not (np.isfinite(x) & ~sentinel_mask(x)).any():
+            raise TelemetryError(f"no value in the whole channel (all {len(frame)} rows NaN, infinite or a "
+                                 "no-data sentinel): the pipeline needs every channel", file=str(telemetry),
+                                 column=c, rows=range(len(frame)))
+    load_vehicle(vehicle)
+    if model_spec:
+        load_models(model_spec)
 
 
 @main.command()
@@ -170,6 +241,12 @@ def audit(file):
     raise click.ClickException(f"{file}: no ledger record produced this content (sha256 {sha[:16]}…); "
                                "was it written by aerosid, or modified since?")
 
+
+from aerosid.cli_modelling import diagnose, fit, history  # noqa: E402  (the modelling-loop commands)
+
+main.add_command(diagnose)
+main.add_command(fit)
+main.add_command(history)
 
 if __name__ == "__main__":  # pragma: no cover
     sys.exit(main())

@@ -23,3 +23,12 @@ def prefect_harness(tmp_path_factory):
 
     with prefect_test_harness():
         yield home
+
+
+@pytest.fixture(scope="session")
+def reference_run(reference_flight):
+    """The whole method in memory on the reference flight (seed 0)."""
+    from aerosid.ebm import process_telemetry
+    from aerosid.vehicle import load_vehicle
+
+    return process_telemetry(reference_flight.telemetry, load_vehicle("seed-rlv"), flight="reference")

@@ -1,0 +1,139 @@
+"""Candidate physical effects the diagnosis tests for (method.md §13).
+
+Every entry of the simulator's catalogue (:data:`aerosid.effects.CATALOGUE`) is a
+candidate under the *same name*; a few extra candidates cover effects the
+simulator cannot hide (rate damping in roll and yaw, alpha-dot, Mach dependence
+of the trim moment and of the fin effectiveness, non-linear force terms).  Each
+candidate is one extra regressor ``coefficient * term`` in one channel, with a
+one-line physical meaning.
+
+Terms are written in the model-spec expression language (``aerosid.expressions``)
+so that a finding can be pasted into a spec file.  One exception: ``alpha_dot``
+needs the signal ``alpha_dot_hat`` (alpha-dot d/(2V), from a smoothing
+derivative of the recovered alpha), which the model specs do not offer yet;
+it is diagnosed but marked ``addable = False``.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import pandas as pd
+import scipy.signal
+
+from aerosid.effects import CATALOGUE
+from aerosid.expressions import evaluate
+
+#: Half-length of the Savitzky-Golay window used to differentiate alpha and beta [s].
+DERIVATIVE_HALF_WINDOW_S = 0.25
+
+
+@dataclass(frozen=True)
+class Candidate:
+    """One candidate effect: ``channel += coefficient * term``."""
+
+    name: str  # catalogue name for catalogue effects
+    channel: str
+    coefficient: str
+    term: str  # expression over the signals (see aerosid.effects)
+    meaning: str  # one line of physics
+    catalogue: bool = False  # True: the simulator can hide it (aerosid simulate --effect NAME)
+    addable: bool = True  # False: the term uses a derived signal the model specs do not offer
+    alias_of: str | None = None  # when confusable with this candidate on a flight, it is reported under it
+
+    @property
+    def spec_term(self) -> str | None:
+        """What to put in a model spec file to add it (None when not addable)."""
+        if not self.addable:
+            return None
+        return self.name if self.catalogue else f"{self.coefficient} = {self.term}"
+
+    def regressor(self, signals: dict[str, np.ndarray]) -> np.ndarray:
+        n = len(signals["alpha"])
+        return evaluate(self.term, signals, n)
+
+
+def catalogue_candidates() -> tuple[Candidate, ...]:
+    return tuple(Candidate(e.name, e.channel, e.coefficient, e.term, e.description, catalogue=True)
+                 for e in CATALOGUE.values())
+
+
+def extra_candidates(mach_reference: float = 12.4) -> tuple[Candidate, ...]:
+    m = f"(mach - {mach_reference:g})"
+    return (
+        Candidate("alpha_dot", "Cm", "Cm_alpha_dot", "alpha_dot_hat",
+                  "alpha-dot damping: the fins feel the body's downwash with a lag, Cm_alpha_dot * alpha_dot d/(2V)",
+                  addable=False, alias_of="pitch_damping"),
+        Candidate("mach_cm0", "Cm", "Cm_0_mach", m,
+                  "Mach dependence of the trim moment: Cm_0 drifts with Mach (base flow, boundary layer)"),
+        Candidate("mach_cm_delta", "Cm", "Cm_delta_p_mach", f"delta_p/2*{m}",
+                  "Mach dependence of pitch-fin effectiveness (fin pressure rise changes with Mach)"),
+        Candidate("roll_damping", "Cl", "Cl_p", "p_hat",
+                  "roll damping: the fins oppose the roll rate, Cl_p * p d/(2V)"),
+        Candidate("roll_control_alpha", "Cl", "Cl_delta_r_alpha_r", "alpha_r*delta_r",
+                  "roll-fin effectiveness changes with total angle of attack (leeward fin shielding)"),
+        Candidate("yaw_damping", "Cn", "Cn_r", "r_hat",
+                  "yaw damping: moment opposing yaw rate, Cn_r * r d/(2V)"),
+        Candidate("beta_nonlinearity", "Cn", "Cn_beta_abs_beta", "beta*abs(beta)",
+                  "non-linear directional stability: cross-flow force grows as beta|beta|"),
+        Candidate("control_beta", "Cn", "Cn_beta_delta_y", "beta*delta_y/2",
+                  "control-sideslip interaction: yaw-fin effectiveness changes with sideslip"),
+        Candidate("cn_alpha_nonlinearity", "CN", "CN_alpha_abs_alpha", "alpha*abs(alpha)",
+                  "non-linear normal force: cross-flow (viscous) lift grows as alpha|alpha|"),
+        Candidate("mach_cn_alpha", "CN", "CN_alpha_mach", f"alpha*{m}",
+                  "Mach dependence of the normal-force slope"),
+        Candidate("cy_beta_nonlinearity", "CY", "CY_beta_abs_beta", "beta*abs(beta)",
+                  "non-linear side force: cross-flow force grows as beta|beta|"),
+    )
+
+
+def default_candidates(mach_reference: float = 12.4) -> tuple[Candidate, ...]:
+    """The catalogue (same names as ``aerosid simulate --effect``) followed by the extras."""
+    return catalogue_candidates() + extra_candidates(mach_reference)
+
+
+def smooth_derivative(t_s: np.ndarray, y: np.ndarray, groups: np.ndarray | None = None,
+                      half_window_s: float = DERIVATIVE_HALF_WINDOW_S) -> np.ndarray:
+    """dy/dt by a Savitzky-Golay (quadratic) derivative, computed per contiguous group.
+
+    Inside a group the samples are put on a uniform grid (median step; linear
+    interpolation over missing rows), differentiated, and read back at the
+    original times.  A derivative amplifies noise by ~2 pi f: the window
+    (2 x ``half_window_s``) is a low-pass at roughly 1/(2 half_window_s) Hz.
+    """
+    t_s = np.asarray(t_s, float)
+    y = np.asarray(y, float)
+    out = np.zeros_like(y)
+    if groups is None:
+        groups = np.zeros(len(t_s), dtype=int)
+    for g in pd.unique(groups):
+        idx = np.nonzero(groups == g)[0]
+        if idx.size < 5:
+            continue
+        t, v = t_s[idx], y[idx]
+        dt = float(np.median(np.diff(t))) if idx.size > 1 else 1.0
+        if not dt > 0:
+            continue
+        grid = np.arange(t[0], t[-1] + 0.5 * dt, dt)
+        vg = np.interp(grid, t, v)
+        half = max(2, int(round(half_window_s / dt)))
+        win = min(2 * half + 1, grid.size - (1 - grid.size % 2))
+        if win < 5:
+            out[idx] = np.gradient(v, t)
+            continue
+        d = scipy.signal.savgol_filter(vg, win, 2, deriv=1, delta=dt, mode="interp")
+        out[idx] = np.interp(t, grid, d)
+    return out
+
+
+def derived_signals(signals: dict[str, np.ndarray], d_m: float, groups: np.ndarray | None = None
+                    ) -> dict[str, np.ndarray]:
+    """The model signals plus ``alpha_dot``, ``beta_dot`` [rad/s] and ``alpha_dot_hat``, ``beta_dot_hat`` [-]."""
+    out = dict(signals)
+    t = signals["t"]
+    two_v = 2.0 * signals["V"]
+    out["alpha_dot"] = smooth_derivative(t, signals["alpha"], groups)
+    out["beta_dot"] = smooth_derivative(t, signals["beta"], groups)
+    out["alpha_dot_hat"] = out["alpha_dot"] * d_m / two_v
+    out["beta_dot_hat"] = out["beta_dot"] * d_m / two_v
+    return out

@@ -1,0 +1,67 @@
+"""The seed-rlv reference flight end to end against its known truth (issues 4 and 5).
+
+Numbers over 30 seeds are in bench/results/accuracy.md; this pins seed 0.
+"""
+import numpy as np
+import pandas as pd
+import pytest
+
+NOISE = np.array([0.8, 1.0, 2.0, *np.deg2rad([4.0, 2.0, 1.0])])
+
+
+def truth_at(flight, t_s):
+    tr = flight.truth.set_index(np.round(flight.truth["t_s"], 6))
+    return tr.loc[np.round(t_s, 6)]
+
+
+def test_measurement_noise_estimates_within_15_percent(reference_run):
+    for seg in reference_run.smoothed:
+        err = seg.result.R_sigma / NOISE - 1
+        assert np.all(np.abs(err) < 0.15), (seg.segment_id, err)
+
+
+def test_smoother_nis_inside_the_chi_square_band_around_6(reference_run):
+    for seg in reference_run.smoothed:
+        lo, hi = seg.result.nis_band
+        assert lo <= seg.result.mean_nis_smoother <= hi
+        assert not seg.result.diverged
+
+
+def test_smoothed_states_track_the_truth_within_their_sigma(reference_flight, reference_run):
+    sm = pd.concat([s.frame for s in reference_run.smoothed], ignore_index=True)
+    tr = truth_at(reference_flight, sm["t_s"])
+    for est, tru, bound in (("q_rad_s", "q_rad_s", 0.008), ("q_dot_rad_s2", "q_dot_rad_s2", 0.04),
+                            ("Z1_m_s2", "az_cg_m_s2", 0.4), ("X1_m_s2", "ax_cg_m_s2", 0.2)):
+        err = sm[est].to_numpy() - tr[tru].to_numpy()
+        assert np.sqrt(np.mean(err ** 2)) < bound, est  # RMS errors, far below the noise (0.035 rad/s, 2 m/s^2)
+        inside = np.mean(np.abs(err) < 2 * sm[f"sigma_{est}"].to_numpy())
+        assert inside > 0.85, (est, inside)
+
+
+def test_alpha_beta_inversion_errors_against_truth(reference_flight, reference_run):
+    fd = reference_run.flight_data
+    tr = truth_at(reference_flight, fd["t_s"])
+    near = (fd["mach"] - 12.4).abs().to_numpy() <= 0.5
+    a = np.rad2deg(np.sqrt(np.mean((fd["alpha_rad"].to_numpy() - tr["alpha_rad"].to_numpy())[near] ** 2)))
+    b = np.rad2deg(np.sqrt(np.mean((fd["beta_rad"].to_numpy() - tr["beta_rad"].to_numpy())[near] ** 2)))
+    assert a < 0.2 and b < 0.12  # seed 0: 0.146 and 0.085 deg
+    assert fd["inversion_J"].max() < 1e-20  # the table is monotone: closed form, J = 0
+
+
+@pytest.mark.parametrize("name, bar", [("CN_alpha", 0.02), ("CN_delta_p", 0.02), ("Cm_alpha", 0.05),
+                                       ("Cm_delta_p", 0.05)])
+def test_pitch_plane_coefficients_within_the_accuracy_bars_and_intervals(reference_flight, reference_run, name, bar):
+    tab = reference_run.identification.table().set_index("coefficient")
+    truth = reference_flight.coefficients[name]
+    row = tab.loc[name]
+    assert abs(row.estimate / truth - 1) <= bar
+    assert row.ci_low <= truth <= row.ci_high
+    assert row.std_error > row.std_error_ols  # the coloured-residual correction widens the plain interval
+
+
+def test_moment_transfer_nose_to_cg_matches_the_seed():
+    from aerosid.aeromodel import AeroModel
+    from aerosid.vehicle import load_vehicle
+
+    ref = AeroModel.preflight(load_vehicle("seed-rlv")).linear_truth()
+    assert np.rad2deg(1) ** -1 * ref["Cm_alpha"] == pytest.approx(-0.0578 + 0.0305 * 1.675, abs=1e-9)
