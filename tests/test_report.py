@@ -1,0 +1,271 @@
+"""The HTML report (aerosid.report): self-contained, complete, escaped, and robust to
+missing pieces (no diagnosis, no versions, a failed segment, an empty folder).
+
+The run folder is made once per session by the real flow (process_flight on a
+30 s seed-rlv flight) plus two model versions and a diagnosis; tests that change
+it work on a copy.  tests/test_report_browser.py uses the same folder.
+"""
+from __future__ import annotations
+
+import json
+import math
+import re
+import shutil
+from html.parser import HTMLParser
+from pathlib import Path
+
+import pandas as pd
+import pytest
+
+pytestmark = pytest.mark.prefect
+
+CHANNELS = ("CN", "Cm", "CY", "Cn", "Cl")
+SECTIONS = ("run", "preprocessing", "segments", "coefficients", "comparison", "diagnosis", "versions", "audit")
+_CACHE: dict = {}
+
+
+def _make_run(root: Path):
+    from aerosid.diagnosis import diagnose
+    from aerosid.io import write_json_atomic
+    from aerosid.models import default_models, parse_term
+    from aerosid.simulation import load_case, simulate
+    from aerosid.vehicle import load_vehicle
+    from aerosid.versions import fit_version, latest_models, read_flight_data
+    from flows.pipeline import process_flight
+
+    simulate(load_case("seed-rlv", duration_s=30.0), seed=0).write(root / "flight")
+    run_dir = root / "run"
+    summary = process_flight(str(root / "flight" / "telemetry.parquet"), str(run_dir))
+    assert summary["status"] in ("ok", "partial"), summary["segments_failed"]
+    fit_version(run_dir)  # v001, the default models
+    models = default_models()
+    models["Cm"] = models["Cm"].with_term(parse_term("pitch_damping", "Cm"))
+    fit_version(run_dir, models, note="add pitch damping <b>")
+    diag = diagnose(read_flight_data(run_dir), load_vehicle("seed-rlv"), latest_models(run_dir))
+    doc = diag.to_json()
+    doc["model"] = "v002"
+    write_json_atomic(doc, run_dir / "diagnosis.json")
+    truth = json.loads((root / "flight" / "truth.json").read_text())
+    return run_dir, diag, truth
+
+
+@pytest.fixture(scope="session")
+def report_run(prefect_harness, tmp_path_factory):
+    """(run folder, Diagnosis, truth.json dict); built once per session (shared with the browser test)."""
+    if "run" not in _CACHE:
+        _CACHE["run"] = _make_run(tmp_path_factory.mktemp("report-run"))
+    return _CACHE["run"]
+
+
+@pytest.fixture
+def run_copy(report_run, tmp_path):
+    run_dir, diag, truth = report_run
+    work = tmp_path / "run"
+    shutil.copytree(run_dir, work)
+    return work, diag, truth
+
+
+def ok_segments(run_dir: Path) -> list[str]:
+    return sorted(p.parent.name for p in (run_dir / "segments").glob("*/smoothed.parquet"))
+
+
+def assert_self_contained(doc: str) -> None:
+    low = doc.lower()
+    for bad in ("http://", "https://", "//cdn", "<link", "<script", "@import", "<iframe", "<object", "<embed"):
+        assert bad not in low, f"{bad!r} in the report"
+    for m in re.finditer(r"\b(src|href)\s*=\s*[\"']?([^\"' >]*)", doc, flags=re.I):
+        attr, value = m.group(1).lower(), m.group(2)
+        ok = value.startswith("data:") or (attr == "href" and value.startswith("#"))
+        assert ok, f"external reference {m.group(0)!r}"
+    for m in re.finditer(r"url\(([^)]*)\)", doc):
+        assert m.group(1).startswith("#"), f"external url({m.group(1)})"
+
+
+class _Checker(HTMLParser):
+    """Every non-void element closed, in order (a cheap well-formedness check)."""
+
+    VOID = {"meta", "br", "hr", "img", "input", "link", "col", "wbr", "source", "area", "base"}
+
+    def __init__(self):
+        super().__init__()
+        self.stack: list[str] = []
+        self.errors: list[str] = []
+
+    def handle_starttag(self, tag, attrs):
+        if tag not in self.VOID:
+            self.stack.append(tag)
+
+    def handle_startendtag(self, tag, attrs):
+        pass
+
+    def handle_endtag(self, tag):
+        if not self.stack or self.stack[-1] != tag:
+            self.errors.append(f"</{tag}> closes <{self.stack[-1] if self.stack else None}>")
+            if tag in self.stack:
+                while self.stack.pop() != tag:
+                    pass
+        else:
+            self.stack.pop()
+
+
+def assert_well_formed(doc: str) -> None:
+    assert doc.startswith("<!DOCTYPE html>")
+    checker = _Checker()
+    checker.feed(doc)
+    checker.close()
+    assert checker.errors == [] and checker.stack == [], (checker.errors[:5], checker.stack)
+
+
+def test_full_report_is_self_contained_and_complete(run_copy):
+    from aerosid.report import write_report
+
+    run_dir, diag, truth = run_copy
+    path = write_report(run_dir, diagnosis=diag, truth=truth)
+    assert path == run_dir / "report.html" and path.is_file()
+    doc = path.read_text()
+    assert_self_contained(doc)
+    assert_well_formed(doc)
+    assert "could not be rendered" not in doc
+    for sid in SECTIONS:
+        assert f'<section id="{sid}">' in doc
+    # plots: one per smoothed segment, one per channel, the version history
+    segs = ok_segments(run_dir)
+    assert segs
+    assert doc.count("<svg") == doc.count("</svg>") == len(segs) + len(CHANNELS) + 1
+    assert "<text" not in doc  # text drawn as paths: no font needed
+    # run facts: telemetry SHA-256 from the ledger, code version
+    ledger = [json.loads(x) for x in (run_dir / "ledger.jsonl").read_text().splitlines()]
+    pre = next(r for r in ledger if r["stage"] == "preprocess")
+    assert pre["inputs"][0]["sha256"] in doc and pre["code_version"] in doc
+    # preprocessing counts from the Parquet metadata
+    assert 'id="preprocess-flags"' in doc and "MISSING_ROW" in doc and "Longest all-channel gap" in doc
+    # NIS table per segment, seed Table 2 style
+    assert doc.count("seed Table 2 style") == len(segs) and "NIS smoother" in doc
+    # the coefficients table: every coefficient, per degree for angle slopes, truth and error
+    table = pd.read_parquet(run_dir / "coefficients.parquet")
+    coef_html = doc[doc.index('<table id="coefficients"'):]
+    coef_html = coef_html[:coef_html.index("</table>")]
+    for name in table["coefficient"]:
+        assert f"<td>{name}</td>" in coef_html
+    cn_alpha = table.set_index("coefficient").loc["CN_alpha"]
+    assert format(cn_alpha["estimate"] * math.pi / 180, ".5g") in coef_html
+    assert format(truth["coefficients"]["CN_alpha"] * math.pi / 180, ".5g") in coef_html
+    assert "per degree" in doc and "deg pair" in coef_html and "error %" in coef_html
+    for ch in CHANNELS:
+        assert f'id="coef-{ch}"' in coef_html and f'id="cmp-{ch}"' in doc
+    # the diagnosis: message, ranked effects, windows, the full regime map, whiteness
+    assert 'id="diagnosis-message"' in doc and 'id="effects-table"' in doc
+    assert doc.count("<tr class=\"why\">") == len(diag.effects)
+    assert 'id="windows-heat"' in doc and 'id="whiteness-table"' in doc and "Ljung–Box" in doc
+    assert doc.count("residual RMS ratio by regime bin") == len(CHANNELS)
+    # model versions, the note escaped
+    assert 'id="versions-table"' in doc and "v002" in doc and "Cm: +pitch_damping" in doc
+    assert "add pitch damping &lt;b&gt;" in doc and "pitch damping <b>" not in doc
+    assert 'id="audit-table"' in doc
+
+
+def test_report_reads_diagnosis_json_when_no_diagnosis_is_given(report_run):
+    from aerosid.report import build_report
+
+    run_dir, _, _ = report_run
+    doc = build_report(run_dir)
+    assert_self_contained(doc)
+    assert_well_formed(doc)
+    assert "could not be rendered" not in doc
+    assert "diagnosis.json" in doc and "model diagnosed: v002" in doc
+    assert 'id="effects-table"' in doc and 'id="regimes-worst"' in doc and 'id="whiteness-table"' in doc
+    assert doc.count("<svg") == len(ok_segments(run_dir)) + len(CHANNELS) + 1
+    assert "truth" not in doc[doc.index('<table id="coefficients"'):].split("</table>")[0]
+    # the path of a diagnosis.json works as well (a dict takes the same route)
+    assert 'id="effects-table"' in build_report(run_dir, diagnosis=run_dir / "diagnosis.json")
+
+
+def test_report_survives_missing_diagnosis_and_versions(run_copy):
+    from aerosid.report import build_report
+
+    run_dir, _, _ = run_copy
+    (run_dir / "diagnosis.json").unlink()
+    shutil.rmtree(run_dir / "models")
+    doc = build_report(run_dir)
+    assert_self_contained(doc)
+    assert_well_formed(doc)
+    assert "could not be rendered" not in doc
+    assert "No diagnosis yet" in doc and "aerosid diagnose" in doc
+    assert "No model versions yet" in doc
+    # the comparison plots still come from coefficients.parquet
+    assert doc.count("<svg") == len(ok_segments(run_dir)) + len(CHANNELS)
+    assert "coefficients.parquet (Mach window of the fit)" in doc
+
+
+def test_flight_id_and_messages_are_escaped(run_copy):
+    from aerosid.report import build_report
+
+    run_dir, _, _ = run_copy
+    state = json.loads((run_dir / "run.json").read_text())
+    state["flight"] = "<script>alert('x')</script>&"
+    state["segments_failed"] = [{"segment": "segX", "error": "boom <img src=x onerror=alert(1)>"}]
+    state["segments"] = state["segments"] + ["segX"]
+    (run_dir / "run.json").write_text(json.dumps(state))
+    doc = build_report(run_dir)
+    assert "<script" not in doc.lower() and "<img" not in doc.lower()
+    assert "&lt;script&gt;alert(&#x27;x&#x27;)&lt;/script&gt;&amp;" in doc
+    assert "boom &lt;img src=x onerror=alert(1)&gt;" in doc
+    assert_well_formed(doc)
+
+
+def test_failed_and_missing_segments_are_reported(run_copy):
+    from aerosid.report import build_report
+
+    run_dir, _, _ = run_copy
+    segs = ok_segments(run_dir)
+    (run_dir / "segments" / segs[0] / "smoothed.parquet").unlink()
+    doc = build_report(run_dir)
+    assert "could not be rendered" not in doc
+    assert f"Segment {segs[0]}" in doc and "No smoothed data for this segment" in doc
+    assert doc.count("<svg") == len(segs) - 1 + len(CHANNELS) + 1
+    state = json.loads((run_dir / "run.json").read_text())
+    for failed in state["segments_failed"]:  # a segment whose filter diverged says why
+        assert failed["segment"] in doc
+
+
+def test_minimal_and_empty_folders(report_run, tmp_path):
+    from aerosid.report import build_report, write_report
+
+    run_dir, _, _ = report_run
+    # only the core's outputs (no run.json, no ledger, no metadata): what the core alone leaves
+    minimal = tmp_path / "minimal"
+    minimal.mkdir()
+    for name in ("flight_data.parquet", "coefficients.parquet"):
+        shutil.copy(run_dir / name, minimal / name)
+    doc = build_report(minimal)
+    assert_self_contained(doc)
+    assert_well_formed(doc)
+    assert "could not be rendered" not in doc
+    assert doc.count("<svg") == len(CHANNELS) and 'id="coefficients"' in doc
+    assert "No preprocessed.parquet" in doc and "No ledger.jsonl" in doc and "No segments" in doc
+    # an empty folder: every section says it has nothing, nothing crashes
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    doc = build_report(empty)
+    assert_well_formed(doc)
+    assert "could not be rendered" not in doc and "<svg" not in doc
+    assert "No coefficients.parquet" in doc and "nothing to compare" in doc
+    # write_report: atomic, no temporary file left, overwrites
+    p1 = write_report(empty)
+    p2 = write_report(empty)
+    assert p1 == p2 == empty / "report.html"
+    assert sorted(x.name for x in empty.iterdir()) == ["report.html"]
+    with pytest.raises(FileNotFoundError):
+        build_report(tmp_path / "no-such-run")
+
+
+def test_broken_inputs_are_reported_not_fatal(run_copy):
+    from aerosid.report import build_report
+
+    run_dir, _, _ = run_copy
+    (run_dir / "diagnosis.json").write_text("{not json")
+    (run_dir / "coefficients.parquet").write_bytes(b"not parquet")
+    doc = build_report(run_dir)
+    assert_well_formed(doc)
+    assert "not valid JSON" in doc and "cannot read" in doc
+    assert "No diagnosis yet" in doc
