@@ -6,11 +6,17 @@ import numpy as np
 import pandas as pd
 
 from aerosid.aerodb import AeroDatabase
+from aerosid.atmosphere import H_MAX_M, H_MIN_M
 from aerosid.flight_coefficients import flight_coefficients
 from aerosid.inversion import invert_alpha_beta
 from aerosid.vehicle import Vehicle
 
 FIN_COLUMNS = ("d1_rad", "d2_rad", "d3_rad", "d4_rad")
+
+
+def _span(t: np.ndarray) -> str:
+    """A time span for messages: 't0..t1 s (first t_s [...])'."""
+    return f"{t[0]:.2f}..{t[-1]:.2f} s (first t_s {[round(float(v), 3) for v in t[:5]]})" if len(t) else "-"
 
 
 def build_flight_data(smoothed: pd.DataFrame, measured: pd.DataFrame, vehicle: Vehicle, db: AeroDatabase,
@@ -23,6 +29,11 @@ def build_flight_data(smoothed: pd.DataFrame, measured: pd.DataFrame, vehicle: V
         raise ValueError("smoothed and measured frames are not on the same time grid")
     clean = {c: measured[f"{c}_clean"].to_numpy(dtype=float) for c in (*FIN_COLUMNS, "V_m_s", "h_m")}
     ok = np.all(np.isfinite(np.column_stack(list(clean.values()))), axis=1) & (clean["V_m_s"] > 0)
+    segment = str(smoothed["segment"].iloc[0]) if len(smoothed) else "?"
+    h_out = ok & ~((clean["h_m"] >= H_MIN_M) & (clean["h_m"] <= H_MAX_M))
+    if h_out.any():
+        raise ValueError(f"segment {segment}: column 'h_m' outside the US-1976 atmosphere's {H_MIN_M:g}.."
+                         f"{H_MAX_M:g} m at {int(h_out.sum())} rows, t = {_span(t[h_out])}")
     s = smoothed.loc[ok].reset_index(drop=True)
     fins = [clean[c][ok] for c in FIN_COLUMNS]
     V, h = clean["V_m_s"][ok], clean["h_m"][ok]
@@ -32,6 +43,16 @@ def build_flight_data(smoothed: pd.DataFrame, measured: pd.DataFrame, vehicle: V
     acc_sig = s[["sigma_X1_m_s2", "sigma_Y1_m_s2", "sigma_Z1_m_s2"]].to_numpy()
     ang_sig = s[["sigma_L1_rad_s2", "sigma_M1_rad_s2", "sigma_N1_rad_s2"]].to_numpy()
     fc = flight_coefficients(vehicle, V, h, acc, ang, acc_sig, ang_sig)
+    m_lo, m_hi = db.mach_range()
+    outside = ~((fc.air.mach >= m_lo) & (fc.air.mach <= m_hi))
+    if outside.any():
+        # the inversion would clamp the table at its edge: alpha and beta there would be made up
+        ts = s["t_s"].to_numpy()[outside]
+        m = fc.air.mach[outside]
+        raise ValueError(f"segment {segment}: Mach (from columns 'V_m_s' and 'h_m') is {m.min():.3g}..{m.max():.3g} "
+                         f"at {int(outside.sum())} samples, t = {_span(ts)}, outside the aerodynamic database's "
+                         f"Mach {m_lo:g}..{m_hi:g} ({vehicle.database_path}); alpha/beta cannot be inverted "
+                         "there: restrict the run to the database's range (--window T0 T1) or extend the database")
     inv = invert_alpha_beta(fc.CN, fc.CY, fc.air.mach, delta_p, delta_y, db, vehicle.preflight)
     return pd.DataFrame({
         "t_s": s["t_s"].to_numpy(),

@@ -70,6 +70,10 @@ def format_table(table: pd.DataFrame) -> str:
                      f"{first['condition_number']:.1f}, N = {first['n_obs']} (effective {first['n_eff']:.0f})")
         for _, row in rows.iterrows():
             k = math.pi / 180 if row["expression"].replace(" ", "") in ANGLE_TERMS else 1.0
+            if not np.isfinite(row["estimate"]):  # no number is printed for what the data cannot tell
+                lines.append(f"  {row['coefficient']:<18}{row['reference'] * k:>12.5g}"
+                             f"   not identifiable (no excitation in {row['expression']})")
+                continue
             lines.append(f"  {row['coefficient']:<18}{row['reference'] * k:>12.5g}{row['estimate'] * k:>12.5g}"
                          f"{row['std_error'] * k:>11.2g}{row['std_error_ols'] * k:>11.2g}"
                          f"   [{row['ci_low'] * k:.5g}, {row['ci_high'] * k:.5g}]")
@@ -90,10 +94,12 @@ def identify(flight_data: pd.DataFrame, vehicle: Vehicle, models: dict[str, Chan
     models = models or default_models()
     fd = flight_data.sort_values(["flight", "t_s"], kind="stable").reset_index(drop=True)
     mask = mach_window_mask(fd["mach"].to_numpy(), vehicle.mach_reference, mach_half_width)
+    span = (f"the flight data's {len(fd)} samples span Mach {fd['mach'].min():.3g}..{fd['mach'].max():.3g}"
+            if len(fd) else "the flight data is empty")
     fd = fd.loc[mask].reset_index(drop=True)
     if len(fd) < 50:
         raise ValueError(f"only {len(fd)} samples inside Mach {vehicle.mach_reference} ± {mach_half_width}: "
-                         "too few to fit the models")
+                         f"too few to fit the models ({span})")
     signals = signals_from_flight_data(fd, vehicle.d_m)
     fits: dict[str, LinearFit] = {}
     for channel, model in models.items():

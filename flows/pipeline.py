@@ -105,8 +105,10 @@ def reprocess_inbox(inbox: str, out_root: str, vehicle: str = "seed-rlv", patter
     logger = get_run_logger()
     root = Path(out_root)
     led = root / LEDGER_NAME
+    if not Path(inbox).is_dir():
+        raise FileNotFoundError(f"inbox {inbox} is not an existing folder")
     files = sorted(p for p in Path(inbox).glob(pattern) if p.is_file() and not p.name.startswith("."))
-    report = {"processed": [], "unchanged": [], "busy": [], "not_ready": [], "failed": []}
+    report = {"processed": [], "unchanged": [], "busy": [], "not_ready": [], "failed": [], "errors": {}}
     if not files:
         logger.info("inbox %s: no telemetry files matching %s", inbox, pattern)
     for path in files:
@@ -129,8 +131,17 @@ def reprocess_inbox(inbox: str, out_root: str, vehicle: str = "seed-rlv", patter
                 report["unchanged"].append(flight)
                 continue
             job = FlightJob(str(path), str(root / flight), flight, vehicle, ledger_path=str(led))
-            summary = run_flights([job])[0]
+            try:
+                summary = run_flights([job])[0]
+            except Exception as exc:  # a bad file (the ledger has it) must not stop the scan of the others
+                logger.error("inbox file %s failed: %s", path, exc)
+                report["failed"].append(flight)
+                report["errors"][flight] = f"{type(exc).__name__}: {exc}"
+                continue
             (report["processed"] if summary["status"] != "failed" else report["failed"]).append(flight)
+            if summary["status"] == "failed":
+                report["errors"][flight] = "; ".join(f"{f['segment']}: {f['error']}"
+                                                     for f in summary["segments_failed"])
     logger.info("inbox scan: %s", {k: len(v) for k, v in report.items()})
     return report
 

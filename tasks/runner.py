@@ -5,8 +5,11 @@ No numerics here: ``produce`` is a closure that calls the core.
 """
 from __future__ import annotations
 
+import fcntl
 import json
+import os
 import time
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
@@ -58,6 +61,22 @@ def read_validated(path: str | Path, schema: type[pa.DataFrameModel]) -> pd.Data
     return validate(frame, schema, str(path))
 
 
+@contextmanager
+def _writing(output: Path):
+    """Exclusive right to write `output`: an flock on its folder.  Every writer of a
+    stage output holds it, so a temporary file of the output found under it was left
+    by a killed process and is removed (a kill mid-write leaves nothing behind)."""
+    output.parent.mkdir(parents=True, exist_ok=True)
+    fd = os.open(output.parent, os.O_RDONLY)
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX)
+        for stale in output.parent.glob(f".{output.name}.*.tmp"):
+            stale.unlink(missing_ok=True)
+        yield
+    finally:
+        os.close(fd)  # releases the lock
+
+
 def cache_key(stage: str, input_hashes: list[str], params: dict) -> str:
     return params_hash({"stage": stage, "inputs": input_hashes, "params": params, "code": code_version()})
 
@@ -94,8 +113,9 @@ def execute(stage: str, ctx: StageContext, inputs: list[str | Path], output: str
                     "aerosid.params": json.dumps(params, sort_keys=True, default=str),
                     "aerosid.rows_in": str(produced.rows_in), "aerosid.rows_out": str(len(produced.frame)),
                     "aerosid.flagged_rows": str(produced.flagged_rows)}
-        write_parquet_atomic(produced.frame, output, metadata=metadata,
-                             check=lambda tmp: validate(pd.read_parquet(tmp), schema, str(output)))
+        with _writing(output):
+            write_parquet_atomic(produced.frame, output, metadata=metadata,
+                                 check=lambda tmp: validate(pd.read_parquet(tmp), schema, str(output)))
     except Exception as exc:
         ledger.append(ctx.ledger_path, {**base, "status": "failed", "outputs": [], "rows_in": None, "rows_out": None,
                                         "flagged_rows": None, "error": f"{type(exc).__name__}: {exc}",
