@@ -104,10 +104,13 @@ def diagnose(run_dir, model_spec, version_id, n_windows, mach_half_width, quiet)
     doc = diag.to_json()
     doc["model"] = source
     out = write_json_atomic(doc, run_dir / "diagnosis.json")
+    from aerosid.report import write_report
+
+    report = write_report(run_dir, diagnosis=diag)
     if not quiet:
         click.echo(f"model: {source}")
         click.echo(diag.summary())
-    click.echo(f"wrote {out}")
+    click.echo(f"wrote {out} and {report}")
 
 
 @click.command(epilog=EPILOG_LOOP)
@@ -156,6 +159,9 @@ def fit(run_dir, model_spec, parent, note, mach_half_width):
             a, b = p.channel_metric(ch, "rms_residual"), v.channel_metric(ch, "rms_residual")
             if a > 0:
                 click.echo(f"  {ch:<4} residual RMS {a:.4g} -> {b:.4g} ({100 * (b / a - 1):+.1f} %)")
+    from aerosid.report import write_report
+
+    click.echo(f"wrote {write_report(run_dir)} (run `aerosid diagnose` to re-diagnose this version)")
 
 
 @click.command()

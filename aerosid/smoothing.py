@@ -18,6 +18,7 @@ from aerosid.vehicle import Vehicle
 from schemas.smoothed import RATE_DERIVATIVE_COLUMNS, STATE_COLUMNS
 
 IMU_CHANNELS = ("ax_m_s2", "ay_m_s2", "az_m_s2", "p_rad_s", "q_rad_s", "r_rad_s")
+MIN_USABLE_SAMPLES = 16  # the seven-point parabola fits and the spectra need some data
 
 
 @dataclass(frozen=True)
@@ -56,8 +57,12 @@ def smooth_segment_frame(rows: pd.DataFrame, vehicle: Vehicle, options: dict | N
     t = rows["t_s"].to_numpy(dtype=float)
     z = rows[[f"{c}_clean" for c in IMU_CHANNELS]].to_numpy(dtype=float)
     valid = usable_mask(rows, list(IMU_CHANNELS)) & np.isfinite(z)
-    if not valid.any():
-        raise ValueError(f"segment {segment_id}: no usable IMU sample ({len(rows)} rows, all dropout or flagged)")
+    counts = valid.sum(axis=0)
+    if counts.min() < MIN_USABLE_SAMPLES:
+        worst = IMU_CHANNELS[int(np.argmin(counts))]
+        raise ValueError(f"segment {segment_id} (t = {t[0]:.2f}..{t[-1]:.2f} s): channel {worst} has "
+                         f"{int(counts.min())} usable samples of {len(rows)} (the rest dropout or flagged); "
+                         f"at least {MIN_USABLE_SAMPLES} per channel are needed to initialise the filter")
     filled = pd.DataFrame(z).interpolate(limit_direction="both").to_numpy()
     res = smooth_flight(t, np.where(valid, z, np.nan), valid,
                         (vehicle.Ixx_kg_m2, vehicle.Iyy_kg_m2, vehicle.Izz_kg_m2, vehicle.Ixz_kg_m2),

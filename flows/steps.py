@@ -12,6 +12,7 @@ from prefect.artifacts import create_markdown_artifact
 from prefect.runtime import flow_run
 
 from tasks.ledger import LEDGER_NAME
+from tasks.report import report_task, truth_next_to
 from tasks.runner import StageContext
 from tasks.stages import (flight_data_task, plan_segments_task, preprocess_task, regression_task,
                           smooth_segment_task)
@@ -92,6 +93,10 @@ def run_flights(jobs: list[FlightJob]) -> list[dict]:
             summary.update(flight_data=fd, coefficients=coeffs)
             _artifacts(job, summary)
         write_run_summary_task(job.run_dir, summary)
+        if done:
+            summary["report"] = report_task(job.run_dir, job.context(), [fd["path"], coeffs["path"]], job.model_spec,
+                                            truth_next_to(job.telemetry))
+            write_run_summary_task(job.run_dir, summary)
         summaries.append(summary)
     return summaries
 

@@ -1,0 +1,41 @@
+"""The last stage: diagnosis.json and report.html for a flight's run folder."""
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+from prefect import task
+
+from aerosid.models import load_models
+from aerosid.modelling_loop import refresh
+from aerosid.provenance import code_version, params_hash, sha256_file
+from tasks import ledger
+from tasks.runner import StageContext
+from tasks.stages import IO_RETRIES
+
+
+@task(name="diagnose-and-report", **IO_RETRIES)
+def report_task(run_dir: str, ctx: StageContext, inputs: list[str], model_spec: str | None,
+                truth_path: str | None) -> dict:
+    params = {"model_spec": model_spec, "truth": truth_path}
+    files = [p for p in [*inputs, model_spec, truth_path] if p]
+    base = {"run_id": ctx.run_id, "flight": ctx.flight, "segment": "", "stage": "report",
+            "inputs": [{"path": p, "sha256": sha256_file(p)} for p in files], "params": params,
+            "params_sha256": params_hash(params), "code_version": code_version()}
+    started = time.perf_counter()
+    try:
+        paths = refresh(run_dir, load_models(model_spec) if model_spec else None, truth=truth_path)
+    except Exception as exc:
+        ledger.append(ctx.ledger_path, {**base, "status": "failed", "outputs": [], "error": f"{type(exc).__name__}: {exc}",
+                                        "duration_s": time.perf_counter() - started})
+        raise
+    outputs = [{"path": str(p), "sha256": sha256_file(p)} for p in paths.values()]
+    ledger.append(ctx.ledger_path, {**base, "status": "ok", "outputs": outputs, "error": None,
+                                    "duration_s": time.perf_counter() - started})
+    return {k: str(v) for k, v in paths.items()}
+
+
+def truth_next_to(telemetry: str) -> str | None:
+    """A simulated flight's truth.json beside its telemetry, if there is one."""
+    candidate = Path(telemetry).with_name("truth.json")
+    return str(candidate) if candidate.is_file() else None
