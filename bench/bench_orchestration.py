@@ -19,16 +19,9 @@ import pandas as pd
 
 from aerosid.ebm import process_telemetry
 from aerosid.simulation import load_case, simulate
+from machine import cpu_model  # bench/machine.py
 
 
-def cpu_model() -> str:
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or "unknown"
 
 
 def main() -> None:

@@ -10,6 +10,8 @@ import pandas as pd
 import pandera.pandas as pa
 from pandera.typing import Series
 
+from schemas.telemetry import strictly_increasing
+
 #: EKF state -> column name (method.md §5; L, M, N are moment/inertia).
 STATE_COLUMNS: dict[str, str] = {
     "p": "p_rad_s", "q": "q_rad_s", "r": "r_rad_s",
@@ -60,10 +62,7 @@ class SmoothedSegment(pa.DataFrameModel):
 
     @pa.check("t_s", name="strictly_increasing")
     def _t_increasing(cls, s: pd.Series) -> pd.Series:
-        t = s.to_numpy()
-        ok = np.ones(t.shape, dtype=bool)
-        ok[1:] = t[1:] > t[:-1]
-        return pd.Series(ok, index=s.index)
+        return strictly_increasing(s)
 
 
 def state_columns() -> list[str]:

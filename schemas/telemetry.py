@@ -87,6 +87,14 @@ def sentinel_mask(values: np.ndarray, sentinels=DEFAULT_SENTINELS) -> np.ndarray
     return np.isin(values, np.array(sorted(cands), dtype=np.float64))
 
 
+def strictly_increasing(s: pd.Series) -> pd.Series:
+    """Element-wise check: each value larger than the one before (the first passes)."""
+    t = s.to_numpy()
+    ok = np.ones(t.shape, dtype=bool)
+    ok[1:] = t[1:] > t[:-1]
+    return pd.Series(ok, index=s.index)
+
+
 def _chan_meta(col: str, **extra) -> dict:
     meta = {"unit": UNITS[col]}
     if col in PHYSICAL_BOUNDS:
@@ -138,10 +146,7 @@ class RawTelemetry(pa.DataFrameModel):
 
     @pa.check("t_s", name="strictly_increasing")
     def _t_increasing(cls, s: pd.Series) -> pd.Series:
-        t = s.to_numpy()
-        ok = np.ones(t.shape, dtype=bool)
-        ok[1:] = t[1:] > t[:-1]
-        return pd.Series(ok, index=s.index)
+        return strictly_increasing(s)
 
     @pa.check(*CHANNELS, name="mostly_in_physical_range")
     def _mostly_in_range(cls, s: pd.Series) -> pd.Series:
