@@ -2,7 +2,7 @@
 once, a read-only output folder, a full disk.
 
 The kill-and-resume and the concurrent-inbox tests loop AEROSID_FAULT_LOOPS times
-(default 1; CI raises it to run them repeatedly).
+(default 2, so every CI run repeats them; raise it for longer soak loops).
 """
 from __future__ import annotations
 
@@ -25,7 +25,7 @@ from aerosid.simulation import load_case, simulate
 from tasks import ledger
 
 ROOT = Path(__file__).resolve().parents[1]
-LOOPS = int(os.environ.get("AEROSID_FAULT_LOOPS", "1"))
+LOOPS = int(os.environ.get("AEROSID_FAULT_LOOPS", "2"))  # CI runs each fault twice
 
 
 @pytest.fixture(scope="module")
