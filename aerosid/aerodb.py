@@ -19,7 +19,7 @@ from aerosid.aeromodel import AeroModel
 
 COLUMNS = ["mach", "alpha_r_rad", "phi_r_rad", "CN_R", "Cm_R_nose", "Cl", "CA"]
 
-MACH_GRID = (4.0, 6.0, 8.0, 10.0, 11.0, 12.4, 14.0, 16.0, 20.0)
+MACH_GRID = (2.0, 3.0, 4.0, 6.0, 8.0, 10.0, 11.0, 12.4, 14.0, 16.0, 20.0)
 ALPHA_R_GRID_DEG = tuple(float(a) for a in range(0, 21))
 PHI_R_GRID_DEG = tuple(float(p) for p in range(-180, 181, 5))
 

@@ -63,11 +63,11 @@ def run_fails(args: list[str], out: Path, *expected: str) -> str:
 
 
 def run_fails_fast(args, out, *expected) -> str:
-    """As run_fails, and the error comes before any flow work (no Prefect, no run folder)."""
-    t0 = time.perf_counter()
+    """As run_fails, and the error comes before any flow work: Prefect's flow never ran
+    (no run folder, no ledger), so the user waits ~1 s rather than for a server start."""
     text = run_fails(args, out, *expected)
-    assert time.perf_counter() - t0 < 10.0  # ~1 s on an idle machine; generous for a loaded CI box
     assert not out.exists(), "nothing is written for input that fails the pre-flight check"
+    assert "Flow run" not in text
     return text
 
 
@@ -348,7 +348,7 @@ def test_25_mach_outside_the_database_is_refused_naming_the_samples(flight):
     with pytest.raises(ValueError) as ei:
         build_flight_data(sm.frame, fast, veh, db)
     msg = str(ei.value)
-    assert "outside the aerodynamic database's Mach 4..20" in msg and "'V_m_s'" in msg
+    assert "outside the aerodynamic database's Mach 2..20" in msg and "'V_m_s'" in msg
     assert "t = 20.00.." in msg and "seg01" in msg and "--window" in msg
 
 
