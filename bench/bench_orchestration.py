@@ -55,7 +55,7 @@ def main() -> None:
         f"Machine: {cpu_model()}, {os.cpu_count()} cores, Python {platform.python_version()}; {date.today()}", "",
         f"- simulate the flight: {t_sim:.1f} s",
         f"- core alone (aerosid.ebm.process_telemetry, numba warm): {t_core:.1f} s "
-        f"({len(core.smoothed)} segments, {len(core.flight_data)} regression samples)",
+        f"({len(core.smoothed)} segments, {len(core.flight_data)} flight-data rows)",
     ]
     lines += [f"- `aerosid run` end to end, {label}: {wall:.1f} s" for label, wall in rows]
     lines += ["", "Target: <= 30 s wall end to end (`aerosid run`). The difference to the core is Prefect's",
