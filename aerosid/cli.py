@@ -92,6 +92,9 @@ def _hermetic_defaults() -> None:
 
     os.environ.setdefault("PREFECT_SERVER_ANALYTICS_ENABLED", "false")
     os.environ.setdefault("PREFECT_LOGGING_LEVEL", "INFO")
+    # The first run on a machine builds Prefect's SQLite database before the ephemeral
+    # server answers: ~20-40 s on 2 cores, past Prefect's default 20 s wait.
+    os.environ.setdefault("PREFECT_SERVER_EPHEMERAL_STARTUP_TIMEOUT_SECONDS", "180")
 
 
 class _NoTraceback:

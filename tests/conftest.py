@@ -19,6 +19,7 @@ def prefect_harness(tmp_path_factory):
     os.environ.pop("PREFECT_API_URL", None)
     os.environ["PREFECT_SERVER_ANALYTICS_ENABLED"] = "false"
     os.environ["PREFECT_LOGGING_LEVEL"] = "WARNING"
+    os.environ["PREFECT_SERVER_EPHEMERAL_STARTUP_TIMEOUT_SECONDS"] = "180"  # a loaded 2-core CI box
     from prefect.testing.utilities import prefect_test_harness
 
     with prefect_test_harness():
