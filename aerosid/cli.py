@@ -172,7 +172,7 @@ def run(telemetry, vehicle, out_dir, flight, windows, model_spec, mach_half_widt
         from aerosid.identify import format_table
 
         click.echo(format_table(pd.read_parquet(summary["coefficients"]["path"])))
-        click.echo(f"wrote {out_dir}/coefficients.parquet, run.json, ledger.jsonl")
+        click.echo(f"wrote {out_dir}/coefficients.parquet, report.html, diagnosis.json, run.json, ledger.jsonl")
     if summary["status"] == "failed":
         reasons = "; ".join(f"{f['segment']}: {f['error']}" for f in summary["segments_failed"])
         raise click.ClickException(f"{telemetry}: no segment could be processed ({reasons or 'no segment'}); "
