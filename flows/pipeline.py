@@ -41,7 +41,7 @@ def campaign(telemetry_files: list[str], out_root: str, vehicle: str = "seed-rlv
         jobs.append(FlightJob(str(path), str(Path(out_root) / fid), fid, vehicle,
                               smoothing_options=smoothing_options or {}, mach_half_width=mach_half_width,
                               ledger_path=str(Path(out_root) / LEDGER_NAME)))
-    return run_flights(jobs)
+    return run_flights(jobs, isolate=True)
 
 
 def campaign_runner(dask_address: str | None = None, n_workers: int | None = None):
@@ -88,11 +88,15 @@ def _claim(lock_path: Path):
         os.close(fd)
 
 
-def _last_processed_sha(records: list[dict], flight: str) -> str | None:
-    for rec in reversed(records):
-        if rec.get("flight") == flight and rec.get("stage") == "preprocess" and rec.get("status") in ("ok", "reused"):
-            return rec["inputs"][0]["sha256"]
-    return None
+def _processed_shas(records: list[dict]) -> dict[str, str]:
+    """flight -> SHA-256 of the telemetry whose processing last *finished* (an inbox
+    'done' record, written after every stage; a run killed half way leaves none, so
+    the next scan processes the file again and reuses what the killed run finished)."""
+    done = {}
+    for rec in records:
+        if rec.get("stage") == "inbox" and rec.get("status") == "done":
+            done[rec["flight"]] = rec["inputs"][0]["sha256"]
+    return done
 
 
 @flow(name="reprocess-inbox", log_prints=True)
@@ -111,13 +115,14 @@ def reprocess_inbox(inbox: str, out_root: str, vehicle: str = "seed-rlv", patter
     report = {"processed": [], "unchanged": [], "busy": [], "not_ready": [], "failed": [], "errors": {}}
     if not files:
         logger.info("inbox %s: no telemetry files matching %s", inbox, pattern)
+    done = _processed_shas(ledger.read(led))
     for path in files:
         flight = flight_id_from_path(path)
         if not _stable(path, settle_s):
             report["not_ready"].append(str(path))
             continue
         sha = sha256_file(path)
-        if _last_processed_sha(ledger.read(led), flight) == sha:
+        if done.get(flight) == sha:
             ledger.append(led, {"run_id": "inbox", "flight": flight, "segment": "", "stage": "inbox",
                                 "status": "unchanged", "inputs": [{"path": str(path), "sha256": sha}],
                                 "outputs": [], "error": None})
@@ -127,7 +132,7 @@ def reprocess_inbox(inbox: str, out_root: str, vehicle: str = "seed-rlv", patter
             if not mine:
                 report["busy"].append(flight)
                 continue
-            if _last_processed_sha(ledger.read(led), flight) == sha:  # done by a concurrent run meanwhile
+            if _processed_shas(ledger.read(led)).get(flight) == sha:  # done by a concurrent run meanwhile
                 report["unchanged"].append(flight)
                 continue
             job = FlightJob(str(path), str(root / flight), flight, vehicle, ledger_path=str(led))
@@ -139,6 +144,10 @@ def reprocess_inbox(inbox: str, out_root: str, vehicle: str = "seed-rlv", patter
                 report["errors"][flight] = f"{type(exc).__name__}: {exc}"
                 continue
             (report["processed"] if summary["status"] != "failed" else report["failed"]).append(flight)
+            if summary["status"] != "failed":
+                ledger.append(led, {"run_id": "inbox", "flight": flight, "segment": "", "stage": "inbox",
+                                    "status": "done", "inputs": [{"path": str(path), "sha256": sha}],
+                                    "outputs": [], "error": None})
             if summary["status"] == "failed":
                 report["errors"][flight] = "; ".join(f"{f['segment']}: {f['error']}"
                                                      for f in summary["segments_failed"])
@@ -161,10 +170,19 @@ def retry_failed(out_root: str) -> dict:
             if rec.get("stage") == "smooth":
                 latest[(str(led), rec["flight"], rec["segment"])] = rec
     failed = {(led, flight) for (led, flight, _), rec in latest.items() if rec["status"] == "failed"}
-    results = []
+    results, errors = [], {}
     for led, flight in sorted(failed):
-        run_dir = Path(led).parent if Path(led).parent.joinpath(STATE_FILE).exists() else root / flight
-        state = json.loads((run_dir / STATE_FILE).read_text())
-        job = FlightJob(**{**state["job"], "ledger_path": led})
-        results.append(run_flights([job])[0])
-    return {"retried": [r["flight"] for r in results], "results": results}
+        # the failed record's own input is RUN_DIR/preprocessed.parquet: its folder is the run
+        rec = next(r for (lp, fl, _), r in latest.items() if lp == led and fl == flight and r["status"] == "failed")
+        run_dir = Path(rec["inputs"][0]["path"]).parent
+        try:
+            state = json.loads((run_dir / STATE_FILE).read_text())
+            job = FlightJob(**{**state["job"], "ledger_path": led})
+            with _claim(root / ".locks" / f"{flight}.lock") as mine:
+                if not mine:
+                    errors[flight] = "busy: another run holds this flight"
+                    continue
+                results.append(run_flights([job], isolate=True)[0])
+        except (OSError, ValueError, KeyError) as exc:
+            errors[flight] = f"{type(exc).__name__}: {exc}"
+    return {"retried": [r["flight"] for r in results], "results": results, "errors": errors}

@@ -58,47 +58,75 @@ class FlightJob:
         return StageContext(ledger, str(flow_run.get_id() or "local"), self.flight, segment)
 
 
-def run_flights(jobs: list[FlightJob]) -> list[dict]:
+def run_flights(jobs: list[FlightJob], isolate: bool = False) -> list[dict]:
     """Every stage of every job; segments of all flights are submitted together so a
     parallel task runner can spread them.  A failed segment is recorded and left out;
-    the flight goes on with the others."""
+    the flight goes on with the others.  With `isolate` (campaigns, inbox scans) a
+    flight whose preprocessing, flight data or regression fails is recorded as failed
+    in its run.json and the other flights go on; otherwise the error is raised after
+    run.json says so."""
     logger = get_run_logger()
+    ids = [check_flight_id(job.flight) for job in jobs]
+    if len(set(ids)) < len(ids):
+        dup = sorted({i for i in ids if ids.count(i) > 1})
+        raise ValueError(f"two telemetry files map to the same flight id {dup}: rename one (the id names the run folder)")
     for job in jobs:
-        check_flight_id(job.flight)
         Path(job.run_dir).mkdir(parents=True, exist_ok=True)
     pre_futures = [preprocess_task.submit(j.telemetry, j.run_dir, j.context(), j.preprocess_params) for j in jobs]
-    pre = [f.result() for f in pre_futures]
-    plans = [plan_segments_task(p["path"], j.windows, j.min_segment_s) for j, p in zip(jobs, pre)]
-    seg_futures = [[smooth_segment_task.submit(p["path"], j.run_dir, j.context(s["segment_id"]), s, j.vehicle,
-                                               j.smoothing_options) for s in plan]
-                   for j, p, plan in zip(jobs, pre, plans)]
+    plans, seg_futures, pre = [], [], []
+    for job, fut in zip(jobs, pre_futures):
+        fut.wait()
+        if not fut.state.is_completed():
+            pre.append(None), plans.append([]), seg_futures.append([])
+            continue
+        p = fut.result()
+        plan = plan_segments_task(p["path"], job.windows, job.min_segment_s)
+        pre.append(p), plans.append(plan)
+        seg_futures.append([smooth_segment_task.submit(p["path"], job.run_dir, job.context(s["segment_id"]), s,
+                                                       job.vehicle, job.smoothing_options) for s in plan])
     summaries = []
-    for job, p, plan, futures in zip(jobs, pre, plans, seg_futures):
-        done, failed = [], []
-        for seg, fut in zip(plan, futures):
-            fut.wait()
-            if fut.state.is_completed():
-                done.append(fut.result())
-            else:
-                err = fut.state.message or "failed"
-                failed.append({"segment": seg["segment_id"], "error": err})
-                logger.warning("flight %s segment %s failed: %s", job.flight, seg["segment_id"], err)
-        summary = {"job": asdict(job), "flight": job.flight, "telemetry": job.telemetry, "run_dir": job.run_dir, "vehicle": job.vehicle,
-                   "preprocess": p, "segments": [s["segment_id"] for s in plan], "segments_ok": done,
-                   "segments_failed": failed, "status": "failed" if not done else ("partial" if failed else "ok")}
-        if done:
-            fd = flight_data_task(p["path"], [d["path"] for d in done], job.run_dir, job.context(), job.vehicle)
-            coeffs = regression_task([fd["path"]], job.run_dir, job.context(), job.vehicle, job.model_spec,
-                                     job.mach_half_width)
-            summary.update(flight_data=fd, coefficients=coeffs)
-            _artifacts(job, summary)
-        write_run_summary_task(job.run_dir, summary)
-        if done:
-            summary["report"] = report_task(job.run_dir, job.context(), [fd["path"], coeffs["path"]], job.model_spec,
-                                            truth_next_to(job.telemetry))
+    for job, p, plan, futures, pre_future in zip(jobs, pre, plans, seg_futures, pre_futures):
+        summary = {"job": asdict(job), "flight": job.flight, "telemetry": job.telemetry, "vehicle": job.vehicle,
+                   "preprocess": p, "segments": [s["segment_id"] for s in plan], "segments_ok": [],
+                   "segments_failed": [], "status": "failed"}
+        try:
+            if p is None:
+                summary["error"] = {"stage": "preprocess", "message": pre_future.state.message or "failed"}
+                pre_future.result()  # raises the stage's own error
+            _finish_flight(job, p, plan, futures, summary, logger)
+        except Exception as exc:
+            summary["status"] = "failed"
+            summary.setdefault("error", {"stage": "flight", "message": f"{type(exc).__name__}: {exc}"})
             write_run_summary_task(job.run_dir, summary)
+            if not isolate:
+                raise
+            logger.error("flight %s failed: %s", job.flight, summary["error"]["message"])
         summaries.append(summary)
     return summaries
+
+
+def _finish_flight(job: FlightJob, p: dict, plan: list, futures: list, summary: dict, logger) -> None:
+    done, failed = summary["segments_ok"], summary["segments_failed"]
+    for seg, fut in zip(plan, futures):
+        fut.wait()
+        if fut.state.is_completed():
+            done.append(fut.result())
+        else:
+            err = fut.state.message or "failed"
+            failed.append({"segment": seg["segment_id"], "error": err})
+            logger.warning("flight %s segment %s failed: %s", job.flight, seg["segment_id"], err)
+    summary["status"] = "failed" if not done else ("partial" if failed else "ok")
+    if done:
+        fd = flight_data_task(p["path"], [d["path"] for d in done], job.run_dir, job.context(), job.vehicle)
+        coeffs = regression_task([fd["path"]], job.run_dir, job.context(), job.vehicle, job.model_spec,
+                                 job.mach_half_width)
+        summary.update(flight_data=fd, coefficients=coeffs)
+        _artifacts(job, summary)
+    write_run_summary_task(job.run_dir, summary)
+    if done:
+        summary["report"] = report_task(job.run_dir, job.context(), [fd["path"], coeffs["path"]], job.model_spec,
+                                        truth_next_to(job.telemetry), job.mach_half_width)
+        write_run_summary_task(job.run_dir, summary)
 
 
 def _artifacts(job: FlightJob, summary: dict) -> None:

@@ -27,10 +27,14 @@ def append(ledger: str | Path, record: dict) -> dict:
     line = (json.dumps(record, sort_keys=False, default=str) + "\n").encode()
     path = Path(ledger)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd = os.open(path, os.O_WRONLY | os.O_APPEND | os.O_CREAT, 0o644)
+    fd = os.open(path, os.O_RDWR | os.O_APPEND | os.O_CREAT, 0o644)
     try:
         fcntl.flock(fd, fcntl.LOCK_EX)
-        os.write(fd, line)
+        if os.fstat(fd).st_size and os.pread(fd, 1, os.fstat(fd).st_size - 1) != b"\n":
+            line = b"\n" + line  # a torn last line (a crash or a full disk mid-write) stays alone
+        view = memoryview(line)
+        while view:
+            view = view[os.write(fd, view):]
         os.fsync(fd)
     finally:
         fcntl.flock(fd, fcntl.LOCK_UN)

@@ -16,15 +16,16 @@ from tasks.stages import IO_RETRIES
 
 @task(name="diagnose-and-report", **IO_RETRIES)
 def report_task(run_dir: str, ctx: StageContext, inputs: list[str], model_spec: str | None,
-                truth_path: str | None) -> dict:
-    params = {"model_spec": model_spec, "truth": truth_path}
+                truth_path: str | None, mach_half_width: float | None = 0.5) -> dict:
+    params = {"model_spec": model_spec, "truth": truth_path, "mach_half_width": mach_half_width}
     files = [p for p in [*inputs, model_spec, truth_path] if p]
     base = {"run_id": ctx.run_id, "flight": ctx.flight, "segment": "", "stage": "report",
             "inputs": [{"path": p, "sha256": sha256_file(p)} for p in files], "params": params,
             "params_sha256": params_hash(params), "code_version": code_version()}
     started = time.perf_counter()
     try:
-        paths = refresh(run_dir, load_models(model_spec) if model_spec else None, truth=truth_path)
+        paths = refresh(run_dir, load_models(model_spec) if model_spec else None, truth=truth_path,
+                        mach_half_width=mach_half_width)
     except Exception as exc:
         ledger.append(ctx.ledger_path, {**base, "status": "failed", "outputs": [], "error": f"{type(exc).__name__}: {exc}",
                                         "duration_s": time.perf_counter() - started})

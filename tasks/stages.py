@@ -39,6 +39,12 @@ def retry_on_io(task, task_run, state) -> bool:
     return False
 
 
+def vehicle_files(vehicle: str) -> list[str]:
+    """The vehicle description and its database: their content enters the cache keys."""
+    veh = load_vehicle(vehicle)
+    return [veh.source, str(veh.database_path)]
+
+
 IO_RETRIES = {"retries": 2, "retry_delay_seconds": [0.2, 1.0], "retry_condition_fn": retry_on_io}
 
 
@@ -85,7 +91,7 @@ def smooth_segment_task(pre_path: str, run_dir: str, ctx: StageContext, segment:
                         flagged_rows=int(smoothed.result.gate_flags.any(axis=1).sum()),
                         note=smoothed.result.summary())
 
-    return execute("smooth", ctx, [pre_path], out, params, SmoothedSegment, produce)
+    return execute("smooth", ctx, [pre_path, *vehicle_files(vehicle)], out, params, SmoothedSegment, produce)
 
 
 @task(name="flight-data", **IO_RETRIES)
@@ -104,14 +110,15 @@ def flight_data_task(pre_path: str, smoothed_paths: list[str], run_dir: str, ctx
         frame = pd.concat(parts, ignore_index=True)
         return Produced(frame, {}, rows_in=sum(len(p) for p in parts))
 
-    return execute("flight_data", ctx, [pre_path, *smoothed_paths], out, {"vehicle": vehicle}, FlightData, produce)
+    return execute("flight_data", ctx, [pre_path, *smoothed_paths, *vehicle_files(vehicle)], out,
+                   {"vehicle": vehicle, "flight": ctx.flight}, FlightData, produce)
 
 
 @task(name="regression", **IO_RETRIES)
 def regression_task(flight_data_paths: list[str], run_dir: str, ctx: StageContext, vehicle: str,
                     model_spec: str | None, mach_half_width: float | None) -> dict:
     out = Path(run_dir) / "coefficients.parquet"
-    inputs = list(flight_data_paths) + ([model_spec] if model_spec else [])
+    inputs = list(flight_data_paths) + ([model_spec] if model_spec else []) + vehicle_files(vehicle)
     params = {"vehicle": vehicle, "mach_half_width": mach_half_width, "model_spec": bool(model_spec)}
 
     def produce() -> Produced:
