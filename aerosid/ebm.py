@@ -11,7 +11,7 @@ from dataclasses import dataclass
 import pandas as pd
 
 from aerosid.aerodb import AeroDatabase
-from aerosid.flight_data import build_flight_data
+from aerosid.flight_data import build_flight_data_segments
 from aerosid.identify import Identification, identify
 from aerosid.models import ChannelModel
 from aerosid.preprocess import PreprocessParams, PreprocessResult, preprocess
@@ -39,11 +39,7 @@ def process_telemetry(raw: pd.DataFrame, vehicle: Vehicle, *, flight: str = "fli
     pre = preprocess(raw, PreprocessParams(**(preprocess_params or {})), source=source)
     segments = split_segments(pre.frame["t_s"].to_numpy(), list(pre.long_gaps), windows, min_segment_s)
     db = AeroDatabase.load(vehicle.database_path)
-    smoothed, parts = [], []
-    for seg in segments:
-        rows = pre.frame.iloc[seg.start:seg.stop].reset_index(drop=True)
-        sm = smooth_segment_frame(rows, vehicle, smoothing_options, seg.segment_id)
-        smoothed.append(sm)
-        parts.append(build_flight_data(sm.frame, rows, vehicle, db, flight))
-    fd = pd.concat(parts, ignore_index=True)
+    smoothed = [smooth_segment_frame(pre.frame.iloc[seg.start:seg.stop].reset_index(drop=True), vehicle,
+                                     smoothing_options, seg.segment_id) for seg in segments]
+    fd = build_flight_data_segments(pre.frame, [s.frame for s in smoothed], vehicle, db, flight)
     return EBMRun(pre, tuple(smoothed), fd, identify(fd, vehicle, models, mach_half_width))

@@ -67,3 +67,17 @@ def build_flight_data(smoothed: pd.DataFrame, measured: pd.DataFrame, vehicle: V
         "delta_p_rad": delta_p, "delta_y_rad": delta_y, "delta_r_rad": delta_r,
         "p_rad_s": s["p_rad_s"].to_numpy(), "q_rad_s": s["q_rad_s"].to_numpy(), "r_rad_s": s["r_rad_s"].to_numpy(),
     })
+
+
+def build_flight_data_segments(preprocessed: pd.DataFrame, smoothed: list[pd.DataFrame], vehicle: Vehicle,
+                               db: AeroDatabase, flight: str = "flight") -> pd.DataFrame:
+    """Flight data of several smoothed segments of one preprocessed flight, pooled:
+    each segment is matched to the preprocessed rows of its own time span."""
+    t = preprocessed["t_s"].to_numpy()
+    parts = []
+    for sm in smoothed:
+        ts = sm["t_s"].to_numpy()
+        start = int(np.searchsorted(t, ts[0] - 1e-9))
+        rows = preprocessed.iloc[start:start + len(ts)].reset_index(drop=True)
+        parts.append(build_flight_data(sm, rows, vehicle, db, flight))
+    return pd.concat(parts, ignore_index=True)

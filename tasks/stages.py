@@ -14,7 +14,7 @@ import pandas as pd
 from prefect import task
 
 from aerosid.aerodb import AeroDatabase
-from aerosid.flight_data import build_flight_data
+from aerosid.flight_data import build_flight_data_segments
 from aerosid.identify import identify
 from aerosid.models import load_models
 from aerosid.preprocess import PreprocessParams, preprocess
@@ -102,13 +102,9 @@ def flight_data_task(pre_path: str, smoothed_paths: list[str], run_dir: str, ctx
         veh = load_vehicle(vehicle)
         db = AeroDatabase.load(veh.database_path)
         pre = read_validated(pre_path, PreprocessedTelemetry)
-        parts = []
-        for path in smoothed_paths:
-            sm = read_validated(path, SmoothedSegment)
-            rows = pre[pre["t_s"].between(sm["t_s"].iloc[0], sm["t_s"].iloc[-1])].reset_index(drop=True)
-            parts.append(build_flight_data(sm, rows, veh, db, ctx.flight))
-        frame = pd.concat(parts, ignore_index=True)
-        return Produced(frame, {}, rows_in=sum(len(p) for p in parts))
+        smoothed = [read_validated(path, SmoothedSegment) for path in smoothed_paths]
+        frame = build_flight_data_segments(pre, smoothed, veh, db, ctx.flight)
+        return Produced(frame, {}, rows_in=sum(len(sm) for sm in smoothed))
 
     return execute("flight_data", ctx, [pre_path, *smoothed_paths, *vehicle_files(vehicle)], out,
                    {"vehicle": vehicle, "flight": ctx.flight}, FlightData, produce)
