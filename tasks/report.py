@@ -8,9 +8,9 @@ from prefect import task
 
 from aerosid.models import load_models
 from aerosid.modelling_loop import refresh
-from aerosid.provenance import code_version, params_hash, sha256_file
+from aerosid.provenance import sha256_file
 from tasks import ledger
-from tasks.runner import StageContext
+from tasks.runner import StageContext, base_record
 from tasks.stages import IO_RETRIES
 
 
@@ -19,9 +19,7 @@ def report_task(run_dir: str, ctx: StageContext, inputs: list[str], model_spec: 
                 truth_path: str | None, mach_half_width: float | None = 0.5) -> dict:
     params = {"model_spec": model_spec, "truth": truth_path, "mach_half_width": mach_half_width}
     files = [p for p in [*inputs, model_spec, truth_path] if p]
-    base = {"run_id": ctx.run_id, "flight": ctx.flight, "segment": "", "stage": "report",
-            "inputs": [{"path": p, "sha256": sha256_file(p)} for p in files], "params": params,
-            "params_sha256": params_hash(params), "code_version": code_version()}
+    base = base_record("report", ctx, files, [sha256_file(p) for p in files], params)
     started = time.perf_counter()
     try:
         paths = refresh(run_dir, load_models(model_spec) if model_spec else None, truth=truth_path,

@@ -77,6 +77,14 @@ def _writing(output: Path):
         os.close(fd)  # releases the lock
 
 
+def base_record(stage: str, ctx: StageContext, inputs: list[str | Path], input_hashes: list[str],
+                params: dict) -> dict:
+    """The ledger fields every stage execution shares (status, outputs and timing come later)."""
+    return {"run_id": ctx.run_id, "flight": ctx.flight, "segment": ctx.segment, "stage": stage,
+            "inputs": [{"path": str(p), "sha256": h} for p, h in zip(inputs, input_hashes)],
+            "params": params, "params_sha256": params_hash(params), "code_version": code_version()}
+
+
 def cache_key(stage: str, input_hashes: list[str], params: dict) -> str:
     return params_hash({"stage": stage, "inputs": input_hashes, "params": params, "code": code_version()})
 
@@ -87,10 +95,7 @@ def execute(stage: str, ctx: StageContext, inputs: list[str | Path], output: str
     output = Path(output)
     in_hashes = [sha256_file(p) for p in inputs]
     key = cache_key(stage, in_hashes, params)
-    base = {"run_id": ctx.run_id, "flight": ctx.flight, "segment": ctx.segment, "stage": stage,
-            "inputs": [{"path": str(p), "sha256": h} for p, h in zip(inputs, in_hashes)],
-            "params": params, "params_sha256": params_hash(params), "code_version": code_version(),
-            "cache_key": key}
+    base = {**base_record(stage, ctx, inputs, in_hashes, params), "cache_key": key}
     started = time.perf_counter()
     if output.is_file():
         try:
