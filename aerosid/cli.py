@@ -48,7 +48,13 @@ def main() -> None:
 @click.option("--rate", type=float, default=None, help="Sample rate [Hz] (default: the case's).")
 @click.option("--no-faults", is_flag=True, help="No dropouts, outliers or sync gap (noise only).")
 @click.option("--list-effects", is_flag=True, help="Print the hidden-effect catalogue and exit.")
-def simulate(case_name, effects, seed, out_dir, duration, rate, no_faults, list_effects):
+@click.option("--jsbsim", "jsbsim_aircraft", default=None, metavar="AIRCRAFT",
+              help="Fly AIRCRAFT (c172x) in JSBSim instead of the built-in simulator (needs the extra: "
+                   "pip install 'aerosid[jsbsim]').")
+@click.option("--manoeuvre", default="3211", show_default=True,
+              help="JSBSim input sequence: 3211 = elevator 3-2-1-1, then aileron and rudder doublets.")
+def simulate(case_name, effects, seed, out_dir, duration, rate, no_faults, list_effects, jsbsim_aircraft,
+             manoeuvre):
     """Simulate a flight whose truth is known and write its telemetry.
 
     Writes DIR/telemetry.parquet (raw, as a flight delivers it: dropouts as
@@ -64,6 +70,23 @@ def simulate(case_name, effects, seed, out_dir, duration, rate, no_faults, list_
     if out_dir is None:
         raise click.UsageError("--out DIR is required (or use --list-effects)")
     from dataclasses import replace
+
+    if jsbsim_aircraft is not None:
+        if effects or duration is not None or rate is not None:
+            raise click.UsageError("--effect, --duration and --rate apply to the built-in simulator, not --jsbsim")
+        from aerosid.simulation.jsbsim_flight import JSBSimUnavailable, simulate_jsbsim
+
+        try:
+            flight = simulate_jsbsim(jsbsim_aircraft, manoeuvre, seed=seed, faults=not no_faults)
+        except JSBSimUnavailable as exc:
+            raise click.ClickException(str(exc)) from exc
+        except ValueError as exc:
+            raise click.BadParameter(str(exc)) from exc
+        paths = flight.write(out_dir)
+        click.echo(flight.summary())
+        for kind, path in paths.items():
+            click.echo(f"  wrote {path}")
+        return
 
     from aerosid.simulation import load_case, simulate as run_simulation
 
@@ -122,8 +145,9 @@ def _quiet_run_tracebacks() -> None:
 
 @main.command()
 @click.argument("telemetry", type=click.Path(exists=True, dir_okay=False, path_type=Path))
-@click.option("--vehicle", default="seed-rlv", show_default=True, metavar="NAME_OR_FILE",
-              help="Built-in vehicle name or a vehicle TOML file.")
+@click.option("--vehicle", default=None, metavar="NAME_OR_FILE",
+              help="Built-in vehicle name or a vehicle TOML file (default: the built-in vehicle the "
+                   "telemetry file names in its metadata, e.g. a simulated c172x flight; else seed-rlv).")
 @click.option("--out", "out_dir", required=True, type=click.Path(file_okay=False, path_type=Path),
               help="Run folder: every stage's Parquet, coefficients.parquet, run.json, ledger.jsonl.")
 @click.option("--flight", default=None, help="Flight identifier (default: from the file name).")
@@ -147,6 +171,8 @@ def run(telemetry, vehicle, out_dir, flight, windows, model_spec, mach_half_widt
     from aerosid.vehicle import VehicleError
 
     try:
+        if vehicle is None:
+            vehicle = _vehicle_from_metadata(telemetry)
         _preflight(telemetry, vehicle, model_spec)  # bad input fails here, before Prefect starts
         from flows.pipeline import process_flight
         from flows.steps import check_flight_id
@@ -179,6 +205,20 @@ def run(telemetry, vehicle, out_dir, flight, windows, model_spec, mach_half_widt
                                    f"see {out_dir}/ledger.jsonl")
 
 
+def _vehicle_from_metadata(telemetry: Path) -> str:
+    """The built-in vehicle named by the file's ``aerosid.case`` metadata, else seed-rlv."""
+    import pyarrow.parquet as pq
+
+    from aerosid.vehicle import builtin_vehicles
+
+    try:
+        meta = pq.read_schema(telemetry).metadata or {}
+    except Exception:  # unreadable: _preflight reports it with the file name
+        return "seed-rlv"
+    case = meta.get(b"aerosid.case", b"").decode("utf-8", "replace")
+    return case if case in builtin_vehicles() else "seed-rlv"
+
+
 def _preflight(telemetry: Path, vehicle: str, model_spec: str | None) -> None:
     """Cheap checks of the inputs before any flow starts: the telemetry file is
     readable Parquet that follows RawTelemetry, has rows and no channel without a
@@ -186,7 +226,7 @@ def _preflight(telemetry: Path, vehicle: str, model_spec: str | None) -> None:
     import numpy as np
     import pyarrow.parquet as pq
 
-    from aerosid.models import load_models
+    from aerosid.models import default_models, load_models
     from aerosid.preprocess import TelemetryError
     from aerosid.vehicle import load_vehicle
     from schemas.telemetry import CHANNELS, RAW_COLUMNS, RawTelemetry, sentinel_mask
@@ -210,9 +250,15 @@ def _preflight(telemetry: Path, vehicle: str, model_spec: str | None) -> None:
             raise TelemetryError(f"no value in the whole channel (all {len(frame)} rows NaN, infinite or a "
                                  "no-data sentinel): the pipeline needs every channel", file=str(telemetry),
                                  column=c, rows=range(len(frame)))
-    load_vehicle(vehicle)
+    veh = load_vehicle(vehicle)
+    if veh.air_data_source == "vanes":
+        for c in (veh.alpha_column, veh.beta_column):
+            if c not in frame.columns:
+                raise TelemetryError(f"vehicle {veh.name} reads alpha and beta from air-data vanes "
+                                     f"({veh.source} [air_data]) but the telemetry has no such column",
+                                     file=str(telemetry), column=c)
     if model_spec:
-        load_models(model_spec)
+        load_models(model_spec, base=default_models(veh))
 
 
 @main.command()

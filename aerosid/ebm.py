@@ -10,8 +10,7 @@ from dataclasses import dataclass
 
 import pandas as pd
 
-from aerosid.aerodb import AeroDatabase
-from aerosid.flight_data import build_flight_data_segments
+from aerosid.flight_data import build_flight_data_segments, load_database
 from aerosid.identify import Identification, identify
 from aerosid.models import ChannelModel
 from aerosid.preprocess import PreprocessParams, PreprocessResult, preprocess
@@ -38,7 +37,7 @@ def process_telemetry(raw: pd.DataFrame, vehicle: Vehicle, *, flight: str = "fli
                       min_segment_s: float = 5.0, source: str = "<memory>") -> EBMRun:
     pre = preprocess(raw, PreprocessParams(**(preprocess_params or {})), source=source)
     segments = split_segments(pre.frame["t_s"].to_numpy(), list(pre.long_gaps), windows, min_segment_s)
-    db = AeroDatabase.load(vehicle.database_path)
+    db = load_database(vehicle)
     smoothed = [smooth_segment_frame(pre.frame.iloc[seg.start:seg.stop].reset_index(drop=True), vehicle,
                                      smoothing_options, seg.segment_id) for seg in segments]
     fd = build_flight_data_segments(pre.frame, [s.frame for s in smoothed], vehicle, db, flight)

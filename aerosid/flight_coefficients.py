@@ -1,7 +1,10 @@
 """Flight force and moment coefficients from smoothed states (method.md §7–§9).
 
     C_N = -m Z1/(qbar S)   C_Y = m Y1/(qbar S)   C_A = -m X1/(qbar S)
-    C_l = Ixx L_hat/(qbar S d)   C_m = Iyy M_hat/(qbar S d)   C_n = Izz N_hat/(qbar S d)
+    C_l = Ixx L_hat/(qbar S b)   C_m = Iyy M_hat/(qbar S c)   C_n = Izz N_hat/(qbar S b)
+
+with c and b the vehicle's pitch and lateral reference lengths (both d for the
+finned class; chord and span for an aircraft).
 
 X1, Y1, Z1 are the CG specific forces [m/s^2] and L_hat, M_hat, N_hat the
 aerodynamic angular accelerations (moment / inertia) [rad/s^2], i.e. the
@@ -39,13 +42,13 @@ def flight_coefficients(vehicle: Vehicle, V_m_s, h_m, accel_cg_m_s2, ang_accel_h
     Optional (N,3) sigmas of each give the coefficients' sigma."""
     air = air_data(V_m_s, h_m)
     qs = air.qbar_pa * vehicle.S_m2
-    qsd = qs * vehicle.d_m
+    lengths = np.array([vehicle.length_lateral_m, vehicle.length_pitch_m, vehicle.length_lateral_m])
     a = np.asarray(accel_cg_m_s2, dtype=float)
     w = np.asarray(ang_accel_hat_rad_s2, dtype=float)
     m = vehicle.mass_kg
     inertia = np.array([vehicle.Ixx_kg_m2, vehicle.Iyy_kg_m2, vehicle.Izz_kg_m2])
     force_scale = m / qs
-    moment_scale = inertia[None, :] / qsd[:, None]
+    moment_scale = inertia[None, :] / (qs[:, None] * lengths[None, :])
     sigma = {}
     if accel_sigma is not None:
         s = np.asarray(accel_sigma) * force_scale[:, None]

@@ -1,5 +1,7 @@
 """From a smoothed segment to the flight data the regression reads (method.md §7–§10):
-air data, flight coefficients, fin mixing, and alpha/beta from the database."""
+air data, flight coefficients, control mixing, and alpha/beta, either inverted from
+the force database (the finned class) or read from air-data vanes (a vehicle file
+with ``[air_data] source = "vanes"``)."""
 from __future__ import annotations
 
 import numpy as np
@@ -14,12 +16,34 @@ from aerosid.vehicle import Vehicle
 FIN_COLUMNS = ("d1_rad", "d2_rad", "d3_rad", "d4_rad")
 
 
+def load_database(vehicle: Vehicle) -> AeroDatabase | None:
+    """The vehicle's force database, or None when alpha/beta come from vanes without one."""
+    if vehicle.air_data_source == "vanes" and vehicle.database_path is None:
+        return None
+    return AeroDatabase.load(vehicle.database_path)
+
+
+def _vane_angles(measured: pd.DataFrame, ok: np.ndarray, vehicle: Vehicle, segment: str, t: np.ndarray):
+    """alpha, beta [rad] from the vanes' clean columns minus the calibration bias, and the
+    total angle of attack alpha_r and aerodynamic roll angle phi_r derived from them."""
+    cols = {}
+    for name, col, bias in (("alpha", vehicle.alpha_column, vehicle.alpha_bias_rad),
+                            ("beta", vehicle.beta_column, vehicle.beta_bias_rad)):
+        if f"{col}_clean" not in measured:
+            raise ValueError(f"segment {segment}: the vehicle {vehicle.name} reads {name} from the vane column "
+                             f"{col!r} ({vehicle.source} [air_data]), which the telemetry does not carry")
+        cols[name] = measured[f"{col}_clean"].to_numpy(dtype=float)[ok] - bias
+    a, b = cols["alpha"], cols["beta"]
+    ta, tb = np.tan(a), np.tan(b)
+    return a, b, np.arctan(np.hypot(ta, tb)), np.arctan2(tb, ta)
+
+
 def _span(t: np.ndarray) -> str:
     """A time span for messages: 't0..t1 s (first t_s [...])'."""
     return f"{t[0]:.2f}..{t[-1]:.2f} s (first t_s {[round(float(v), 3) for v in t[:5]]})" if len(t) else "-"
 
 
-def build_flight_data(smoothed: pd.DataFrame, measured: pd.DataFrame, vehicle: Vehicle, db: AeroDatabase,
+def build_flight_data(smoothed: pd.DataFrame, measured: pd.DataFrame, vehicle: Vehicle, db: AeroDatabase | None,
                       flight: str = "flight") -> pd.DataFrame:
     """smoothed: a SmoothedSegment frame; measured: the preprocessed rows of the same
     segment (same t_s), whose ``*_clean`` columns give fins, V and h.  Rows where V, h
@@ -27,9 +51,15 @@ def build_flight_data(smoothed: pd.DataFrame, measured: pd.DataFrame, vehicle: V
     t = smoothed["t_s"].to_numpy()
     if len(measured) != len(t) or not np.allclose(measured["t_s"].to_numpy(), t, atol=1e-9, rtol=0):
         raise ValueError("smoothed and measured frames are not on the same time grid")
-    clean = {c: measured[f"{c}_clean"].to_numpy(dtype=float) for c in (*FIN_COLUMNS, "V_m_s", "h_m")}
-    ok = np.all(np.isfinite(np.column_stack(list(clean.values()))), axis=1) & (clean["V_m_s"] > 0)
     segment = str(smoothed["segment"].iloc[0]) if len(smoothed) else "?"
+    vanes = vehicle.air_data_source == "vanes"
+    cols = (*FIN_COLUMNS, "V_m_s", "h_m") + ((vehicle.alpha_column, vehicle.beta_column) if vanes else ())
+    missing = [c for c in cols if f"{c}_clean" not in measured]
+    if missing:
+        raise ValueError(f"segment {segment}: the preprocessed telemetry has no column(s) "
+                         f"{[c + '_clean' for c in missing]} (vehicle {vehicle.name}, {vehicle.source})")
+    clean = {c: measured[f"{c}_clean"].to_numpy(dtype=float) for c in cols}
+    ok = np.all(np.isfinite(np.column_stack(list(clean.values()))), axis=1) & (clean["V_m_s"] > 0)
     h_out = ok & ~((clean["h_m"] >= H_MIN_M) & (clean["h_m"] <= H_MAX_M))
     if h_out.any():
         raise ValueError(f"segment {segment}: column 'h_m' outside the US-1976 atmosphere's {H_MIN_M:g}.."
@@ -43,6 +73,28 @@ def build_flight_data(smoothed: pd.DataFrame, measured: pd.DataFrame, vehicle: V
     acc_sig = s[["sigma_X1_m_s2", "sigma_Y1_m_s2", "sigma_Z1_m_s2"]].to_numpy()
     ang_sig = s[["sigma_L1_rad_s2", "sigma_M1_rad_s2", "sigma_N1_rad_s2"]].to_numpy()
     fc = flight_coefficients(vehicle, V, h, acc, ang, acc_sig, ang_sig)
+    if vanes:
+        alpha, beta, alpha_r, phi_r = _vane_angles(measured, ok, vehicle, segment, t)
+        inv_J = np.zeros(len(alpha))
+    else:
+        alpha, beta, alpha_r, phi_r, inv_J = _inverted_angles(fc, s, delta_p, delta_y, vehicle, db, segment)
+    return pd.DataFrame({
+        "t_s": s["t_s"].to_numpy(),
+        "flight": flight,
+        "segment": s["segment"].to_numpy(),
+        "V_m_s": V, "h_m": h,
+        "rho_kg_m3": fc.air.rho_kg_m3, "mach": fc.air.mach, "qbar_pa": fc.air.qbar_pa,
+        "CA": fc.CA, "CY": fc.CY, "CN": fc.CN, "Cl": fc.Cl, "Cm": fc.Cm, "Cn": fc.Cn,
+        **{f"sigma_{k}": v for k, v in fc.sigma.items()},
+        "alpha_rad": alpha, "beta_rad": beta,
+        "alpha_r_rad": alpha_r, "phi_r_rad": phi_r, "inversion_J": inv_J,
+        "delta_p_rad": delta_p, "delta_y_rad": delta_y, "delta_r_rad": delta_r,
+        "p_rad_s": s["p_rad_s"].to_numpy(), "q_rad_s": s["q_rad_s"].to_numpy(), "r_rad_s": s["r_rad_s"].to_numpy(),
+    })
+
+
+def _inverted_angles(fc, s: pd.DataFrame, delta_p, delta_y, vehicle: Vehicle, db: AeroDatabase, segment: str):
+    """alpha, beta, alpha_r, phi_r [rad] and the inversion cost from the force database."""
     m_lo, m_hi = db.mach_range()
     outside = ~((fc.air.mach >= m_lo) & (fc.air.mach <= m_hi))
     if outside.any():
@@ -54,23 +106,11 @@ def build_flight_data(smoothed: pd.DataFrame, measured: pd.DataFrame, vehicle: V
                          f"Mach {m_lo:g}..{m_hi:g} ({vehicle.database_path}); alpha/beta cannot be inverted "
                          "there: restrict the run to the database's range (--window T0 T1) or extend the database")
     inv = invert_alpha_beta(fc.CN, fc.CY, fc.air.mach, delta_p, delta_y, db, vehicle.preflight)
-    return pd.DataFrame({
-        "t_s": s["t_s"].to_numpy(),
-        "flight": flight,
-        "segment": s["segment"].to_numpy(),
-        "V_m_s": V, "h_m": h,
-        "rho_kg_m3": fc.air.rho_kg_m3, "mach": fc.air.mach, "qbar_pa": fc.air.qbar_pa,
-        "CA": fc.CA, "CY": fc.CY, "CN": fc.CN, "Cl": fc.Cl, "Cm": fc.Cm, "Cn": fc.Cn,
-        **{f"sigma_{k}": v for k, v in fc.sigma.items()},
-        "alpha_rad": inv.alpha_rad, "beta_rad": inv.beta_rad,
-        "alpha_r_rad": inv.alpha_r_rad, "phi_r_rad": inv.phi_r_rad, "inversion_J": inv.J,
-        "delta_p_rad": delta_p, "delta_y_rad": delta_y, "delta_r_rad": delta_r,
-        "p_rad_s": s["p_rad_s"].to_numpy(), "q_rad_s": s["q_rad_s"].to_numpy(), "r_rad_s": s["r_rad_s"].to_numpy(),
-    })
+    return inv.alpha_rad, inv.beta_rad, inv.alpha_r_rad, inv.phi_r_rad, inv.J
 
 
 def build_flight_data_segments(preprocessed: pd.DataFrame, smoothed: list[pd.DataFrame], vehicle: Vehicle,
-                               db: AeroDatabase, flight: str = "flight") -> pd.DataFrame:
+                               db: AeroDatabase | None, flight: str = "flight") -> pd.DataFrame:
     """Flight data of several smoothed segments of one preprocessed flight, pooled:
     each segment is matched to the preprocessed rows of its own time span."""
     t = preprocessed["t_s"].to_numpy()

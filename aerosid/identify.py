@@ -13,7 +13,7 @@ import numpy as np
 import pandas as pd
 
 from aerosid.aeromodel import AeroModel
-from aerosid.models import ChannelModel, default_models, signals_from_flight_data
+from aerosid.models import ChannelModel, default_models, signals_from_flight_data, vehicle_signals
 from aerosid.regression import LinearFit, fit_linear
 from aerosid.vehicle import Vehicle
 
@@ -91,7 +91,7 @@ def mach_window_mask(mach: np.ndarray, reference: float, half_width: float | Non
 def identify(flight_data: pd.DataFrame, vehicle: Vehicle, models: dict[str, ChannelModel] | None = None,
              mach_half_width: float | None = 0.5, cov: str = "morelli_klein") -> Identification:
     """Fit every channel's model on the samples with |M - M_ref| <= mach_half_width."""
-    models = models or default_models()
+    models = models or default_models(vehicle)
     fd = flight_data.sort_values(["flight", "t_s"], kind="stable").reset_index(drop=True)
     mask = mach_window_mask(fd["mach"].to_numpy(), vehicle.mach_reference, mach_half_width)
     span = (f"the flight data's {len(fd)} samples span Mach {fd['mach'].min():.3g}..{fd['mach'].max():.3g}"
@@ -100,11 +100,11 @@ def identify(flight_data: pd.DataFrame, vehicle: Vehicle, models: dict[str, Chan
     if len(fd) < 50:
         raise ValueError(f"only {len(fd)} samples inside Mach {vehicle.mach_reference} ± {mach_half_width}: "
                          f"too few to fit the models ({span})")
-    signals = signals_from_flight_data(fd, vehicle.d_m)
+    signals = vehicle_signals(fd, vehicle)
     fits: dict[str, LinearFit] = {}
     for channel, model in models.items():
         X = model.regressors(signals)
         fits[channel] = fit_linear(fd[channel].to_numpy(float), X, names=model.names, channel=channel, cov=cov)
-    refs = AeroModel.preflight(vehicle).linear_truth()
+    refs = AeroModel.preflight(vehicle).linear_truth() if vehicle.preflight is not None else {}
     window = (float(fd["mach"].min()), float(fd["mach"].max()))
     return Identification(fits, dict(models), refs, len(fd), window)

@@ -23,7 +23,7 @@ def refresh(run_dir: str | Path, models: dict[str, ChannelModel] | None = None, 
     version, then the report.  Returns the paths written."""
     run_dir = Path(run_dir)
     if history(run_dir).latest is None:
-        fit_version(run_dir, None, note="default models (method.md §11)", mach_half_width=mach_half_width)
+        fit_version(run_dir, None, note="default models", mach_half_width=mach_half_width)
         if models is not None:
             fit_version(run_dir, models, note="--model given to aerosid run", mach_half_width=mach_half_width)
     diag = diagnose(read_flight_data(run_dir), load_vehicle(run_vehicle(run_dir)), latest_models(run_dir),

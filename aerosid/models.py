@@ -87,9 +87,12 @@ def parse_term(text: str, channel: str, source: str = "<memory>") -> Term:
     return Term(name, expr.strip())
 
 
-def default_models() -> dict[str, ChannelModel]:
-    return {ch: ChannelModel(ch, tuple(parse_term(t, ch, "<default>") for t in terms))
-            for ch, terms in DEFAULT_TERMS.items()}
+def default_models(vehicle=None) -> dict[str, ChannelModel]:
+    """The default models: the vehicle file's ``[models]`` table when it has one (an
+    aircraft), else method.md §11 (the finned seed-rlv class)."""
+    table = getattr(vehicle, "default_terms", None) or DEFAULT_TERMS
+    where = f"{vehicle.source} [models]" if getattr(vehicle, "default_terms", None) else "<default>"
+    return {ch: ChannelModel(ch, tuple(parse_term(t, ch, where) for t in terms)) for ch, terms in table.items()}
 
 
 def load_models(path: str | Path, base: dict[str, ChannelModel] | None = None) -> dict[str, ChannelModel]:
@@ -125,8 +128,11 @@ def models_to_toml(models: dict[str, ChannelModel]) -> str:
     return "\n".join(lines)
 
 
-def signals_from_flight_data(fd: pd.DataFrame, d_m: float) -> dict[str, np.ndarray]:
-    """The named signals of a FlightData frame (SI, radians)."""
+def signals_from_flight_data(fd: pd.DataFrame, d_m: float, lateral_m: float | None = None) -> dict[str, np.ndarray]:
+    """The named signals of a FlightData frame (SI, radians).  d_m: the pitch reference
+    length of q_hat [m] (d, or an aircraft's chord); lateral_m: that of p_hat and r_hat
+    (an aircraft's span; default d_m)."""
+    b_m = d_m if lateral_m is None else lateral_m
     V = fd["V_m_s"].to_numpy(float)
     p, q, r = (fd[c].to_numpy(float) for c in ("p_rad_s", "q_rad_s", "r_rad_s"))
     return {
@@ -135,6 +141,11 @@ def signals_from_flight_data(fd: pd.DataFrame, d_m: float) -> dict[str, np.ndarr
         "mach": fd["mach"].to_numpy(float), "V": V, "qbar": fd["qbar_pa"].to_numpy(float),
         "delta_p": fd["delta_p_rad"].to_numpy(float), "delta_y": fd["delta_y_rad"].to_numpy(float),
         "delta_r": fd["delta_r_rad"].to_numpy(float), "p": p, "q": q, "r": r,
-        "p_hat": p * d_m / (2 * V), "q_hat": q * d_m / (2 * V), "r_hat": r * d_m / (2 * V),
+        "p_hat": p * b_m / (2 * V), "q_hat": q * d_m / (2 * V), "r_hat": r * b_m / (2 * V),
         "t": fd["t_s"].to_numpy(float),
     }
+
+
+def vehicle_signals(fd: pd.DataFrame, vehicle) -> dict[str, np.ndarray]:
+    """signals_from_flight_data with the vehicle's pitch and lateral reference lengths."""
+    return signals_from_flight_data(fd, vehicle.length_pitch_m, vehicle.length_lateral_m)

@@ -652,7 +652,7 @@ def _comparisons(run: _Run, diag) -> tuple[dict, str]:
     fd = fd.loc[mach_window_mask(fd["mach"].to_numpy(float), veh.mach_reference, half)].reset_index(drop=True)
     if fd.empty:
         return {}, ""
-    sig = signals_from_flight_data(fd, veh.d_m)
+    sig = signals_from_flight_data(fd, veh.length_pitch_m, veh.length_lateral_m)
     n = len(fd)
     out = {}
     for ch, g in table.groupby("channel", sort=False):

@@ -74,10 +74,36 @@ class Vehicle:
     mixing: tuple[tuple[float, ...], ...]
     fin_limit_rad: float
     mach_reference: float
-    database_path: Path
-    preflight: PreflightAero
+    database_path: Path | None  # None: no force database (alpha/beta from vanes)
+    preflight: PreflightAero | None
     estimation: dict = field(default_factory=dict)  # smoother option defaults for this vehicle (EBMOptions names)
     source: str = field(default="<memory>", compare=False)
+    #: "finned" (seed-rlv: cruciform fins, one reference length d) or "aircraft"
+    #: (elevator/aileron/rudder, chord for pitch, span for roll and yaw)
+    vehicle_class: str = "finned"
+    chord_m: float | None = None  # pitch reference length (aircraft) [m]
+    span_m: float | None = None  # roll/yaw reference length (aircraft) [m]
+    #: where alpha and beta come from: "database" (invert the force database, method.md §10)
+    #: or "vanes" (air-data vanes, columns below, minus a known calibration bias)
+    air_data_source: str = "database"
+    alpha_column: str = "alpha_vane_rad"
+    beta_column: str = "beta_vane_rad"
+    alpha_bias_rad: float = 0.0  # vane calibration bias subtracted from the vane reading [rad]
+    beta_bias_rad: float = 0.0
+    vane_noise_rad: float = 0.0  # 1-sigma of the vanes' noise [rad] (errors-in-variables check)
+    surfaces: tuple[str, ...] = ("fin 1", "fin 2", "fin 3", "fin 4")  # what d1..d4 are
+    #: the vehicle's default model terms per channel (None: method.md §11 defaults)
+    default_terms: dict | None = None
+
+    @property
+    def length_pitch_m(self) -> float:
+        """Reference length of C_m and of q d/(2V) [m]: the chord, else d."""
+        return self.chord_m if self.chord_m is not None else self.d_m
+
+    @property
+    def length_lateral_m(self) -> float:
+        """Reference length of C_l, C_n and of p, r d/(2V) [m]: the span, else d."""
+        return self.span_m if self.span_m is not None else self.d_m
 
     @property
     def inertia(self) -> InertiaConstants:
@@ -108,6 +134,12 @@ class Vehicle:
             f"Izz {self.Izz_kg_m2:g}, Ixz {self.Ixz_kg_m2:g} kg m^2",
             f"  S {self.S_m2:.4f} m^2, d {self.d_m:g} m, x_cg {self.x_cg_m:g} m (x_cg/d {self.xcg_over_d:.3f})",
             f"  accelerometer offset from CG {self.accel_offset_m} m",
+        ]
+        if p is None:
+            rows[2] = (f"  S {self.S_m2:.4f} m^2, chord {self.length_pitch_m:g} m, span {self.length_lateral_m:g} m")
+            rows.append(f"  controls d1..d4 = {', '.join(self.surfaces)}; alpha/beta from {self.air_data_source}")
+            return "\n".join(rows)
+        rows += [
             f"  preflight at M {self.mach_reference}: CN_alpha {p.CN_alpha * deg:.4f}/deg, "
             f"Cm_alpha(nose) {p.Cm_alpha_nose * deg:.4f}/deg, CN_delta_p {p.CN_delta_p * deg:.5f}/deg pair, "
             f"Cm_delta_p(nose) {p.Cm_delta_p_nose * deg:.5f}/deg pair",
@@ -117,11 +149,13 @@ class Vehicle:
 
 _REQUIRED = {
     "mass": ["mass_kg", "Ixx_kg_m2", "Iyy_kg_m2", "Izz_kg_m2", "Ixz_kg_m2"],
-    "reference": ["S_m2", "d_m", "x_cg_m"],
+    "reference": ["S_m2", "x_cg_m"],
     "sensors": ["accel_offset_m"],
-    "controls": ["mixing", "fin_limit_rad"],
-    "aero": ["database", "mach_reference"],
+    "controls": ["mixing"],
+    "aero": ["mach_reference"],
 }
+CLASSES = ("finned", "aircraft")
+AIR_DATA_SOURCES = ("database", "vanes")
 
 
 def builtin_vehicles() -> list[str]:
@@ -171,19 +205,56 @@ def load_vehicle(name_or_path: str | Path = "seed-rlv") -> Vehicle:
     # the triangle inequality for principal inertias (of the pitch-plane pair)
     if Iyy > Ixx + Izz or Ixx > Iyy + Izz or Izz > Ixx + Iyy:
         raise VehicleError(src, "mass", f"inertias Ixx={Ixx}, Iyy={Iyy}, Izz={Izz} violate the triangle inequality")
-    S, d = positive("reference", "S_m2"), positive("reference", "d_m")
+    vclass = str(doc.get("class", "finned"))
+    if vclass not in CLASSES:
+        raise VehicleError(src, "class", f"unknown vehicle class {vclass!r}; known: {', '.join(CLASSES)}")
+    S = positive("reference", "S_m2")
+    chord = positive("reference", "chord_m") if "chord_m" in ref else None
+    span = positive("reference", "span_m") if "span_m" in ref else None
+    if "d_m" in ref:
+        d = positive("reference", "d_m")
+    elif chord is not None and span is not None:
+        d = chord
+    else:
+        raise VehicleError(src, "reference.d_m", "value missing (or give both chord_m and span_m)")
     offset = doc["sensors"]["accel_offset_m"]
     if len(offset) != 3:
         raise VehicleError(src, "sensors.accel_offset_m", "needs three numbers (x, y, z) [m]")
     mixing = doc["controls"]["mixing"]
     if len(mixing) != 3 or any(len(row) != 4 for row in mixing):
         raise VehicleError(src, "controls.mixing", "needs 3 rows (roll, pitch, yaw) of 4 fin weights")
-    pre = doc["aero"].get("preflight", {})
-    names = [f.name for f in PreflightAero.__dataclass_fields__.values()]
-    missing = [n for n in names if n not in pre]
-    if missing:
-        raise VehicleError(src, "aero.preflight", f"missing {', '.join(missing)}")
-    preflight = PreflightAero(**{n: (tuple(pre[n]) if isinstance(pre[n], list) else float(pre[n])) for n in names})
+    air = doc.get("air_data", {})
+    source = str(air.get("source", "database"))
+    if source not in AIR_DATA_SOURCES:
+        raise VehicleError(src, "air_data.source", f"must be one of {', '.join(AIR_DATA_SOURCES)}, got {source!r}")
+    if source == "database" and "database" not in doc["aero"]:
+        raise VehicleError(src, "aero.database", "value missing (needed to invert alpha and beta; or set "
+                           "[air_data] source = \"vanes\")")
+    database_path = path.parent / doc["aero"]["database"] if "database" in doc["aero"] else None
+    pre = doc["aero"].get("preflight")
+    preflight = None
+    if pre is not None or source == "database":
+        pre = pre or {}
+        names = [f.name for f in PreflightAero.__dataclass_fields__.values()]
+        missing = [n for n in names if n not in pre]
+        if missing:
+            raise VehicleError(src, "aero.preflight", f"missing {', '.join(missing)}")
+        preflight = PreflightAero(**{n: (tuple(pre[n]) if isinstance(pre[n], list) else float(pre[n]))
+                                     for n in names})
+    limit_key = "fin_limit_rad" if "fin_limit_rad" in doc["controls"] else "surface_limit_rad"
+    if limit_key not in doc["controls"]:
+        raise VehicleError(src, "controls.fin_limit_rad", "value missing (or surface_limit_rad)")
+    surfaces = doc["controls"].get("surfaces", ["fin 1", "fin 2", "fin 3", "fin 4"])
+    if len(surfaces) != 4:
+        raise VehicleError(src, "controls.surfaces", "needs 4 names, one per column d1..d4")
+    terms = doc.get("models")
+    if terms is not None:
+        from aerosid.models import CHANNELS as MODEL_CHANNELS
+
+        bad = [k for k in terms if k not in MODEL_CHANNELS or not isinstance(terms[k], list)]
+        if bad:
+            raise VehicleError(src, "models", f"channels {bad}: each entry must be a channel "
+                               f"({', '.join(MODEL_CHANNELS)}) with a list of terms")
     return Vehicle(
         name=str(doc.get("name", path.parent.name)),
         description=str(doc.get("description", "")),
@@ -197,10 +268,21 @@ def load_vehicle(name_or_path: str | Path = "seed-rlv") -> Vehicle:
         x_cg_m=float(ref["x_cg_m"]),
         accel_offset_m=tuple(float(v) for v in offset),
         mixing=tuple(tuple(float(v) for v in row) for row in mixing),
-        fin_limit_rad=positive("controls", "fin_limit_rad"),
+        fin_limit_rad=positive("controls", limit_key),
         mach_reference=float(doc["aero"]["mach_reference"]),
-        database_path=path.parent / doc["aero"]["database"],
+        database_path=database_path,
         preflight=preflight,
         estimation={k: (tuple(v) if isinstance(v, list) else v) for k, v in doc.get("estimation", {}).items()},
         source=src,
+        vehicle_class=vclass,
+        chord_m=chord,
+        span_m=span,
+        air_data_source=source,
+        alpha_column=str(air.get("alpha_column", "alpha_vane_rad")),
+        beta_column=str(air.get("beta_column", "beta_vane_rad")),
+        alpha_bias_rad=float(air.get("alpha_bias_rad", 0.0)),
+        beta_bias_rad=float(air.get("beta_bias_rad", 0.0)),
+        vane_noise_rad=float(air.get("noise_rad", 0.0)),
+        surfaces=tuple(str(x) for x in surfaces),
+        default_terms={k: list(v) for k, v in terms.items()} if terms is not None else None,
     )

@@ -108,7 +108,8 @@ class VersionHistory:
     def changes(self, v: ModelVersion) -> str:
         """Terms added/removed relative to the parent ('default' for a root with the default models)."""
         if v.parent is None:
-            return "default models" if _same_models(v.models, default_models()) else "root: " + _spec_brief(v.models)
+            return ("default models" if _same_models(v.models, run_default_models(self.run_dir))
+                    else "root: " + _spec_brief(v.models))
         try:
             p = self.get(v.parent)
         except VersionError:
@@ -214,6 +215,16 @@ def run_vehicle(run_dir: str | Path) -> str:
     return "seed-rlv"
 
 
+def run_default_models(run_dir: str | Path) -> dict[str, ChannelModel]:
+    """The default models of the run's vehicle (its [models] table, else method.md §11)."""
+    from aerosid.vehicle import VehicleError, load_vehicle
+
+    try:
+        return default_models(load_vehicle(run_vehicle(run_dir)))
+    except VehicleError:
+        return default_models()
+
+
 def load_version(path: str | Path) -> ModelVersion:
     path = Path(path)
     metrics_path = path / "metrics.json"
@@ -241,7 +252,7 @@ def history(run_dir: str | Path) -> VersionHistory:
 def latest_models(run_dir: str | Path) -> dict[str, ChannelModel]:
     """The models of the latest version, or the defaults when there is none."""
     h = history(run_dir)
-    return dict(h.latest.models) if h.latest else default_models()
+    return dict(h.latest.models) if h.latest else run_default_models(run_dir)
 
 
 def _claim(root: Path) -> Path:
@@ -309,15 +320,15 @@ def fit_version(run_dir: str | Path, models: dict[str, ChannelModel] | None = No
     run_dir = Path(run_dir)
     fd = read_flight_data(run_dir)
     vehicle_name = run_vehicle(run_dir)
-    models = dict(models) if models is not None else default_models()
+    defaults = run_default_models(run_dir)
+    models = dict(models) if models is not None else defaults
     unknown = set(models) - set(CHANNELS)
     if unknown:
         raise ModelSpecError(f"unknown channel(s) {sorted(unknown)}; channels: {', '.join(CHANNELS)}")
     h = history(run_dir)
     if not h.versions:
-        root = _write_version(run_dir, fd, vehicle_name, default_models(), None, "default models (method.md §11)",
-                              mach_half_width)
-        if _same_models(models, default_models()) and parent is None:
+        root = _write_version(run_dir, fd, vehicle_name, defaults, None, "default models", mach_half_width)
+        if _same_models(models, defaults) and parent is None:
             return root
         h = history(run_dir)
     if parent is None:
@@ -331,5 +342,5 @@ def models_from_spec(spec: str | Path, run_dir: str | Path, parent: str | None =
     """Read a spec file; channels it does not mention keep the parent version's terms
     (the latest version's, or the defaults when there is none)."""
     h = history(run_dir)
-    base = h.get(parent).models if parent else (h.latest.models if h.latest else default_models())
+    base = h.get(parent).models if parent else (h.latest.models if h.latest else run_default_models(run_dir))
     return load_models(spec, base=dict(base))

@@ -23,6 +23,8 @@ physical bounds used by the range checks (inclusive).
 """
 from __future__ import annotations
 
+from typing import Optional
+
 import numpy as np
 import pandas as pd
 import pandera.pandas as pa
@@ -40,6 +42,10 @@ RAW_COLUMNS: tuple[str, ...] = (
 )
 #: The 12 measurement channels (every raw column but time).
 CHANNELS: tuple[str, ...] = RAW_COLUMNS[1:]
+#: Optional air-data channels (vanes): cleaned like the others when a telemetry file
+#: carries them; a vehicle file with ``[air_data] source = "vanes"`` needs them.  They
+#: do not enter the ``flags`` OR (that stays the 12 contract channels').
+AIR_DATA_CHANNELS: tuple[str, ...] = ("alpha_vane_rad", "beta_vane_rad")
 
 #: SI unit of every raw column.
 UNITS: dict[str, str] = {
@@ -48,6 +54,7 @@ UNITS: dict[str, str] = {
     "p_rad_s": "rad/s", "q_rad_s": "rad/s", "r_rad_s": "rad/s",
     "d1_rad": "rad", "d2_rad": "rad", "d3_rad": "rad", "d4_rad": "rad",
     "V_m_s": "m/s", "h_m": "m",
+    "alpha_vane_rad": "rad", "beta_vane_rad": "rad",
 }
 
 #: Physical bounds (inclusive) per channel.  Accelerations ~100 g, body rates
@@ -59,6 +66,7 @@ PHYSICAL_BOUNDS: dict[str, tuple[float, float]] = {
     "d1_rad": (-0.6, 0.6), "d2_rad": (-0.6, 0.6), "d3_rad": (-0.6, 0.6), "d4_rad": (-0.6, 0.6),
     "V_m_s": (0.0, 12000.0),
     "h_m": (-500.0, 150000.0),
+    "alpha_vane_rad": (-1.6, 1.6), "beta_vane_rad": (-1.6, 1.6),
 }
 
 _FLT_MAX = float(np.finfo(np.float32).max)
@@ -135,6 +143,8 @@ class RawTelemetry(pa.DataFrameModel):
     d4_rad: Series[float] = _raw("d4_rad")
     V_m_s: Series[float] = _raw("V_m_s")
     h_m: Series[float] = _raw("h_m")
+    alpha_vane_rad: Optional[Series[float]] = _raw("alpha_vane_rad")
+    beta_vane_rad: Optional[Series[float]] = _raw("beta_vane_rad")
 
     class Config:
         strict = False
@@ -195,6 +205,10 @@ class PreprocessedTelemetry(RawTelemetry):
     flags_d4_rad: Series[np.uint16] = _flags("d4_rad")
     flags_V_m_s: Series[np.uint16] = _flags("V_m_s")
     flags_h_m: Series[np.uint16] = _flags("h_m")
+    alpha_vane_rad_clean: Optional[Series[float]] = _clean("alpha_vane_rad")
+    beta_vane_rad_clean: Optional[Series[float]] = _clean("beta_vane_rad")
+    flags_alpha_vane_rad: Optional[Series[np.uint16]] = _flags("alpha_vane_rad")
+    flags_beta_vane_rad: Optional[Series[np.uint16]] = _flags("beta_vane_rad")
     flags: Series[np.uint16] = pa.Field(
         metadata={"unit": "bitmask", "description": "bitwise OR of the flags_<channel> columns"})
 
@@ -251,7 +265,7 @@ class PreprocessedTelemetry(RawTelemetry):
 
         missing_row = np.isnan(df["t_raw_s"].to_numpy())
         ok = np.ones(len(df), dtype=bool)
-        for c in CHANNELS:
+        for c in (*CHANNELS, *(a for a in AIR_DATA_CHANNELS if f"flags_{a}" in df.columns)):
             f = df[f"flags_{c}"].to_numpy().astype(np.int64)
             raw = df[c].to_numpy()
             clean = df[f"{c}_clean"].to_numpy()

@@ -13,10 +13,9 @@ from pathlib import Path
 import pandas as pd
 from prefect import task
 
-from aerosid.aerodb import AeroDatabase
-from aerosid.flight_data import build_flight_data_segments
+from aerosid.flight_data import build_flight_data_segments, load_database
 from aerosid.identify import identify
-from aerosid.models import load_models
+from aerosid.models import default_models, load_models
 from aerosid.preprocess import PreprocessParams, preprocess
 from aerosid.segments import split_segments
 from aerosid.smoothing import smooth_segment_frame
@@ -42,7 +41,7 @@ def retry_on_io(task, task_run, state) -> bool:
 def vehicle_files(vehicle: str) -> list[str]:
     """The vehicle description and its database: their content enters the cache keys."""
     veh = load_vehicle(vehicle)
-    return [veh.source, str(veh.database_path)]
+    return [veh.source] + ([str(veh.database_path)] if veh.database_path is not None else [])
 
 
 IO_RETRIES = {"retries": 2, "retry_delay_seconds": [0.2, 1.0], "retry_condition_fn": retry_on_io}
@@ -100,7 +99,7 @@ def flight_data_task(pre_path: str, smoothed_paths: list[str], run_dir: str, ctx
 
     def produce() -> Produced:
         veh = load_vehicle(vehicle)
-        db = AeroDatabase.load(veh.database_path)
+        db = load_database(veh)
         pre = read_validated(pre_path, PreprocessedTelemetry)
         smoothed = [read_validated(path, SmoothedSegment) for path in smoothed_paths]
         frame = build_flight_data_segments(pre, smoothed, veh, db, ctx.flight)
@@ -120,7 +119,7 @@ def regression_task(flight_data_paths: list[str], run_dir: str, ctx: StageContex
     def produce() -> Produced:
         veh = load_vehicle(vehicle)
         fd = pd.concat([read_validated(p, FlightData) for p in flight_data_paths], ignore_index=True)
-        models = load_models(model_spec) if model_spec else None
+        models = load_models(model_spec, base=default_models(veh)) if model_spec else None
         ident = identify(fd, veh, models, mach_half_width)
         return Produced(ident.table(), {"aerosid.summary": ident.summary()}, rows_in=len(fd), note=ident.summary())
 

@@ -10,6 +10,7 @@ import pytest
 
 from aerosid.preprocess import QualityFlag, TelemetryError, preprocess
 from schemas.telemetry import (
+    AIR_DATA_CHANNELS,
     CHANNELS,
     DEFAULT_SENTINELS,
     PHYSICAL_BOUNDS,
@@ -38,7 +39,9 @@ def raw_frame(n: int = 400, seed: int = 0) -> pd.DataFrame:
 
 def test_raw_schema_declares_the_contract_with_units():
     schema = RawTelemetry.to_schema()
-    assert list(schema.columns) == list(RAW_COLUMNS)
+    assert list(schema.columns) == list(RAW_COLUMNS) + list(AIR_DATA_CHANNELS)
+    for c in AIR_DATA_CHANNELS:  # optional: only aircraft with vanes carry them
+        assert not schema.columns[c].required and schema.columns[c].metadata["unit"] == "rad"
     for c in RAW_COLUMNS:
         col = schema.columns[c]
         assert str(col.dtype) == "float64"

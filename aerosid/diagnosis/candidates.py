@@ -126,14 +126,15 @@ def smooth_derivative(t_s: np.ndarray, y: np.ndarray, groups: np.ndarray | None 
     return out
 
 
-def derived_signals(signals: dict[str, np.ndarray], d_m: float, groups: np.ndarray | None = None
-                    ) -> dict[str, np.ndarray]:
-    """The model signals plus ``alpha_dot``, ``beta_dot`` [rad/s] and ``alpha_dot_hat``, ``beta_dot_hat`` [-]."""
+def derived_signals(signals: dict[str, np.ndarray], d_m: float, groups: np.ndarray | None = None,
+                    lateral_m: float | None = None) -> dict[str, np.ndarray]:
+    """The model signals plus ``alpha_dot``, ``beta_dot`` [rad/s] and ``alpha_dot_hat``, ``beta_dot_hat`` [-]
+    (d_m: pitch reference length [m]; lateral_m: that of beta_dot_hat, default d_m)."""
     out = dict(signals)
     t = signals["t"]
     two_v = 2.0 * signals["V"]
     out["alpha_dot"] = smooth_derivative(t, signals["alpha"], groups)
     out["beta_dot"] = smooth_derivative(t, signals["beta"], groups)
     out["alpha_dot_hat"] = out["alpha_dot"] * d_m / two_v
-    out["beta_dot_hat"] = out["beta_dot"] * d_m / two_v
+    out["beta_dot_hat"] = out["beta_dot"] * (d_m if lateral_m is None else lateral_m) / two_v
     return out

@@ -153,6 +153,9 @@ class EffectEvidence:
     p_value_simex: float  # corrected p-value of the SIMEX-corrected estimate (same sigma)
     confused_with: tuple[str, ...] = ()
     reasons: tuple[str, ...] = ()  # why it is not significant (empty when significant)
+    #: smallest |estimate| this flight could call significant at p < P_MAX with this term's
+    #: coloured-residual sigma: the detection floor ("if present, it is smaller than this")
+    detectable_size: float = float("nan")
 
     @property
     def score(self) -> float:
@@ -172,7 +175,8 @@ class EffectEvidence:
         for k in ("estimate", "std_error", "std_error_ols", "partial_f_corrected", "p_value", "partial_f_plain",
                   "p_value_plain", "pse_before", "pse_after", "pse_drop", "variance_share", "window_consistency",
                   "windows_improved", "rms_before", "rms_after", "rms_drop_fraction", "contribution_rms",
-                  "size_ratio", "collinearity_r2", "n_eff", "eiv_fraction", "estimate_simex", "p_value_simex"):
+                  "size_ratio", "collinearity_r2", "n_eff", "eiv_fraction", "estimate_simex", "p_value_simex",
+                  "detectable_size"):
             d[k] = _f(getattr(self, k))
         d["confused_with"] = list(self.confused_with)
         d["reasons"] = list(self.reasons)
@@ -350,6 +354,10 @@ class Diagnosis:
         strongest = (f" Strongest candidate: {best.name} in {best.channel} (p = {best.p_value:.2g}, explains "
                      f"{best.variance_share:.2%} of the residual variance, consistency "
                      f"{best.window_consistency:.0%}): not enough." if best else "")
+        floors = [e for e in self.effects if e.catalogue and math.isfinite(e.detectable_size)]
+        if floors:
+            strongest += (" This flight could not have detected effects smaller than: "
+                          + ", ".join(f"{e.name} |{e.coefficient}| {e.detectable_size:.3g}" for e in floors) + ".")
         unident = [e.name for e in self.effects if not e.identifiable]
         cannot = (f" Not separable from the model's own terms on this flight (so not tested): "
                   f"{', '.join(unident)}." if unident else "")
@@ -583,7 +591,7 @@ def diagnose(flight_data: pd.DataFrame, vehicle, models: dict[str, ChannelModel]
     (alpha and beta come from inverting the force database, so a C_N error maps
     to an angle error through the normal-force slope); 0 switches the check off.
     """
-    models = dict(models or default_models())
+    models = dict(models or default_models(vehicle))
     if candidates is None:
         candidates = default_candidates(vehicle.mach_reference)
     fd = flight_data.sort_values(["flight", "t_s"], kind="stable").reset_index(drop=True)
@@ -594,18 +602,21 @@ def diagnose(flight_data: pd.DataFrame, vehicle, models: dict[str, ChannelModel]
         raise ValueError(f"only {n} samples inside Mach {vehicle.mach_reference} ± {mach_half_width}: "
                          "too few to diagnose the model")
     groups = (fd["flight"].astype(str) + "/" + fd["segment"].astype(str)).to_numpy()
-    signals = derived_signals(signals_from_flight_data(fd, vehicle.d_m), vehicle.d_m, groups)
+    lengths = (vehicle.length_pitch_m, vehicle.length_lateral_m)
+    signals = derived_signals(signals_from_flight_data(fd, *lengths), lengths[0], groups, lengths[1])
     t = fd["t_s"].to_numpy(float)
     flight = fd["flight"].astype(str).to_numpy()
     dts = np.diff(t)
     dts = dts[dts > 0]
     fs = 1.0 / float(np.median(dts)) if dts.size else 1.0
     win = _windows_index(n, n_windows)
+    if angle_sigma_rad is None and vehicle.air_data_source == "vanes":
+        angle_sigma_rad = vehicle.vane_noise_rad
     if angle_sigma_rad is None:
         sig_cn = fd["sigma_CN"].to_numpy(float) if "sigma_CN" in fd else np.array([0.0])
         cn_alpha = abs(float(vehicle.preflight.CN_alpha))
         angle_sigma_rad = float(np.nanmedian(sig_cn)) / cn_alpha if cn_alpha > 0 else 0.0
-    simex = _simex_signals(fd, vehicle.d_m, groups, float(angle_sigma_rad)) if angle_sigma_rad > 0 else []
+    simex = _simex_signals(fd, lengths, groups, float(angle_sigma_rad)) if angle_sigma_rad > 0 else []
 
     reports: dict[str, ChannelReport] = {}
     simex_cache: dict = {}
@@ -675,7 +686,8 @@ def diagnose(flight_data: pd.DataFrame, vehicle, models: dict[str, ChannelModel]
                 rms_drop_fraction=1.0 - rms_a / rms_b if rms_b > 0 else 0.0,
                 contribution_rms=_rms(est * perp), size_ratio=float(np.std(est * x) / y_std) if y_std > 0 else np.nan,
                 collinearity_r2=float(r2_col), n_eff=fa.n_eff, eiv_fraction=eiv,
-                estimate_simex=est_simex, p_value_simex=p_simex))
+                estimate_simex=est_simex, p_value_simex=p_simex,
+                detectable_size=float(scipy.stats.t.isf(P_MAX / 2.0, fa.dof_eff) * se)))
         # confusable candidates: correlated once the base terms are removed
         names = list(perp_cols)
         confused: dict[str, list[str]] = {k: [] for k in names}
@@ -701,7 +713,7 @@ def diagnose(flight_data: pd.DataFrame, vehicle, models: dict[str, ChannelModel]
     return Diagnosis(tuple(ranked), reports, models, n, window, int(win.max()) + 1)
 
 
-def _simex_signals(fd: pd.DataFrame, d_m: float, groups: np.ndarray, sigma: float) -> dict:
+def _simex_signals(fd: pd.DataFrame, lengths: tuple[float, float], groups: np.ndarray, sigma: float) -> dict:
     """{lambda: [signals]}: extra white noise of variance lambda sigma^2 on alpha and beta
     (alpha_r, phi_r and the derivatives recomputed from them), SIMEX_REPLICATES per
     lambda in SIMEX_LAMBDAS; deterministic (SIMEX_SEED)."""
@@ -717,7 +729,7 @@ def _simex_signals(fd: pd.DataFrame, d_m: float, groups: np.ndarray, sigma: floa
             ta, tb = np.tan(a), np.tan(b)
             f["alpha_rad"], f["beta_rad"] = a, b
             f["alpha_r_rad"], f["phi_r_rad"] = np.arctan(np.hypot(ta, tb)), np.arctan2(tb, ta)
-            out[lam].append(derived_signals(signals_from_flight_data(f, d_m), d_m, groups))
+            out[lam].append(derived_signals(signals_from_flight_data(f, *lengths), lengths[0], groups, lengths[1]))
     return out
 
 

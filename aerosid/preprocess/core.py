@@ -37,6 +37,7 @@ import numpy as np
 import pandas as pd
 
 from schemas.telemetry import (
+    AIR_DATA_CHANNELS,
     CHANNELS,
     DEFAULT_SENTINELS,
     PHYSICAL_BOUNDS,
@@ -60,7 +61,7 @@ DEFAULT_MIN_NOISE_SCALE: tuple[tuple[str, float], ...] = (
     ("ax_m_s2", 1e-3), ("ay_m_s2", 1e-3), ("az_m_s2", 1e-3),
     ("p_rad_s", 1e-4), ("q_rad_s", 1e-4), ("r_rad_s", 1e-4),
     ("d1_rad", 1e-5), ("d2_rad", 1e-5), ("d3_rad", 1e-5), ("d4_rad", 1e-5),
-    ("V_m_s", 1e-3), ("h_m", 1e-2),
+    ("V_m_s", 1e-3), ("h_m", 1e-2), ("alpha_vane_rad", 1e-5), ("beta_vane_rad", 1e-5),
 )
 
 #: Hard cap on the grid size (a clock jump would otherwise allocate without bound).
@@ -140,10 +141,11 @@ class PreprocessParams:
                              f"got {self.snap_tolerance!r}")
         if int(self.outlier_min_window) < 1 or int(self.frozen_min_run) < 2:
             raise ValueError("PreprocessParams.outlier_min_window must be >= 1 and frozen_min_run >= 2")
-        unknown = [c for c in self.frozen_channels if c not in CHANNELS]
-        unknown += [c for c, _ in self.min_noise_scale if c not in CHANNELS]
+        known = (*CHANNELS, *AIR_DATA_CHANNELS)
+        unknown = [c for c in self.frozen_channels if c not in known]
+        unknown += [c for c, _ in self.min_noise_scale if c not in known]
         if unknown:
-            raise ValueError(f"PreprocessParams: unknown channel(s) {unknown}; channels are {list(CHANNELS)}")
+            raise ValueError(f"PreprocessParams: unknown channel(s) {unknown}; channels are {list(known)}")
         lo, hi = self.rate_bounds_hz
         if not (0 < lo < hi):
             raise ValueError(f"PreprocessParams.rate_bounds_hz must be 0 < low < high, got {self.rate_bounds_hz}")
@@ -260,7 +262,7 @@ class PreprocessResult:
             f"long gaps (> {self.params.max_interp_gap_s:g} s): {len(self.long_gaps)}"
             + "".join(f"\n    {a:.3f} .. {b:.3f} s" for a, b in self.long_gaps),
         ]
-        for c in CHANNELS:
+        for c in self.flag_counts_by_channel:
             counts = {k: v for k, v in self.flag_counts_by_channel[c].items() if v}
             if counts:
                 lines.append(f"  {c}: usable {self.n_usable_by_channel[c]}, "
@@ -450,7 +452,12 @@ def preprocess(raw: pd.DataFrame, params: PreprocessParams = PreprocessParams(),
     clean_cols, flag_cols = {}, {}
     sigmas, longest_by = {}, {}
     all_bad = np.ones(n, dtype=bool)
-    for c in CHANNELS:
+    air = tuple(c for c in AIR_DATA_CHANNELS if c in raw.columns)
+    for c in air:
+        if raw[c].dtype != np.float64:
+            raise TelemetryError(f"dtype is {raw[c].dtype}, air-data channels must be float64", file=source,
+                                 column=c)
+    for c in (*CHANNELS, *air):
         x = np.full(n, np.nan)
         x[k] = raw[c].to_numpy()  # plain assignment: bit patterns are kept
         cols[c] = x
@@ -459,11 +466,12 @@ def preprocess(raw: pd.DataFrame, params: PreprocessParams = PreprocessParams(),
         flag_cols[f"flags_{c}"] = f
         sigmas[c] = sig
         longest_by[c] = longest * dt
-        all_bad &= (f & np.uint16(int(DETECTION))) != 0
+        if c in CHANNELS:
+            all_bad &= (f & np.uint16(int(DETECTION))) != 0
     flags_all = np.zeros(n, dtype=FLAGS_DTYPE)
-    for f in flag_cols.values():
-        flags_all |= f
-    frame = pd.DataFrame({"t_s": t_grid, "t_raw_s": t_raw, **{c: cols[c] for c in CHANNELS}, **clean_cols,
+    for c in CHANNELS:
+        flags_all |= flag_cols[f"flags_{c}"]
+    frame = pd.DataFrame({"t_s": t_grid, "t_raw_s": t_raw, **{c: cols[c] for c in (*CHANNELS, *air)}, **clean_cols,
                           **flag_cols, "flags": flags_all})
 
     starts, ends = detect.runs(all_bad)
@@ -474,9 +482,9 @@ def preprocess(raw: pd.DataFrame, params: PreprocessParams = PreprocessParams(),
     names = [fl.name for fl in QualityFlag]
     flag_counts = {nm: int(((flags_all & np.uint16(int(QualityFlag[nm]))) != 0).sum()) for nm in names}
     by_channel = {c: {nm: int(((flag_cols[f"flags_{c}"] & np.uint16(int(QualityFlag[nm]))) != 0).sum())
-                      for nm in names} for c in CHANNELS}
+                      for nm in names} for c in (*CHANNELS, *air)}
     unusable = np.uint16(int(UNUSABLE))
-    usable_by = {c: int(((flag_cols[f"flags_{c}"] & unusable) == 0).sum()) for c in CHANNELS}
+    usable_by = {c: int(((flag_cols[f"flags_{c}"] & unusable) == 0).sum()) for c in (*CHANNELS, *air)}
     result = PreprocessResult(
         frame=frame,
         params=params,
@@ -495,7 +503,7 @@ def preprocess(raw: pd.DataFrame, params: PreprocessParams = PreprocessParams(),
         longest_gap_s_by_channel=longest_by,
         long_gaps=long_gaps,
         noise_sigma=sigmas,
-        ignored_columns=tuple(str(c) for c in raw.columns if c not in RAW_COLUMNS),
+        ignored_columns=tuple(str(c) for c in raw.columns if c not in RAW_COLUMNS and c not in air),
     )
     validate(frame, PreprocessedTelemetry, source)
     return result
