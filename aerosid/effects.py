@@ -97,12 +97,16 @@ CATALOGUE: dict[str, Effect] = {
         Effect(
             name="fin_misalignment",
             channel="Cl",
-            coefficient="Cl_misalignment",
-            term="qbar/qbar",
-            description="fin misalignment: a 0.15 deg incidence error on fin 1 gives a roll bias (and a small yaw bias)",
-            sizing="0.15 deg rigging tolerance times the fin's roll effectiveness (Cl_delta_r ~ -0.017)",
-            value=-0.017 * np.deg2rad(0.15),
-            regressor=lambda s: np.ones_like(np.asarray(s["alpha"], dtype=float)),
+            coefficient="Cl_delta_p",
+            term="delta_p/2",
+            description="pitch-fin misalignment: fin 4 deflects 5 % more than fin 2 for the same pitch command "
+                        "(hinge/linkage rigging), so every pitch command also rolls the vehicle",
+            sizing="5 % effectiveness mismatch within a pitch pair (hinge/linkage rigging and fin-area tolerance) times "
+                   "one fin's roll effectiveness (Cl_delta_r = -0.017 per rad of one fin): -0.017 * 0.05 per rad "
+                   "of delta_p/2 (about 20 % of the Cl signal on seed-rlv). "
+                   "A constant rigging offset would be identical to Cl_0 and could never be told apart from it",
+            value=-0.017 * 0.05,
+            regressor=lambda s: s["delta_p"] / 2.0,
         ),
     )
 }
