@@ -172,7 +172,9 @@ def run(telemetry, vehicle, out_dir, flight, windows, model_spec, mach_half_widt
 
     try:
         if vehicle is None:
-            vehicle = _vehicle_from_metadata(telemetry)
+            from aerosid.io import telemetry_vehicle
+
+            vehicle = telemetry_vehicle(telemetry)
         _preflight(telemetry, vehicle, model_spec)  # bad input fails here, before Prefect starts
         from flows.pipeline import process_flight
         from flows.steps import check_flight_id
@@ -203,20 +205,6 @@ def run(telemetry, vehicle, out_dir, flight, windows, model_spec, mach_half_widt
         reasons = "; ".join(f"{f['segment']}: {f['error']}" for f in summary["segments_failed"])
         raise click.ClickException(f"{telemetry}: no segment could be processed ({reasons or 'no segment'}); "
                                    f"see {out_dir}/ledger.jsonl")
-
-
-def _vehicle_from_metadata(telemetry: Path) -> str:
-    """The built-in vehicle named by the file's ``aerosid.case`` metadata, else seed-rlv."""
-    import pyarrow.parquet as pq
-
-    from aerosid.vehicle import builtin_vehicles
-
-    try:
-        meta = pq.read_schema(telemetry).metadata or {}
-    except Exception:  # unreadable: _preflight reports it with the file name
-        return "seed-rlv"
-    case = meta.get(b"aerosid.case", b"").decode("utf-8", "replace")
-    return case if case in builtin_vehicles() else "seed-rlv"
 
 
 def _preflight(telemetry: Path, vehicle: str, model_spec: str | None) -> None:

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 import pandas as pd
+import scipy.signal
 
 from aerosid.aerodb import AeroDatabase
 from aerosid.atmosphere import H_MAX_M, H_MIN_M
@@ -23,6 +24,19 @@ def load_database(vehicle: Vehicle) -> AeroDatabase | None:
     return AeroDatabase.load(vehicle.database_path)
 
 
+def _low_pass(x: np.ndarray, t_s: np.ndarray, cutoff_hz: float | None) -> np.ndarray:
+    """Zero-phase 2nd-order Butterworth low-pass (forward-backward, so no lag: the angles
+    stay aligned with the smoothed rates and accelerations); unchanged when cutoff_hz is
+    None or the segment is too short to filter."""
+    if cutoff_hz is None or len(x) < 16:
+        return x
+    fs = 1.0 / float(np.median(np.diff(t_s)))
+    if cutoff_hz >= 0.5 * fs:
+        return x
+    sos = scipy.signal.butter(2, cutoff_hz, fs=fs, output="sos")
+    return scipy.signal.sosfiltfilt(sos, x, padlen=min(len(x) - 1, 3 * int(fs / cutoff_hz)))
+
+
 def _vane_angles(measured: pd.DataFrame, ok: np.ndarray, vehicle: Vehicle, segment: str, t: np.ndarray):
     """alpha, beta [rad] from the vanes' clean columns minus the calibration bias, and the
     total angle of attack alpha_r and aerodynamic roll angle phi_r derived from them."""
@@ -32,7 +46,8 @@ def _vane_angles(measured: pd.DataFrame, ok: np.ndarray, vehicle: Vehicle, segme
         if f"{col}_clean" not in measured:
             raise ValueError(f"segment {segment}: the vehicle {vehicle.name} reads {name} from the vane column "
                              f"{col!r} ({vehicle.source} [air_data]), which the telemetry does not carry")
-        cols[name] = measured[f"{col}_clean"].to_numpy(dtype=float)[ok] - bias
+        cols[name] = _low_pass(measured[f"{col}_clean"].to_numpy(dtype=float)[ok], t[ok],
+                               vehicle.vane_cutoff_hz) - bias
     a, b = cols["alpha"], cols["beta"]
     ta, tb = np.tan(a), np.tan(b)
     return a, b, np.arctan(np.hypot(ta, tb)), np.arctan2(tb, ta)
@@ -78,18 +93,20 @@ def build_flight_data(smoothed: pd.DataFrame, measured: pd.DataFrame, vehicle: V
         inv_J = np.zeros(len(alpha))
     else:
         alpha, beta, alpha_r, phi_r, inv_J = _inverted_angles(fc, s, delta_p, delta_y, vehicle, db, segment)
+    coef = {"CA": fc.CA, "CY": fc.CY, "CN": fc.CN, "Cl": fc.Cl, "Cm": fc.Cm, "Cn": fc.Cn}
+    rates = {c: s[c].to_numpy() for c in ("p_rad_s", "q_rad_s", "r_rad_s")}
     return pd.DataFrame({
         "t_s": s["t_s"].to_numpy(),
         "flight": flight,
         "segment": s["segment"].to_numpy(),
         "V_m_s": V, "h_m": h,
         "rho_kg_m3": fc.air.rho_kg_m3, "mach": fc.air.mach, "qbar_pa": fc.air.qbar_pa,
-        "CA": fc.CA, "CY": fc.CY, "CN": fc.CN, "Cl": fc.Cl, "Cm": fc.Cm, "Cn": fc.Cn,
+        **coef,
         **{f"sigma_{k}": v for k, v in fc.sigma.items()},
         "alpha_rad": alpha, "beta_rad": beta,
         "alpha_r_rad": alpha_r, "phi_r_rad": phi_r, "inversion_J": inv_J,
         "delta_p_rad": delta_p, "delta_y_rad": delta_y, "delta_r_rad": delta_r,
-        "p_rad_s": s["p_rad_s"].to_numpy(), "q_rad_s": s["q_rad_s"].to_numpy(), "r_rad_s": s["r_rad_s"].to_numpy(),
+        **rates,
     })
 
 

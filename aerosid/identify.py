@@ -18,7 +18,7 @@ from aerosid.regression import LinearFit, fit_linear
 from aerosid.vehicle import Vehicle
 
 #: Coefficients that are slopes per radian (printed per degree); the rest are per unit term.
-ANGLE_TERMS = ("alpha", "beta", "alpha_r", "delta_p/2", "delta_y/2", "delta_r")
+ANGLE_TERMS = ("alpha", "beta", "alpha_r", "delta_p/2", "delta_y/2", "delta_r", "delta_p", "delta_y")
 
 
 @dataclass(frozen=True)
@@ -70,11 +70,12 @@ def format_table(table: pd.DataFrame) -> str:
                      f"{first['condition_number']:.1f}, N = {first['n_obs']} (effective {first['n_eff']:.0f})")
         for _, row in rows.iterrows():
             k = math.pi / 180 if row["expression"].replace(" ", "") in ANGLE_TERMS else 1.0
+            ref = f"{row['reference'] * k:>12.5g}" if np.isfinite(row["reference"]) else f"{'-':>12}"
             if not np.isfinite(row["estimate"]):  # no number is printed for what the data cannot tell
-                lines.append(f"  {row['coefficient']:<18}{row['reference'] * k:>12.5g}"
+                lines.append(f"  {row['coefficient']:<18}{ref}"
                              f"   not identifiable (no excitation in {row['expression']})")
                 continue
-            lines.append(f"  {row['coefficient']:<18}{row['reference'] * k:>12.5g}{row['estimate'] * k:>12.5g}"
+            lines.append(f"  {row['coefficient']:<18}{ref}{row['estimate'] * k:>12.5g}"
                          f"{row['std_error'] * k:>11.2g}{row['std_error_ols'] * k:>11.2g}"
                          f"   [{row['ci_low'] * k:.5g}, {row['ci_high'] * k:.5g}]")
         for i, w in enumerate(w for w in first["warnings"].split(" | ") if w):

@@ -69,3 +69,16 @@ def write_json_atomic(document, path: str | Path) -> Path:
 
 def write_text_atomic(text: str, path: str | Path) -> Path:
     return _atomic(Path(path), lambda tmp: tmp.write_text(text))
+
+
+def telemetry_vehicle(path: str | Path, default: str = "seed-rlv") -> str:
+    """The built-in vehicle a telemetry file names in its Parquet metadata
+    (``aerosid.case``, written by ``aerosid simulate``), else `default`."""
+    from aerosid.vehicle import builtin_vehicles
+
+    try:
+        meta = pq.read_schema(path).metadata or {}
+    except (OSError, pa.ArrowInvalid):  # unreadable: the preprocessing stage reports it with the file name
+        return default
+    case = meta.get(b"aerosid.case", b"").decode("utf-8", "replace")
+    return case if case in builtin_vehicles() else default

@@ -18,12 +18,15 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from aerosid.derivatives import smooth_derivative
 from aerosid.effects import CATALOGUE
 from aerosid.expressions import ExpressionError, evaluate, parse
 
 SIGNALS = ("alpha", "beta", "alpha_r", "phi_r", "mach", "V", "qbar", "delta_p", "delta_y", "delta_r",
-           "p", "q", "r", "p_hat", "q_hat", "r_hat", "t")
+           "p", "q", "r", "p_hat", "q_hat", "r_hat", "alpha_dot_hat", "beta_dot_hat", "t")
 CHANNELS = ("CN", "Cm", "CY", "Cn", "Cl")
+#: Half-length of the Savitzky-Golay window of alpha_dot_hat and beta_dot_hat [s]
+RATE_HALF_WINDOW_S = 0.15
 
 
 class ModelSpecError(ValueError):
@@ -133,16 +136,23 @@ def signals_from_flight_data(fd: pd.DataFrame, d_m: float, lateral_m: float | No
     length of q_hat [m] (d, or an aircraft's chord); lateral_m: that of p_hat and r_hat
     (an aircraft's span; default d_m)."""
     b_m = d_m if lateral_m is None else lateral_m
+    t = fd["t_s"].to_numpy(float)
+    alpha, beta = fd["alpha_rad"].to_numpy(float), fd["beta_rad"].to_numpy(float)
+    groups = ((fd["flight"].astype(str) + "/" + fd["segment"].astype(str)).to_numpy()
+              if {"flight", "segment"} <= set(fd.columns) else None)
     V = fd["V_m_s"].to_numpy(float)
     p, q, r = (fd[c].to_numpy(float) for c in ("p_rad_s", "q_rad_s", "r_rad_s"))
     return {
-        "alpha": fd["alpha_rad"].to_numpy(float), "beta": fd["beta_rad"].to_numpy(float),
+        "alpha": alpha, "beta": beta,
         "alpha_r": fd["alpha_r_rad"].to_numpy(float), "phi_r": fd["phi_r_rad"].to_numpy(float),
         "mach": fd["mach"].to_numpy(float), "V": V, "qbar": fd["qbar_pa"].to_numpy(float),
         "delta_p": fd["delta_p_rad"].to_numpy(float), "delta_y": fd["delta_y_rad"].to_numpy(float),
         "delta_r": fd["delta_r_rad"].to_numpy(float), "p": p, "q": q, "r": r,
         "p_hat": p * b_m / (2 * V), "q_hat": q * d_m / (2 * V), "r_hat": r * b_m / (2 * V),
-        "t": fd["t_s"].to_numpy(float),
+        # alpha-dot, beta-dot: Savitzky-Golay derivative per flight segment
+        "alpha_dot_hat": smooth_derivative(t, alpha, groups, RATE_HALF_WINDOW_S) * d_m / (2 * V),
+        "beta_dot_hat": smooth_derivative(t, beta, groups, RATE_HALF_WINDOW_S) * b_m / (2 * V),
+        "t": t,
     }
 
 

@@ -308,6 +308,18 @@ class LinearFit:
         """Estimate of one coefficient by name."""
         return float(self.estimate[self.names.index(name)])
 
+    def combination(self, weights: dict[str, float], alpha: float = 0.05) -> tuple[float, float, float, float]:
+        """A linear combination sum(w_i * theta_i) of coefficients (e.g. the combined pitch
+        damping Cm_q + Cm_alpha_dot, which a short-period manoeuvre determines far better than
+        either term): (estimate, corrected sigma from the full covariance, interval low, high)."""
+        w = np.zeros(len(self.names))
+        for name, v in weights.items():
+            w[self.names.index(name)] = float(v)
+        est = float(w @ np.nan_to_num(self.estimate))
+        se = float(np.sqrt(max(float(w @ np.nan_to_num(self.cov) @ w), 0.0)))
+        q = scipy.stats.t.ppf(1.0 - alpha / 2.0, self.dof_eff)
+        return est, se, est - q * se, est + q * se
+
     # ---- intervals and prediction
     def conf_int(self, alpha: float = 0.05) -> np.ndarray:
         """(k, 2) two-sided 1-alpha intervals from the corrected sigma, t(dof_eff) quantiles."""

@@ -585,7 +585,11 @@ def _s_coefficients(run: _Run, truth: dict) -> str:
             est = r.get("estimate")
             ident = bool(r.get("identifiable", True)) and _finite(est)
             ref = r.get("reference")
-            tv = truth.get(str(r["coefficient"])) if has_truth else None
+            # a q_hat term also takes up Cm_alpha_dot (alpha-dot ~ q in a short-period manoeuvre): when the
+            # truth gives the sum (a JSBSim flight), that is what the estimate is compared with
+            name = str(r["coefficient"])
+            merged = name == "Cm_q" and "Cm_alpha_dot" not in set(g["coefficient"])
+            tv = (truth.get("Cm_q_plus_alpha_dot", truth.get(name)) if merged else truth.get(name)) if has_truth else None
             if not ident:
                 cells = [str(r["coefficient"]), per, _sc(ref, k),
                          _H(f'<span class="na">not identifiable (no excitation in {_e(expr or "its term")})</span>'),
@@ -614,7 +618,10 @@ def _s_coefficients(run: _Run, truth: dict) -> str:
                "OLS is the plain least-squares value, shown for comparison; the 95 % interval uses the corrected "
                "σ. Preflight is the database value the flight is compared with."
                + (" Truth is the simulator's true value (truth.json); error % is relative to it." if has_truth
-                  else ""))
+                  else "")
+               + (" Without a Cm_alpha_dot term, Cm_q is compared with Cm_q + Cm_α̇ (truth.json's "
+                  "Cm_q_plus_alpha_dot): the q d/(2V) term then takes up both." if has_truth
+                  and "Cm_q_plus_alpha_dot" in truth else ""))
     return intro + _table(headers, rows, id="coefficients", cls="coefficients")
 
 

@@ -90,7 +90,9 @@ class Vehicle:
     beta_column: str = "beta_vane_rad"
     alpha_bias_rad: float = 0.0  # vane calibration bias subtracted from the vane reading [rad]
     beta_bias_rad: float = 0.0
-    vane_noise_rad: float = 0.0  # 1-sigma of the vanes' noise [rad] (errors-in-variables check)
+    vane_noise_rad: float = 0.0  # 1-sigma of the vanes' raw noise [rad] (errors-in-variables check)
+    #: corner of the zero-phase low-pass applied to the vane angles [Hz] (None: unfiltered)
+    vane_cutoff_hz: float | None = None
     surfaces: tuple[str, ...] = ("fin 1", "fin 2", "fin 3", "fin 4")  # what d1..d4 are
     #: the vehicle's default model terms per channel (None: method.md §11 defaults)
     default_terms: dict | None = None
@@ -283,6 +285,7 @@ def load_vehicle(name_or_path: str | Path = "seed-rlv") -> Vehicle:
         alpha_bias_rad=float(air.get("alpha_bias_rad", 0.0)),
         beta_bias_rad=float(air.get("beta_bias_rad", 0.0)),
         vane_noise_rad=float(air.get("noise_rad", 0.0)),
+        vane_cutoff_hz=float(air["cutoff_hz"]) if "cutoff_hz" in air else None,
         surfaces=tuple(str(x) for x in surfaces),
         default_terms={k: list(v) for k, v in terms.items()} if terms is not None else None,
     )

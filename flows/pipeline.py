@@ -13,6 +13,7 @@ from pathlib import Path
 
 from prefect import flow, get_run_logger
 
+from aerosid.io import telemetry_vehicle
 from aerosid.provenance import sha256_file
 from flows.steps import FlightJob, check_flight_id, flight_id_from_path, run_flights
 from tasks import ledger
@@ -20,25 +21,26 @@ from tasks.ledger import LEDGER_NAME
 
 
 @flow(name="process-flight", log_prints=True)
-def process_flight(telemetry: str, out_dir: str, vehicle: str = "seed-rlv", flight: str | None = None,
+def process_flight(telemetry: str, out_dir: str, vehicle: str | None = None, flight: str | None = None,
                    windows: list | None = None, model_spec: str | None = None,
                    preprocess_params: dict | None = None, smoothing_options: dict | None = None,
                    mach_half_width: float | None = 0.5) -> dict:
-    """One telemetry file -> segments -> every stage -> coefficients (and run.json, ledger)."""
+    """One telemetry file -> segments -> every stage -> coefficients (and run.json, ledger).
+    vehicle: a built-in name or a vehicle file; None = the one the file's metadata names, else seed-rlv."""
     job = FlightJob(str(telemetry), str(out_dir), check_flight_id(flight or flight_id_from_path(telemetry)),
-                    vehicle, windows, model_spec, preprocess_params or {}, smoothing_options or {}, mach_half_width)
+                    vehicle or telemetry_vehicle(telemetry), windows, model_spec, preprocess_params or {}, smoothing_options or {}, mach_half_width)
     return run_flights([job])[0]
 
 
 @flow(name="campaign", log_prints=True)
-def campaign(telemetry_files: list[str], out_root: str, vehicle: str = "seed-rlv",
+def campaign(telemetry_files: list[str], out_root: str, vehicle: str | None = None,
              smoothing_options: dict | None = None, mach_half_width: float | None = 0.5) -> list[dict]:
     """Many flights; their segments are submitted together so that a Dask task runner
     (see ``campaign_runner``) spreads them over workers."""
     jobs = []
     for path in telemetry_files:
         fid = flight_id_from_path(path)
-        jobs.append(FlightJob(str(path), str(Path(out_root) / fid), fid, vehicle,
+        jobs.append(FlightJob(str(path), str(Path(out_root) / fid), fid, vehicle or telemetry_vehicle(path),
                               smoothing_options=smoothing_options or {}, mach_half_width=mach_half_width,
                               ledger_path=str(Path(out_root) / LEDGER_NAME)))
     return run_flights(jobs, isolate=True)
@@ -100,7 +102,7 @@ def _processed_shas(records: list[dict]) -> dict[str, str]:
 
 
 @flow(name="reprocess-inbox", log_prints=True)
-def reprocess_inbox(inbox: str, out_root: str, vehicle: str = "seed-rlv", pattern: str = "*.parquet",
+def reprocess_inbox(inbox: str, out_root: str, vehicle: str | None = None, pattern: str = "*.parquet",
                     settle_s: float = 0.5) -> dict:
     """Process every telemetry file in `inbox` that is new or whose content changed
     (by SHA-256, not by name or time); skip the rest.  Files still being written
@@ -135,7 +137,8 @@ def reprocess_inbox(inbox: str, out_root: str, vehicle: str = "seed-rlv", patter
             if _processed_shas(ledger.read(led)).get(flight) == sha:  # done by a concurrent run meanwhile
                 report["unchanged"].append(flight)
                 continue
-            job = FlightJob(str(path), str(root / flight), flight, vehicle, ledger_path=str(led))
+            job = FlightJob(str(path), str(root / flight), flight, vehicle or telemetry_vehicle(path),
+                            ledger_path=str(led))
             try:
                 summary = run_flights([job])[0]
             except Exception as exc:  # a bad file (the ledger has it) must not stop the scan of the others

@@ -294,3 +294,20 @@ def test_bad_arguments():
         fit_linear(np.ones(9), X)
     with pytest.raises(ValueError):
         fit_linear(np.ones(10), np.zeros((10, 2)))  # nothing identifiable
+
+
+def test_linear_combination_uses_the_full_covariance():
+    """Two nearly collinear regressors: each coefficient is poorly determined, their sum well
+    (the pitch-damping situation, Cm_q + Cm_alpha_dot); the sum's sigma comes from the covariance."""
+    rng = np.random.default_rng(3)
+    n = 4000
+    a = rng.standard_normal(n)
+    b = a + 0.05 * rng.standard_normal(n)
+    y = -12.0 * a - 5.0 * b + 0.5 * rng.standard_normal(n)
+    fit = fit_linear(y, pd.DataFrame({"q": a, "adot": b}), names=["q", "adot"], cov="ols")
+    est, se, lo, hi = fit.combination({"q": 1.0, "adot": 1.0})
+    assert abs(est - (-17.0)) < 4 * se
+    assert se < 0.2 * min(fit.std_error)  # the sum is far better known than either term
+    expected = np.sqrt(fit.cov[0, 0] + fit.cov[1, 1] + 2 * fit.cov[0, 1])
+    assert se == pytest.approx(expected, rel=1e-12)
+    assert lo < est < hi

@@ -8,24 +8,19 @@ candidate is one extra regressor ``coefficient * term`` in one channel, with a
 one-line physical meaning.
 
 Terms are written in the model-spec expression language (``aerosid.expressions``)
-so that a finding can be pasted into a spec file.  One exception: ``alpha_dot``
-needs the signal ``alpha_dot_hat`` (alpha-dot d/(2V), from a smoothing
-derivative of the recovered alpha), which the model specs do not offer yet;
-it is diagnosed but marked ``addable = False``.
+so that a finding can be pasted into a spec file (``alpha_dot_hat`` is alpha-dot
+d/(2V) from a smoothing derivative of the recovered alpha, see aerosid.derivatives).
 """
 from __future__ import annotations
 
 from dataclasses import dataclass
 
 import numpy as np
-import pandas as pd
-import scipy.signal
 
 from aerosid.effects import CATALOGUE
 from aerosid.expressions import evaluate
 
-#: Half-length of the Savitzky-Golay window used to differentiate alpha and beta [s].
-DERIVATIVE_HALF_WINDOW_S = 0.25
+from aerosid.derivatives import DERIVATIVE_HALF_WINDOW_S, smooth_derivative  # noqa: F401  (re-exported)
 
 
 @dataclass(frozen=True)
@@ -63,7 +58,7 @@ def extra_candidates(mach_reference: float = 12.4) -> tuple[Candidate, ...]:
     return (
         Candidate("alpha_dot", "Cm", "Cm_alpha_dot", "alpha_dot_hat",
                   "alpha-dot damping: the fins feel the body's downwash with a lag, Cm_alpha_dot * alpha_dot d/(2V)",
-                  addable=False, alias_of="pitch_damping"),
+                  alias_of="pitch_damping"),
         Candidate("mach_cm0", "Cm", "Cm_0_mach", m,
                   "Mach dependence of the trim moment: Cm_0 drifts with Mach (base flow, boundary layer)"),
         Candidate("mach_cm_delta", "Cm", "Cm_delta_p_mach", f"delta_p/2*{m}",
@@ -90,40 +85,6 @@ def extra_candidates(mach_reference: float = 12.4) -> tuple[Candidate, ...]:
 def default_candidates(mach_reference: float = 12.4) -> tuple[Candidate, ...]:
     """The catalogue (same names as ``aerosid simulate --effect``) followed by the extras."""
     return catalogue_candidates() + extra_candidates(mach_reference)
-
-
-def smooth_derivative(t_s: np.ndarray, y: np.ndarray, groups: np.ndarray | None = None,
-                      half_window_s: float = DERIVATIVE_HALF_WINDOW_S) -> np.ndarray:
-    """dy/dt by a Savitzky-Golay (quadratic) derivative, computed per contiguous group.
-
-    Inside a group the samples are put on a uniform grid (median step; linear
-    interpolation over missing rows), differentiated, and read back at the
-    original times.  A derivative amplifies noise by ~2 pi f: the window
-    (2 x ``half_window_s``) is a low-pass at roughly 1/(2 half_window_s) Hz.
-    """
-    t_s = np.asarray(t_s, float)
-    y = np.asarray(y, float)
-    out = np.zeros_like(y)
-    if groups is None:
-        groups = np.zeros(len(t_s), dtype=int)
-    for g in pd.unique(groups):
-        idx = np.nonzero(groups == g)[0]
-        if idx.size < 5:
-            continue
-        t, v = t_s[idx], y[idx]
-        dt = float(np.median(np.diff(t))) if idx.size > 1 else 1.0
-        if not dt > 0:
-            continue
-        grid = np.arange(t[0], t[-1] + 0.5 * dt, dt)
-        vg = np.interp(grid, t, v)
-        half = max(2, int(round(half_window_s / dt)))
-        win = min(2 * half + 1, grid.size - (1 - grid.size % 2))
-        if win < 5:
-            out[idx] = np.gradient(v, t)
-            continue
-        d = scipy.signal.savgol_filter(vg, win, 2, deriv=1, delta=dt, mode="interp")
-        out[idx] = np.interp(t, grid, d)
-    return out
 
 
 def derived_signals(signals: dict[str, np.ndarray], d_m: float, groups: np.ndarray | None = None,

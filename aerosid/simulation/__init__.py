@@ -42,7 +42,8 @@ class SimulatedFlight:
         return {
             "case": self.case,
             "seed": self.seed,
-            "units": "SI per radian; moments about the CG; pitch/yaw fin terms per radian of delta/2",
+            "units": self.info.get("units", "SI per radian; moments about the CG; pitch/yaw fin terms per radian "
+                                            "of delta/2"),
             "moment_reference": "cg",
             "effects": [{"name": n, "scale": s} for n, s in self.effects],
             "coefficients": self.coefficients,
@@ -51,6 +52,7 @@ class SimulatedFlight:
 
     def summary(self) -> str:
         i = self.info
+        at = f" at M {i['mach_reference']:.3g}" if "mach_reference" in i else ""
         lines = [
             f"simulated flight {self.case} seed {self.seed}, effects: "
             f"{', '.join(f'{n}x{s:g}' for n, s in self.effects) or 'none'}",
@@ -58,7 +60,7 @@ class SimulatedFlight:
             f"({i['n_dropout']} dropout samples, {i['n_outliers']} outliers, sync gap {i['sync_gap_s']:g} s)",
             f"  Mach {i['mach_min']:.2f}..{i['mach_max']:.2f}, h {i['h_min_m'] / 1e3:.1f}..{i['h_max_m'] / 1e3:.1f} km, "
             f"qbar {i['qbar_min_pa'] / 1e3:.1f}..{i['qbar_max_pa'] / 1e3:.1f} kPa, alpha {i['alpha_min_deg']:.2f}..{i['alpha_max_deg']:.2f} deg",
-            f"  pitch-plane SNR at M 12.4 (std of true manoeuvre signal / noise sigma): "
+            f"  pitch-plane SNR{at} (std of true manoeuvre signal / noise sigma): "
             + ", ".join(f"{k} {v:.2f}" for k, v in i["snr"].items()),
         ]
         return "\n".join(lines)
@@ -237,5 +239,6 @@ def flight_info(case: SimulationCase, truth: pd.DataFrame, telemetry: pd.DataFra
         "qbar_min_pa": float(truth["qbar_pa"].min()), "qbar_max_pa": float(truth["qbar_pa"].max()),
         "alpha_min_deg": float(truth["alpha_rad"].min() * deg), "alpha_max_deg": float(truth["alpha_rad"].max() * deg),
         "snr": snr,
+        "mach_reference": case.vehicle.mach_reference,
         "noise_sigma": {"accel_m_s2": list(s.accel_noise_m_s2), "gyro_rad_s": list(s.gyro_noise_rad_s)},
     }

@@ -58,8 +58,13 @@ class SimulationCase:
     faults: FaultSpec = FaultSpec()
 
 
+def _is_jsbsim(path: Path) -> bool:
+    return "jsbsim" in tomllib.loads(path.read_text())
+
+
 def builtin_cases() -> list[str]:
-    return sorted(p.parent.name for p in DATA_DIR.glob("*/simulation.toml"))
+    """Cases of the built-in simulator (JSBSim-flown ones, e.g. c172x, use --jsbsim)."""
+    return sorted(p.parent.name for p in DATA_DIR.glob("*/simulation.toml") if not _is_jsbsim(p))
 
 
 def load_case(name: str = "seed-rlv", **overrides) -> SimulationCase:
@@ -69,6 +74,8 @@ def load_case(name: str = "seed-rlv", **overrides) -> SimulationCase:
     if not path.is_file():
         raise KeyError(f"unknown simulation case {name!r}; built-in: {', '.join(builtin_cases())}")
     doc = tomllib.loads(path.read_text())
+    if "jsbsim" in doc:
+        raise KeyError(f"case {name!r} is flown by JSBSim: aerosid simulate --jsbsim {name} --manoeuvre 3211")
     import math
 
     deg = math.pi / 180.0
