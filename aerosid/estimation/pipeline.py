@@ -424,13 +424,21 @@ def smooth_flight(t_s, z, valid, inertia_kg_m2, sensor_offset_m, z_filled=None,
                                    opt.segment_length), Qd
 
     n_iter = max(1, int(opt.max_tuning_iterations)) if opt.auto_tune else 1
+    good = None  # the last iteration whose smoother output is finite
     for it in range(n_iter):
         run, Qd = one(q_scale, r_fac)
         target, lo, hi = chi2_band(run.dof)
         mf = float(np.nanmean(run.nis_filter))
         ms = float(np.nanmean(run.nis_smoother))
         history.append(TuningRecord(it, q_scale, tuple(float(v) for v in r_fac), mf, ms))
-        if not opt.auto_tune:
+        finite = (math.isfinite(mf) and math.isfinite(ms) and bool(np.all(np.isfinite(run.x_smooth)))
+                  and bool(np.all(np.isfinite(run.sigma_smooth))))
+        if not finite and good is not None:
+            # a tuning step drove the smoother to a numerical failure: keep the last finite iteration
+            run, Qd, q_scale, r_fac = good
+            break
+        good = (run, Qd, q_scale, r_fac)
+        if not opt.auto_tune or not finite:
             break
         tol = opt.nis_tolerance * (hi - lo) / 2.0
         r_new = r_fac

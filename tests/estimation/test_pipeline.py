@@ -114,3 +114,29 @@ def test_numpy_path_and_no_tuning_options(short_flight):
     assert col_rel_err(b.x_smooth, a.x_smooth) < 1e-8
     with pytest.raises(ValueError):
         smooth_flight(sf.t_s[::-1], sf.z, valid, m.inertia_kg_m2, m.sensor_offset_m)
+
+
+def test_a_tuning_step_that_breaks_the_smoother_falls_back_to_the_last_finite_iteration(short_flight, monkeypatch):
+    """If an auto-tuning iteration returns a non-finite smoother (seen on JSBSim flights with R at
+    its EM bound), the result is the last finite iteration, not NaN states."""
+    import aerosid.estimation.pipeline as pl
+
+    real = pl.run_filter_smoother
+    calls = []
+
+    def flaky(*args, **kwargs):
+        run = real(*args, **kwargs)
+        calls.append(1)
+        if len(calls) == 2:
+            bad = np.full_like(run.x_smooth, np.nan)
+            return dataclasses.replace(run, x_smooth=bad, nis_smoother=np.full_like(run.nis_smoother, np.nan))
+        return run
+
+    monkeypatch.setattr(pl, "run_filter_smoother", flaky)
+    sf = short_flight
+    m = sf.model
+    res = smooth_flight(sf.t_s, sf.z, np.ones_like(sf.z, bool), m.inertia_kg_m2, m.sensor_offset_m,
+                        options=EBMOptions(use_numba=False))
+    assert len(calls) == 2 and len(res.tuning_history) == 2
+    assert not np.isfinite(res.tuning_history[1].mean_nis_smoother)  # the failed step is on record
+    assert np.all(np.isfinite(res.x_smooth)) and np.isfinite(res.mean_nis_smoother)
