@@ -11,7 +11,7 @@ from click.testing import CliRunner
 from aerosid.cli_modelling import diagnose as diagnose_cmd
 from aerosid.cli_modelling import fit as fit_cmd
 from aerosid.cli_modelling import history as history_cmd
-from aerosid.diagnosis.synthetic import flight_data_from_truth
+from aerosid.diagnosis.synthetic import MEASURED_NOISE, flight_data_from_truth
 from aerosid.effects import CATALOGUE
 from aerosid.models import ModelSpecError, default_models, parse_term
 from aerosid.versions import (VersionError, _claim, fit_version, history, latest_models, models_from_spec,
@@ -26,7 +26,7 @@ terms = ["Cm_0 = 1", "Cm_alpha = alpha", "Cm_delta_p = delta_p/2", "control_alph
 @pytest.fixture(scope="module")
 def flight_data(reference_flight):
     """Flight data with control_alpha added along the reference trajectory (open loop)."""
-    fd = flight_data_from_truth(reference_flight.truth, seed=0)
+    fd = flight_data_from_truth(reference_flight.truth, MEASURED_NOISE.scaled(0.25), seed=0)
     tr = reference_flight.truth
     e = CATALOGUE["control_alpha"]
     fd["Cm"] = fd["Cm"] + e.value * tr["alpha_rad"].to_numpy() * tr["delta_p_rad"].to_numpy() / 2
@@ -69,7 +69,8 @@ def test_versions_grow_with_parent_links_and_the_error_falls(run_dir):
     assert tab.loc[1, "changes"] == "Cm: +control_alpha"
     assert tab.loc[0, "changes"] == "default models"
     assert {"rms_Cm", "r2_Cm", "pse_Cm", "rms_Cl"} <= set(tab.columns)
-    # the error falls when the missing effect is added (measured residual, placeholder noise)
+    # the error falls when the missing effect is added (measured residual, a quarter of the real
+    # pipeline's errors as in tests/test_diagnosis.py)
     assert tab.loc[1, "rms_Cm"] < 0.5 * tab.loc[0, "rms_Cm"]
     assert tab.loc[1, "rms_CN"] == tab.loc[0, "rms_CN"]
     plot = h.plot_data()
