@@ -13,8 +13,9 @@ import numpy as np
 import pandas as pd
 
 from aerosid.aeromodel import AeroModel
+from aerosid.eiv import simex_estimates
 from aerosid.models import ChannelModel, default_models, signals_from_flight_data, vehicle_signals
-from aerosid.regression import LinearFit, fit_linear
+from aerosid.regression import LinearFit, fit_linear, with_corrected_estimate
 from aerosid.vehicle import Vehicle
 
 #: Coefficients that are slopes per radian (printed per degree); the rest are per unit term.
@@ -83,6 +84,23 @@ def format_table(table: pd.DataFrame) -> str:
     return "\n".join(lines)
 
 
+def _eiv_corrected(fd: pd.DataFrame, vehicle: Vehicle, models: dict, fits: dict) -> dict:
+    """The fits with their estimates corrected for the vanes' noise (aerosid.eiv, SIMEX)."""
+    ok = {ch: f for ch, f in fits.items() if np.all(np.isfinite(f.estimate)) and f.n_dropped == 0}
+    if not ok:
+        return fits
+
+    def design(frame: pd.DataFrame) -> dict:
+        sig = vehicle_signals(frame, vehicle)
+        return {ch: models[ch].regressors(sig).to_numpy(float) for ch in ok}
+
+    corrected = simex_estimates(fd, {ch: fd[ch].to_numpy(float) for ch in ok}, design, vehicle.vane_noise_rad,
+                                vehicle.vane_cutoff_hz)
+    note = (f"estimates corrected for the vane noise (SIMEX, sigma {vehicle.vane_noise_rad:g} rad); "
+            "sigma and residual statistics are the uncorrected fit's")
+    return {ch: with_corrected_estimate(f, corrected[ch], note) if ch in corrected else f for ch, f in fits.items()}
+
+
 def mach_window_mask(mach: np.ndarray, reference: float, half_width: float | None) -> np.ndarray:
     if half_width is None:
         return np.ones(len(mach), dtype=bool)
@@ -106,6 +124,8 @@ def identify(flight_data: pd.DataFrame, vehicle: Vehicle, models: dict[str, Chan
     for channel, model in models.items():
         X = model.regressors(signals)
         fits[channel] = fit_linear(fd[channel].to_numpy(float), X, names=model.names, channel=channel, cov=cov)
+    if vehicle.air_data_source == "vanes" and vehicle.vane_noise_rad > 0:
+        fits = _eiv_corrected(fd, vehicle, models, fits)
     refs = AeroModel.preflight(vehicle).linear_truth() if vehicle.preflight is not None else {}
     window = (float(fd["mach"].min()), float(fd["mach"].max()))
     return Identification(fits, dict(models), refs, len(fd), window)

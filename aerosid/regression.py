@@ -99,6 +99,8 @@ Imports numpy, scipy, pandas and statsmodels only.
 """
 from __future__ import annotations
 
+import dataclasses
+
 from dataclasses import dataclass, field
 from typing import Any, Sequence
 
@@ -483,6 +485,18 @@ def _identifiability(X: np.ndarray, names: Sequence[str]):
                 continue
         kept.append(j)
     return keep, intercept, warns
+
+
+def with_corrected_estimate(fit: LinearFit, estimate: np.ndarray, note: str) -> LinearFit:
+    """The same fit with another estimate vector (e.g. corrected for errors in the
+    regressors); t, p and the intervals follow it, sigma and the residual statistics
+    stay those of the fit; `note` is added to its warnings."""
+    est = np.asarray(estimate, dtype=float)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        t = est / fit.std_error
+    p = 2.0 * scipy.stats.t.sf(np.abs(t), fit.dof_eff)
+    return dataclasses.replace(fit, estimate=_as_readonly(est), t_values=_as_readonly(t),
+                               p_values=_as_readonly(p), warnings=tuple(fit.warnings) + (note,))
 
 
 def fit_linear(
