@@ -20,13 +20,14 @@ def smooth_derivative(t_s: np.ndarray, y: np.ndarray, groups: np.ndarray | None 
     """
     t_s = np.asarray(t_s, float)
     y = np.asarray(y, float)
-    out = np.zeros_like(y)
+    out = np.full_like(y, np.nan)  # a segment too short to differentiate stays NaN (its rows drop out of a fit)
     if groups is None:
         groups = np.zeros(len(t_s), dtype=int)
     for g in pd.unique(groups):
         idx = np.nonzero(groups == g)[0]
         if idx.size < 5:
             continue
+        idx = idx[np.argsort(t_s[idx], kind="stable")]
         t, v = t_s[idx], y[idx]
         dt = float(np.median(np.diff(t))) if idx.size > 1 else 1.0
         if not dt > 0:

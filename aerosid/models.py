@@ -25,8 +25,9 @@ from aerosid.expressions import ExpressionError, evaluate, parse
 SIGNALS = ("alpha", "beta", "alpha_r", "phi_r", "mach", "V", "qbar", "delta_p", "delta_y", "delta_r",
            "p", "q", "r", "p_hat", "q_hat", "r_hat", "alpha_dot_hat", "beta_dot_hat", "t")
 CHANNELS = ("CN", "Cm", "CY", "Cn", "Cl")
-#: Half-length of the Savitzky-Golay window of alpha_dot_hat and beta_dot_hat [s]
-RATE_HALF_WINDOW_S = 0.15
+#: Default half-length of the Savitzky-Golay window of alpha_dot_hat and beta_dot_hat [s]
+#: (a vehicle file may set its own: [air_data] derivative_half_window_s)
+RATE_HALF_WINDOW_S = 0.25
 
 
 class ModelSpecError(ValueError):
@@ -131,10 +132,12 @@ def models_to_toml(models: dict[str, ChannelModel]) -> str:
     return "\n".join(lines)
 
 
-def signals_from_flight_data(fd: pd.DataFrame, d_m: float, lateral_m: float | None = None) -> dict[str, np.ndarray]:
+def signals_from_flight_data(fd: pd.DataFrame, d_m: float, lateral_m: float | None = None,
+                             rate_half_window_s: float = RATE_HALF_WINDOW_S) -> dict[str, np.ndarray]:
     """The named signals of a FlightData frame (SI, radians).  d_m: the pitch reference
     length of q_hat [m] (d, or an aircraft's chord); lateral_m: that of p_hat and r_hat
-    (an aircraft's span; default d_m)."""
+    (an aircraft's span; default d_m); rate_half_window_s: the derivative window of
+    alpha_dot_hat and beta_dot_hat [s].  The frame must be sorted by flight and time."""
     b_m = d_m if lateral_m is None else lateral_m
     t = fd["t_s"].to_numpy(float)
     alpha, beta = fd["alpha_rad"].to_numpy(float), fd["beta_rad"].to_numpy(float)
@@ -150,12 +153,13 @@ def signals_from_flight_data(fd: pd.DataFrame, d_m: float, lateral_m: float | No
         "delta_r": fd["delta_r_rad"].to_numpy(float), "p": p, "q": q, "r": r,
         "p_hat": p * b_m / (2 * V), "q_hat": q * d_m / (2 * V), "r_hat": r * b_m / (2 * V),
         # alpha-dot, beta-dot: Savitzky-Golay derivative per flight segment
-        "alpha_dot_hat": smooth_derivative(t, alpha, groups, RATE_HALF_WINDOW_S) * d_m / (2 * V),
-        "beta_dot_hat": smooth_derivative(t, beta, groups, RATE_HALF_WINDOW_S) * b_m / (2 * V),
+        "alpha_dot_hat": smooth_derivative(t, alpha, groups, rate_half_window_s) * d_m / (2 * V),
+        "beta_dot_hat": smooth_derivative(t, beta, groups, rate_half_window_s) * b_m / (2 * V),
         "t": t,
     }
 
 
 def vehicle_signals(fd: pd.DataFrame, vehicle) -> dict[str, np.ndarray]:
     """signals_from_flight_data with the vehicle's pitch and lateral reference lengths."""
-    return signals_from_flight_data(fd, vehicle.length_pitch_m, vehicle.length_lateral_m)
+    return signals_from_flight_data(fd, vehicle.length_pitch_m, vehicle.length_lateral_m,
+                                    vehicle.derivative_half_window_s)

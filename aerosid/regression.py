@@ -317,6 +317,10 @@ class LinearFit:
         w = np.zeros(len(self.names))
         for name, v in weights.items():
             w[self.names.index(name)] = float(v)
+        used = w != 0
+        if not (np.all(np.isfinite(self.estimate[used])) and np.all(np.isfinite(self.cov[np.ix_(used, used)]))):
+            nan = float("nan")  # a term the data cannot tell: so is any sum that holds it
+            return nan, nan, nan, nan
         est = float(w @ np.nan_to_num(self.estimate))
         se = float(np.sqrt(max(float(w @ np.nan_to_num(self.cov) @ w), 0.0)))
         q = scipy.stats.t.ppf(1.0 - alpha / 2.0, self.dof_eff)

@@ -93,6 +93,8 @@ class Vehicle:
     vane_noise_rad: float = 0.0  # 1-sigma of the vanes' raw noise [rad] (errors-in-variables check)
     #: corner of the zero-phase low-pass applied to the vane angles [Hz] (None: unfiltered)
     vane_cutoff_hz: float | None = None
+    #: half-length of the Savitzky-Golay window of alpha_dot_hat, beta_dot_hat [s]
+    derivative_half_window_s: float = 0.25
     surfaces: tuple[str, ...] = ("fin 1", "fin 2", "fin 3", "fin 4")  # what d1..d4 are
     #: the vehicle's default model terms per channel (None: method.md §11 defaults)
     default_terms: dict | None = None
@@ -257,6 +259,14 @@ def load_vehicle(name_or_path: str | Path = "seed-rlv") -> Vehicle:
         if bad:
             raise VehicleError(src, "models", f"channels {bad}: each entry must be a channel "
                                f"({', '.join(MODEL_CHANNELS)}) with a list of terms")
+        from aerosid.models import ModelSpecError, parse_term
+
+        for ch, items in terms.items():
+            for item in items:
+                try:
+                    parse_term(str(item), ch, src)
+                except ModelSpecError as exc:
+                    raise VehicleError(src, f"models.{ch}", str(exc)) from exc
     return Vehicle(
         name=str(doc.get("name", path.parent.name)),
         description=str(doc.get("description", "")),
@@ -286,6 +296,7 @@ def load_vehicle(name_or_path: str | Path = "seed-rlv") -> Vehicle:
         beta_bias_rad=float(air.get("beta_bias_rad", 0.0)),
         vane_noise_rad=float(air.get("noise_rad", 0.0)),
         vane_cutoff_hz=float(air["cutoff_hz"]) if "cutoff_hz" in air else None,
+        derivative_half_window_s=float(air.get("derivative_half_window_s", 0.25)),
         surfaces=tuple(str(x) for x in surfaces),
         default_terms={k: list(v) for k, v in terms.items()} if terms is not None else None,
     )

@@ -217,12 +217,11 @@ def run_vehicle(run_dir: str | Path) -> str:
 
 def run_default_models(run_dir: str | Path) -> dict[str, ChannelModel]:
     """The default models of the run's vehicle (its [models] table, else method.md §11)."""
-    from aerosid.vehicle import VehicleError, load_vehicle
+    from aerosid.vehicle import load_vehicle
 
-    try:
-        return default_models(load_vehicle(run_vehicle(run_dir)))
-    except VehicleError:
-        return default_models()
+    # a run whose vehicle file cannot be read fails here, naming the file: falling back to
+    # another vehicle's models would fit the wrong terms under the name "default models"
+    return default_models(load_vehicle(run_vehicle(run_dir)))
 
 
 def load_version(path: str | Path) -> ModelVersion:

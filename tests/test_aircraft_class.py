@@ -175,3 +175,21 @@ def test_missing_vane_column_is_a_clear_error(aircraft):
     pre = preprocess(raw).frame
     with pytest.raises(ValueError, match="alpha_vane_rad_clean"):
         build_flight_data(_smoothed_like(pre), pre, aircraft, None, "f1")
+
+
+def test_a_bad_term_in_the_vehicle_models_table_fails_at_load(tmp_path):
+    path = tmp_path / "vehicle.toml"
+    path.write_text(AIRCRAFT.replace('"Cm_alpha = alpha"', '"Cm_alpha = __import__(1)"'))
+    with pytest.raises(VehicleError) as exc:
+        load_vehicle(path)
+    assert "models.Cm" in str(exc.value) and str(path) in str(exc.value)
+
+
+def test_aircraft_diagnosis_leaves_out_cruciform_effects_and_uses_its_own_mach_reference(aircraft):
+    from aerosid.diagnosis import default_candidates
+
+    cands = {c.name: c for c in default_candidates(aircraft.mach_reference, aircraft.vehicle_class)}
+    assert "roll_orientation" not in cands and "fin_misalignment" not in cands
+    assert cands["mach_cm_alpha"].term == "alpha*(mach - 0.15)"
+    finned = {c.name for c in default_candidates()}
+    assert {"roll_orientation", "fin_misalignment"} <= finned

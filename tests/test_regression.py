@@ -311,3 +311,12 @@ def test_linear_combination_uses_the_full_covariance():
     expected = np.sqrt(fit.cov[0, 0] + fit.cov[1, 1] + 2 * fit.cov[0, 1])
     assert se == pytest.approx(expected, rel=1e-12)
     assert lo < est < hi
+
+
+def test_linear_combination_of_a_non_identifiable_term_is_nan():
+    rng = np.random.default_rng(4)
+    a = rng.standard_normal(500)
+    X = pd.DataFrame({"q": a, "adot": np.zeros(500)})  # no excitation in adot
+    fit = fit_linear(2 * a + 0.1 * rng.standard_normal(500), X, names=["q", "adot"], cov="ols")
+    assert all(np.isnan(v) for v in fit.combination({"q": 1.0, "adot": 1.0}))
+    assert np.isfinite(fit.combination({"q": 1.0})[0])

@@ -48,9 +48,17 @@ class Candidate:
         return evaluate(self.term, signals, n)
 
 
-def catalogue_candidates() -> tuple[Candidate, ...]:
-    return tuple(Candidate(e.name, e.channel, e.coefficient, e.term, e.description, catalogue=True)
-                 for e in CATALOGUE.values())
+#: catalogue effects that only a cruciform finned body has
+FINNED_ONLY = ("roll_orientation", "fin_misalignment")
+
+
+def catalogue_candidates(mach_reference: float = 12.4, vehicle_class: str = "finned") -> tuple[Candidate, ...]:
+    """The simulator's catalogue as candidates; Mach terms about the vehicle's own reference
+    Mach; the cruciform-only effects are left out for an aircraft."""
+    return tuple(Candidate(e.name, e.channel, e.coefficient,
+                           e.term.replace("(mach - 12.4)", f"(mach - {mach_reference:g})"), e.description,
+                           catalogue=True)
+                 for e in CATALOGUE.values() if vehicle_class == "finned" or e.name not in FINNED_ONLY)
 
 
 def extra_candidates(mach_reference: float = 12.4) -> tuple[Candidate, ...]:
@@ -82,9 +90,9 @@ def extra_candidates(mach_reference: float = 12.4) -> tuple[Candidate, ...]:
     )
 
 
-def default_candidates(mach_reference: float = 12.4) -> tuple[Candidate, ...]:
+def default_candidates(mach_reference: float = 12.4, vehicle_class: str = "finned") -> tuple[Candidate, ...]:
     """The catalogue (same names as ``aerosid simulate --effect``) followed by the extras."""
-    return catalogue_candidates() + extra_candidates(mach_reference)
+    return catalogue_candidates(mach_reference, vehicle_class) + extra_candidates(mach_reference)
 
 
 def derived_signals(signals: dict[str, np.ndarray], d_m: float, groups: np.ndarray | None = None,
@@ -94,8 +102,14 @@ def derived_signals(signals: dict[str, np.ndarray], d_m: float, groups: np.ndarr
     out = dict(signals)
     t = signals["t"]
     two_v = 2.0 * signals["V"]
+    b_m = d_m if lateral_m is None else lateral_m
+    # the model language's own alpha_dot_hat, beta_dot_hat (same window as the regression) when present
+    if "alpha_dot_hat" in signals and "beta_dot_hat" in signals:
+        out["alpha_dot"] = signals["alpha_dot_hat"] * two_v / d_m
+        out["beta_dot"] = signals["beta_dot_hat"] * two_v / b_m
+        return out
     out["alpha_dot"] = smooth_derivative(t, signals["alpha"], groups)
     out["beta_dot"] = smooth_derivative(t, signals["beta"], groups)
     out["alpha_dot_hat"] = out["alpha_dot"] * d_m / two_v
-    out["beta_dot_hat"] = out["beta_dot"] * (d_m if lateral_m is None else lateral_m) / two_v
+    out["beta_dot_hat"] = out["beta_dot"] * b_m / two_v
     return out

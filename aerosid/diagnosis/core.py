@@ -59,7 +59,7 @@ from statsmodels.stats.diagnostic import acorr_ljungbox
 from aerosid.diagnosis.candidates import Candidate, default_candidates, derived_signals
 from aerosid.expressions import evaluate
 from aerosid.identify import mach_window_mask
-from aerosid.models import ChannelModel, default_models, signals_from_flight_data
+from aerosid.models import ChannelModel, default_models, vehicle_signals
 from aerosid.regression import LinearFit, fit_linear, residual_autocovariance
 
 __all__ = [
@@ -593,7 +593,7 @@ def diagnose(flight_data: pd.DataFrame, vehicle, models: dict[str, ChannelModel]
     """
     models = dict(models or default_models(vehicle))
     if candidates is None:
-        candidates = default_candidates(vehicle.mach_reference)
+        candidates = default_candidates(vehicle.mach_reference, vehicle.vehicle_class)
     fd = flight_data.sort_values(["flight", "t_s"], kind="stable").reset_index(drop=True)
     mask = mach_window_mask(fd["mach"].to_numpy(float), vehicle.mach_reference, mach_half_width)
     fd = fd.loc[mask].reset_index(drop=True)
@@ -603,7 +603,7 @@ def diagnose(flight_data: pd.DataFrame, vehicle, models: dict[str, ChannelModel]
                          "too few to diagnose the model")
     groups = (fd["flight"].astype(str) + "/" + fd["segment"].astype(str)).to_numpy()
     lengths = (vehicle.length_pitch_m, vehicle.length_lateral_m)
-    signals = derived_signals(signals_from_flight_data(fd, *lengths), lengths[0], groups, lengths[1])
+    signals = derived_signals(vehicle_signals(fd, vehicle), lengths[0], groups, lengths[1])
     t = fd["t_s"].to_numpy(float)
     flight = fd["flight"].astype(str).to_numpy()
     dts = np.diff(t)
@@ -616,7 +616,7 @@ def diagnose(flight_data: pd.DataFrame, vehicle, models: dict[str, ChannelModel]
         sig_cn = fd["sigma_CN"].to_numpy(float) if "sigma_CN" in fd else np.array([0.0])
         cn_alpha = abs(float(vehicle.preflight.CN_alpha))
         angle_sigma_rad = float(np.nanmedian(sig_cn)) / cn_alpha if cn_alpha > 0 else 0.0
-    simex = _simex_signals(fd, lengths, groups, float(angle_sigma_rad)) if angle_sigma_rad > 0 else []
+    simex = _simex_signals(fd, vehicle, groups, float(angle_sigma_rad)) if angle_sigma_rad > 0 else []
 
     reports: dict[str, ChannelReport] = {}
     simex_cache: dict = {}
@@ -713,7 +713,7 @@ def diagnose(flight_data: pd.DataFrame, vehicle, models: dict[str, ChannelModel]
     return Diagnosis(tuple(ranked), reports, models, n, window, int(win.max()) + 1)
 
 
-def _simex_signals(fd: pd.DataFrame, lengths: tuple[float, float], groups: np.ndarray, sigma: float) -> dict:
+def _simex_signals(fd: pd.DataFrame, vehicle, groups: np.ndarray, sigma: float) -> dict:
     """{lambda: [signals]}: extra white noise of variance lambda sigma^2 on alpha and beta
     (alpha_r, phi_r and the derivatives recomputed from them), SIMEX_REPLICATES per
     lambda in SIMEX_LAMBDAS; deterministic (SIMEX_SEED)."""
@@ -724,13 +724,24 @@ def _simex_signals(fd: pd.DataFrame, lengths: tuple[float, float], groups: np.nd
         for _ in range(SIMEX_REPLICATES):
             f = fd.copy()
             sd = sigma * math.sqrt(lam)
-            a = f["alpha_rad"].to_numpy(float) + sd * rng.standard_normal(len(f))
-            b = f["beta_rad"].to_numpy(float) + sd * rng.standard_normal(len(f))
+            a = f["alpha_rad"].to_numpy(float) + _angle_noise(rng, f, groups, sd, vehicle)
+            b = f["beta_rad"].to_numpy(float) + _angle_noise(rng, f, groups, sd, vehicle)
             ta, tb = np.tan(a), np.tan(b)
             f["alpha_rad"], f["beta_rad"] = a, b
             f["alpha_r_rad"], f["phi_r_rad"] = np.arctan(np.hypot(ta, tb)), np.arctan2(tb, ta)
-            out[lam].append(derived_signals(signals_from_flight_data(f, *lengths), lengths[0], groups, lengths[1]))
+            out[lam].append(derived_signals(vehicle_signals(f, vehicle), vehicle.length_pitch_m, groups,
+                                            vehicle.length_lateral_m))
     return out
+
+
+def _angle_noise(rng: np.random.Generator, f: pd.DataFrame, groups: np.ndarray, sd: float, vehicle) -> np.ndarray:
+    """SIMEX noise like the angles' own: white for angles inverted from the database; for
+    vanes, the raw vane noise through the vanes' low-pass (as aerosid.eiv does)."""
+    if vehicle.air_data_source == "vanes" and vehicle.vane_cutoff_hz is not None:
+        from aerosid.eiv import _filtered_noise
+
+        return _filtered_noise(rng, groups, f["t_s"].to_numpy(float), sd, vehicle.vane_cutoff_hz)
+    return sd * rng.standard_normal(len(f))
 
 
 def _simex_fraction(simex: dict, model: ChannelModel, c: Candidate, y: np.ndarray, est: float,

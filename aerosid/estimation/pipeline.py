@@ -431,8 +431,7 @@ def smooth_flight(t_s, z, valid, inertia_kg_m2, sensor_offset_m, z_filled=None,
         mf = float(np.nanmean(run.nis_filter))
         ms = float(np.nanmean(run.nis_smoother))
         history.append(TuningRecord(it, q_scale, tuple(float(v) for v in r_fac), mf, ms))
-        finite = (math.isfinite(mf) and math.isfinite(ms) and bool(np.all(np.isfinite(run.x_smooth)))
-                  and bool(np.all(np.isfinite(run.sigma_smooth))))
+        finite = math.isfinite(mf) and math.isfinite(ms) and bool(np.all(np.isfinite(run.x_smooth)))
         if not finite and good is not None:
             # a tuning step drove the smoother to a numerical failure: keep the last finite iteration
             run, Qd, q_scale, r_fac = good
