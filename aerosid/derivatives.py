@@ -1,4 +1,5 @@
-"""Time derivatives of measured signals for the model language (alpha-dot, beta-dot)."""
+"""Filtering of measured signals: the zero-phase low-pass of the vanes and the smoothing
+derivatives of the model language (alpha-dot, beta-dot)."""
 from __future__ import annotations
 
 import numpy as np
@@ -7,6 +8,16 @@ import scipy.signal
 
 #: Half-length of the Savitzky-Golay window used to differentiate alpha and beta [s].
 DERIVATIVE_HALF_WINDOW_S = 0.25
+
+
+def zero_phase_low_pass(x: np.ndarray, fs_hz: float, cutoff_hz: float | None) -> np.ndarray:
+    """2nd-order Butterworth low-pass run forward and backward (no lag: the filtered angles
+    stay aligned with the smoothed rates and accelerations); `x` unchanged when cutoff_hz
+    is None, at or above Nyquist, or the record is too short to filter."""
+    if cutoff_hz is None or len(x) < 16 or cutoff_hz >= 0.5 * fs_hz:
+        return x
+    sos = scipy.signal.butter(2, cutoff_hz, fs=fs_hz, output="sos")
+    return scipy.signal.sosfiltfilt(sos, x, padlen=min(len(x) - 1, 3 * int(fs_hz / cutoff_hz)))
 
 
 def smooth_derivative(t_s: np.ndarray, y: np.ndarray, groups: np.ndarray | None = None,

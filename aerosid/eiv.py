@@ -20,29 +20,44 @@ from __future__ import annotations
 
 import numpy as np
 import pandas as pd
-import scipy.signal
+
+from aerosid.derivatives import zero_phase_low_pass
+from aerosid.inversion import total_angles
 
 LAMBDAS = (0.5, 1.0, 1.5, 2.0)
 REPLICATES = 10
 SEED = 20261122
 
 
-def _low_pass(x: np.ndarray, fs_hz: float, cutoff_hz: float | None) -> np.ndarray:
-    if cutoff_hz is None or len(x) < 16 or cutoff_hz >= 0.5 * fs_hz:
-        return x
-    sos = scipy.signal.butter(2, cutoff_hz, fs=fs_hz, output="sos")
-    return scipy.signal.sosfiltfilt(sos, x, padlen=min(len(x) - 1, 3 * int(fs_hz / cutoff_hz)))
-
-
-def _filtered_noise(rng: np.random.Generator, groups: np.ndarray, t_s: np.ndarray, sigma: float,
-                    cutoff_hz: float | None) -> np.ndarray:
+def filtered_noise(rng: np.random.Generator, groups: np.ndarray, t_s: np.ndarray, sigma: float,
+                   cutoff_hz: float | None) -> np.ndarray:
     """White noise of 1-sigma `sigma` through the vane low-pass, per flight segment."""
     out = np.empty(len(t_s))
     for g in pd.unique(groups):
         idx = np.flatnonzero(groups == g)
         fs = 1.0 / float(np.median(np.diff(t_s[idx]))) if idx.size > 1 else 1.0
-        out[idx] = _low_pass(sigma * rng.standard_normal(idx.size), fs, cutoff_hz)
+        out[idx] = zero_phase_low_pass(sigma * rng.standard_normal(idx.size), fs, cutoff_hz)
     return out
+
+
+def with_angle_noise(fd: pd.DataFrame, rng: np.random.Generator, groups: np.ndarray, sigma: float,
+                     cutoff_hz: float | None) -> pd.DataFrame:
+    """A copy of the flight data with extra noise of 1-sigma `sigma` on alpha and beta
+    (alpha_r, phi_r recomputed): white when cutoff_hz is None (angles inverted from the
+    database), else through the vanes' low-pass (the vanes' own noise)."""
+    f = fd.copy()
+    t = f["t_s"].to_numpy(float)
+
+    def draw() -> np.ndarray:
+        if cutoff_hz is None:
+            return sigma * rng.standard_normal(len(f))
+        return filtered_noise(rng, groups, t, sigma, cutoff_hz)
+
+    a = f["alpha_rad"].to_numpy(float) + draw()
+    b = f["beta_rad"].to_numpy(float) + draw()
+    f["alpha_rad"], f["beta_rad"] = a, b
+    f["alpha_r_rad"], f["phi_r_rad"] = total_angles(a, b)
+    return f
 
 
 def simex_estimates(fd: pd.DataFrame, y_by_channel: dict[str, np.ndarray], design, sigma_rad: float,
@@ -55,7 +70,6 @@ def simex_estimates(fd: pd.DataFrame, y_by_channel: dict[str, np.ndarray], desig
     """
     rng = np.random.default_rng(SEED)
     groups = (fd["flight"].astype(str) + "/" + fd["segment"].astype(str)).to_numpy()
-    t = fd["t_s"].to_numpy(float)
 
     def fit_all(frame: pd.DataFrame) -> dict[str, np.ndarray]:
         X = design(frame)
@@ -66,12 +80,7 @@ def simex_estimates(fd: pd.DataFrame, y_by_channel: dict[str, np.ndarray], desig
     for lam in LAMBDAS:
         acc = {ch: np.zeros_like(b) for ch, b in naive.items()}
         for _ in range(REPLICATES):
-            f = fd.copy()
-            a = f["alpha_rad"].to_numpy(float) + _filtered_noise(rng, groups, t, sigma_rad * np.sqrt(lam), cutoff_hz)
-            b = f["beta_rad"].to_numpy(float) + _filtered_noise(rng, groups, t, sigma_rad * np.sqrt(lam), cutoff_hz)
-            ta, tb = np.tan(a), np.tan(b)
-            f["alpha_rad"], f["beta_rad"] = a, b
-            f["alpha_r_rad"], f["phi_r_rad"] = np.arctan(np.hypot(ta, tb)), np.arctan2(tb, ta)
+            f = with_angle_noise(fd, rng, groups, sigma_rad * np.sqrt(lam), cutoff_hz)
             for ch, est in fit_all(f).items():
                 acc[ch] += est / REPLICATES
         for ch in curves:

@@ -6,12 +6,12 @@ from __future__ import annotations
 
 import numpy as np
 import pandas as pd
-import scipy.signal
 
 from aerosid.aerodb import AeroDatabase
 from aerosid.atmosphere import H_MAX_M, H_MIN_M
 from aerosid.flight_coefficients import flight_coefficients
-from aerosid.inversion import invert_alpha_beta
+from aerosid.derivatives import zero_phase_low_pass
+from aerosid.inversion import invert_alpha_beta, total_angles
 from aerosid.vehicle import Vehicle
 
 FIN_COLUMNS = ("d1_rad", "d2_rad", "d3_rad", "d4_rad")
@@ -24,33 +24,16 @@ def load_database(vehicle: Vehicle) -> AeroDatabase | None:
     return AeroDatabase.load(vehicle.database_path)
 
 
-def _low_pass(x: np.ndarray, t_s: np.ndarray, cutoff_hz: float | None) -> np.ndarray:
-    """Zero-phase 2nd-order Butterworth low-pass (forward-backward, so no lag: the angles
-    stay aligned with the smoothed rates and accelerations); unchanged when cutoff_hz is
-    None or the segment is too short to filter."""
-    if cutoff_hz is None or len(x) < 16:
-        return x
-    fs = 1.0 / float(np.median(np.diff(t_s)))
-    if cutoff_hz >= 0.5 * fs:
-        return x
-    sos = scipy.signal.butter(2, cutoff_hz, fs=fs, output="sos")
-    return scipy.signal.sosfiltfilt(sos, x, padlen=min(len(x) - 1, 3 * int(fs / cutoff_hz)))
-
-
-def _vane_angles(measured: pd.DataFrame, ok: np.ndarray, vehicle: Vehicle, segment: str, t: np.ndarray):
-    """alpha, beta [rad] from the vanes' clean columns minus the calibration bias, and the
-    total angle of attack alpha_r and aerodynamic roll angle phi_r derived from them."""
-    cols = {}
-    for name, col, bias in (("alpha", vehicle.alpha_column, vehicle.alpha_bias_rad),
-                            ("beta", vehicle.beta_column, vehicle.beta_bias_rad)):
-        if f"{col}_clean" not in measured:
-            raise ValueError(f"segment {segment}: the vehicle {vehicle.name} reads {name} from the vane column "
-                             f"{col!r} ({vehicle.source} [air_data]), which the telemetry does not carry")
-        cols[name] = _low_pass(measured[f"{col}_clean"].to_numpy(dtype=float)[ok], t[ok],
-                               vehicle.vane_cutoff_hz) - bias
-    a, b = cols["alpha"], cols["beta"]
-    ta, tb = np.tan(a), np.tan(b)
-    return a, b, np.arctan(np.hypot(ta, tb)), np.arctan2(tb, ta)
+def _vane_angles(measured: pd.DataFrame, ok: np.ndarray, vehicle: Vehicle, t: np.ndarray):
+    """alpha, beta [rad] from the vanes' clean columns (zero-phase low-passed) minus the
+    calibration bias, and the total angle of attack alpha_r and aerodynamic roll angle
+    phi_r derived from them.  build_flight_data has checked that the columns exist."""
+    ts = t[ok]
+    fs = 1.0 / float(np.median(np.diff(ts))) if ts.size > 1 else 1.0
+    a, b = (zero_phase_low_pass(measured[f"{col}_clean"].to_numpy(dtype=float)[ok], fs, vehicle.vane_cutoff_hz)
+            - bias for col, bias in ((vehicle.alpha_column, vehicle.alpha_bias_rad),
+                                     (vehicle.beta_column, vehicle.beta_bias_rad)))
+    return (a, b, *total_angles(a, b))
 
 
 def _span(t: np.ndarray) -> str:
@@ -89,7 +72,7 @@ def build_flight_data(smoothed: pd.DataFrame, measured: pd.DataFrame, vehicle: V
     ang_sig = s[["sigma_L1_rad_s2", "sigma_M1_rad_s2", "sigma_N1_rad_s2"]].to_numpy()
     fc = flight_coefficients(vehicle, V, h, acc, ang, acc_sig, ang_sig)
     if vanes:
-        alpha, beta, alpha_r, phi_r = _vane_angles(measured, ok, vehicle, segment, t)
+        alpha, beta, alpha_r, phi_r = _vane_angles(measured, ok, vehicle, t)
         inv_J = np.zeros(len(alpha))
     else:
         alpha, beta, alpha_r, phi_r, inv_J = _inverted_angles(fc, s, delta_p, delta_y, vehicle, db, segment)

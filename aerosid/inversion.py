@@ -46,6 +46,13 @@ class Inversion:
                 f"{int(self.clipped.sum())} outside the table, {self.n_searched} by scalar search")
 
 
+def total_angles(alpha_rad, beta_rad) -> tuple[np.ndarray, np.ndarray]:
+    """Total angle of attack alpha_r and aerodynamic roll angle phi_r [rad] from alpha and
+    beta [rad] (the inverse of alpha = atan(tan alpha_r cos phi_r), beta = atan(tan alpha_r sin phi_r))."""
+    ta, tb = np.tan(alpha_rad), np.tan(beta_rad)
+    return np.arctan(np.hypot(ta, tb)), np.arctan2(tb, ta)
+
+
 def aero_force_targets(CN, CY, delta_p, delta_y, aero: PreflightAero):
     """Remove the preflight control (and offset) parts: the angle-only force coefficients."""
     cn_alpha = np.asarray(CN, float) - aero.CN_0 - aero.CN_delta_p * np.asarray(delta_p, float) / 2.0

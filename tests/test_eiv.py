@@ -6,7 +6,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from aerosid.eiv import _filtered_noise, simex_estimates
+from aerosid.eiv import filtered_noise, simex_estimates
 
 
 def _frame(alpha: np.ndarray, t: np.ndarray) -> pd.DataFrame:
@@ -25,7 +25,7 @@ def test_simex_recovers_a_slope_attenuated_by_filtered_vane_noise(sigma):
     t = np.arange(6000) * 0.01
     alpha = 0.01 * np.sin(2 * np.pi * 0.3 * t) + 0.006 * np.sin(2 * np.pi * 0.9 * t + 1.0)
     y = 0.1 - 1.8 * alpha + 1e-4 * rng.standard_normal(t.size)
-    measured = alpha + _filtered_noise(rng, np.zeros(t.size), t, sigma, 2.0)
+    measured = alpha + filtered_noise(rng, np.zeros(t.size), t, sigma, 2.0)
     fd = _frame(measured, t)
     naive = np.linalg.lstsq(_design(fd)["Cm"], y, rcond=None)[0][1]
     corrected = simex_estimates(fd, {"Cm": y}, _design, sigma, 2.0)["Cm"][1]

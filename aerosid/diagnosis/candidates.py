@@ -95,21 +95,14 @@ def default_candidates(mach_reference: float = 12.4, vehicle_class: str = "finne
     return catalogue_candidates(mach_reference, vehicle_class) + extra_candidates(mach_reference)
 
 
-def derived_signals(signals: dict[str, np.ndarray], d_m: float, groups: np.ndarray | None = None,
-                    lateral_m: float | None = None) -> dict[str, np.ndarray]:
-    """The model signals plus ``alpha_dot``, ``beta_dot`` [rad/s] and ``alpha_dot_hat``, ``beta_dot_hat`` [-]
-    (d_m: pitch reference length [m]; lateral_m: that of beta_dot_hat, default d_m)."""
+def derived_signals(signals: dict[str, np.ndarray], d_m: float, lateral_m: float | None = None
+                    ) -> dict[str, np.ndarray]:
+    """The model signals (aerosid.models.signals_from_flight_data, which holds alpha_dot_hat
+    and beta_dot_hat with the regression's own derivative window) plus ``alpha_dot`` and
+    ``beta_dot`` [rad/s] (d_m: pitch reference length [m]; lateral_m: that of beta_dot_hat,
+    default d_m)."""
     out = dict(signals)
-    t = signals["t"]
     two_v = 2.0 * signals["V"]
-    b_m = d_m if lateral_m is None else lateral_m
-    # the model language's own alpha_dot_hat, beta_dot_hat (same window as the regression) when present
-    if "alpha_dot_hat" in signals and "beta_dot_hat" in signals:
-        out["alpha_dot"] = signals["alpha_dot_hat"] * two_v / d_m
-        out["beta_dot"] = signals["beta_dot_hat"] * two_v / b_m
-        return out
-    out["alpha_dot"] = smooth_derivative(t, signals["alpha"], groups)
-    out["beta_dot"] = smooth_derivative(t, signals["beta"], groups)
-    out["alpha_dot_hat"] = out["alpha_dot"] * d_m / two_v
-    out["beta_dot_hat"] = out["beta_dot"] * b_m / two_v
+    out["alpha_dot"] = signals["alpha_dot_hat"] * two_v / d_m
+    out["beta_dot"] = signals["beta_dot_hat"] * two_v / (d_m if lateral_m is None else lateral_m)
     return out

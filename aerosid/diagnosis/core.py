@@ -59,6 +59,7 @@ from statsmodels.stats.diagnostic import acorr_ljungbox
 from aerosid.diagnosis.candidates import Candidate, default_candidates, derived_signals
 from aerosid.expressions import evaluate
 from aerosid.identify import mach_window_mask
+from aerosid.eiv import with_angle_noise
 from aerosid.models import ChannelModel, default_models, vehicle_signals
 from aerosid.regression import LinearFit, fit_linear, residual_autocovariance
 
@@ -602,8 +603,7 @@ def diagnose(flight_data: pd.DataFrame, vehicle, models: dict[str, ChannelModel]
         raise ValueError(f"only {n} samples inside Mach {vehicle.mach_reference} ± {mach_half_width}: "
                          "too few to diagnose the model")
     groups = (fd["flight"].astype(str) + "/" + fd["segment"].astype(str)).to_numpy()
-    lengths = (vehicle.length_pitch_m, vehicle.length_lateral_m)
-    signals = derived_signals(vehicle_signals(fd, vehicle), lengths[0], groups, lengths[1])
+    signals = derived_signals(vehicle_signals(fd, vehicle), vehicle.length_pitch_m, vehicle.length_lateral_m)
     t = fd["t_s"].to_numpy(float)
     flight = fd["flight"].astype(str).to_numpy()
     dts = np.diff(t)
@@ -718,30 +718,17 @@ def _simex_signals(fd: pd.DataFrame, vehicle, groups: np.ndarray, sigma: float) 
     (alpha_r, phi_r and the derivatives recomputed from them), SIMEX_REPLICATES per
     lambda in SIMEX_LAMBDAS; deterministic (SIMEX_SEED)."""
     rng = np.random.default_rng(SIMEX_SEED)
+    cutoff = vehicle.vane_cutoff_hz if vehicle.air_data_source == "vanes" else None
     out: dict = {}
     for lam in SIMEX_LAMBDAS:
         out[lam] = []
         for _ in range(SIMEX_REPLICATES):
-            f = fd.copy()
-            sd = sigma * math.sqrt(lam)
-            a = f["alpha_rad"].to_numpy(float) + _angle_noise(rng, f, groups, sd, vehicle)
-            b = f["beta_rad"].to_numpy(float) + _angle_noise(rng, f, groups, sd, vehicle)
-            ta, tb = np.tan(a), np.tan(b)
-            f["alpha_rad"], f["beta_rad"] = a, b
-            f["alpha_r_rad"], f["phi_r_rad"] = np.arctan(np.hypot(ta, tb)), np.arctan2(tb, ta)
-            out[lam].append(derived_signals(vehicle_signals(f, vehicle), vehicle.length_pitch_m, groups,
+            # noise like the angles' own: white for angles inverted from the database, through
+            # the vanes' low-pass for vanes (as aerosid.eiv does)
+            f = with_angle_noise(fd, rng, groups, sigma * math.sqrt(lam), cutoff)
+            out[lam].append(derived_signals(vehicle_signals(f, vehicle), vehicle.length_pitch_m,
                                             vehicle.length_lateral_m))
     return out
-
-
-def _angle_noise(rng: np.random.Generator, f: pd.DataFrame, groups: np.ndarray, sd: float, vehicle) -> np.ndarray:
-    """SIMEX noise like the angles' own: white for angles inverted from the database; for
-    vanes, the raw vane noise through the vanes' low-pass (as aerosid.eiv does)."""
-    if vehicle.air_data_source == "vanes" and vehicle.vane_cutoff_hz is not None:
-        from aerosid.eiv import _filtered_noise
-
-        return _filtered_noise(rng, groups, f["t_s"].to_numpy(float), sd, vehicle.vane_cutoff_hz)
-    return sd * rng.standard_normal(len(f))
 
 
 def _simex_fraction(simex: dict, model: ChannelModel, c: Candidate, y: np.ndarray, est: float,

@@ -22,6 +22,8 @@ import numpy as np
 import pandas as pd
 import scipy.signal
 
+from aerosid.inversion import total_angles
+
 
 @dataclass(frozen=True)
 class NoiseLevels:
@@ -87,10 +89,8 @@ def flight_data_from_truth(truth: pd.DataFrame, noise: NoiseLevels = MEASURED_NO
     out["sigma_Cm"] = np.full(n, noise.Cm)
     alpha = noisy("alpha_rad", noise.alpha_rad)
     beta = noisy("beta_rad", noise.beta_rad)
-    ta, tb = np.tan(alpha), np.tan(beta)
     out["alpha_rad"], out["beta_rad"] = alpha, beta
-    out["alpha_r_rad"] = np.arctan(np.hypot(ta, tb))
-    out["phi_r_rad"] = np.arctan2(tb, ta)
+    out["alpha_r_rad"], out["phi_r_rad"] = total_angles(alpha, beta)
     out["inversion_J"] = np.zeros(n)
     for c in ("delta_p_rad", "delta_y_rad", "delta_r_rad"):
         out[c] = truth[c].to_numpy(float)
