@@ -427,3 +427,34 @@ def test_detection_rates_at_half_size(fly, vehicle, record_property):
         record_property(f"detect_{name}_half", first)
         lines.append(f"{name:<20} half size: ranked first & significant {first}/10, significant {sig}/10")
     print("\n" + "\n".join(lines))
+
+
+def test_the_angle_error_check_can_lower_the_ranking_score_but_never_raise_it(reference_flight, vehicle):
+    """score = corrected partial F x clip(1 - eiv_fraction, 0, 1)^2.  A SIMEX extrapolation that runs
+    away (seen on the real pipeline's force channels: eiv_fraction -4000 and +17000) must not put a
+    candidate at the head of the list; an artefact that angle errors fully explain scores 0."""
+    d = diagnose(_fd(reference_flight, 0), vehicle)
+    e = next(e for e in d.effects if e.identifiable and math.isfinite(e.eiv_fraction))
+    f = e.partial_f_corrected
+    assert replace(e, eiv_fraction=-4000.0, estimate_simex=4001.0 * e.estimate).score == pytest.approx(f)
+    assert replace(e, eiv_fraction=17000.0, estimate_simex=-16999.0 * e.estimate).score == 0.0
+    assert replace(e, eiv_fraction=0.75, estimate_simex=0.25 * e.estimate).score == pytest.approx(f / 16)
+    assert replace(e, eiv_fraction=float("nan")).score == pytest.approx(f)
+    for ev in d.effects:
+        assert ev.score <= ev.partial_f_corrected or not math.isfinite(ev.partial_f_corrected)
+
+
+def test_a_term_whose_simex_estimate_flips_sign_is_an_angle_error_artefact(reference_flight, vehicle, monkeypatch):
+    """eiv_fraction > 1: the SIMEX-corrected estimate has the opposite sign, i.e. errors in the
+    recovered angles make the whole term.  It must not pass the errors-in-variables check
+    (the real pipeline once called such a beta_nonlinearity, eiv_fraction 1.98, significant)."""
+    import aerosid.diagnosis.core as core
+
+    fd = _fd(inject(reference_flight, CATALOGUE["mach_cm_alpha"]), 0)
+    assert diagnose(fd, vehicle).effect("mach_cm_alpha").significant
+    monkeypatch.setattr(core, "_simex_fraction", lambda *a, **k: 1.98)
+    e = diagnose(fd, vehicle).effect("mach_cm_alpha")
+    assert e.estimate_simex == pytest.approx(-0.98 * e.estimate)
+    assert e.p_value_simex == pytest.approx(1.0) and not e.significant
+    assert any("errors in the recovered angles" in r for r in e.reasons)
+    assert e.score == 0.0

@@ -38,8 +38,8 @@ A candidate is *significant* when it is identifiable and
     AND  variance_share >= MIN_VARIANCE_SHARE (1 %)  AND  pse_drop > 0.
 
 Ranking: significant candidates first, then by ``score`` (descending): the
-corrected t^2 of the SIMEX-corrected estimate, i.e. the corrected partial F net of
-what errors in the recovered angles could produce.  Only the *first* finding should be acted on: add it, refit and
+corrected partial F times the squared share of the estimate that errors in the
+recovered angles cannot produce (SIMEX; it can lower the evidence, never raise it).  Only the *first* finding should be acted on: add it, refit and
 diagnose again, because a strong missing term makes correlated candidates look
 significant too (they are listed in ``confused_with`` when their regressors,
 after removing what the base model explains, correlate by |r| >= 0.9).
@@ -104,7 +104,7 @@ RULE_TEXT = (f"significant = identifiable and corrected p < {P_MAX:g} (t^2 of th
              f"coloured-residual sigma) and held-out window consistency >= {MIN_WINDOW_CONSISTENCY:.0%} "
              f"and explains >= {MIN_VARIANCE_SHARE:.0%} of the residual variance and lowers the PSE and is not an "
              f"errors-in-variables artefact (the SIMEX-corrected estimate also has p < {P_MAX:g}); "
-             "ranked significant first, then by the corrected partial F of the SIMEX-corrected estimate")
+             "ranked significant first, then by the corrected partial F net of the share angle errors could make (SIMEX)")
 
 
 # --------------------------------------------------------------------------- results
@@ -151,7 +151,7 @@ class EffectEvidence:
     n_eff: float
     eiv_fraction: float  # (theta(extra angle noise) - theta) / theta: ~1 for an artefact of angle errors
     estimate_simex: float  # SIMEX-corrected estimate (extrapolated to no angle error)
-    p_value_simex: float  # corrected p-value of the SIMEX-corrected estimate (same sigma)
+    p_value_simex: float  # corrected p of the SIMEX-corrected estimate (same sigma; 1 when its sign flips)
     confused_with: tuple[str, ...] = ()
     reasons: tuple[str, ...] = ()  # why it is not significant (empty when significant)
     #: smallest |estimate| this flight could call significant at p < P_MAX with this term's
@@ -160,12 +160,19 @@ class EffectEvidence:
 
     @property
     def score(self) -> float:
-        """Ranking score: corrected t^2 of the SIMEX-corrected estimate (evidence net of what
-        errors in the recovered angles could make); the corrected partial F when SIMEX is off."""
-        if math.isfinite(self.estimate_simex) and self.std_error > 0:
-            return float((self.estimate_simex / self.std_error) ** 2)
+        """Ranking score: the corrected partial F times the share of the estimate that errors
+        in the recovered angles cannot account for, ``clip(1 - eiv_fraction, 0, 1)^2`` (SIMEX).
+        The angle-error check can only lower the evidence, never raise it: a SIMEX
+        extrapolation that runs away (a term whose estimate is ~0, or a force channel whose
+        angles were inverted from that very channel, where the extra angle noise wrecks the
+        fit) would otherwise score thousands and head the list.  The corrected partial F when
+        SIMEX is off."""
         f = self.partial_f_corrected
-        return float(f) if math.isfinite(f) else -1.0
+        if not math.isfinite(f):
+            return -1.0
+        if math.isfinite(self.eiv_fraction):
+            return float(f * min(max(1.0 - self.eiv_fraction, 0.0), 1.0) ** 2)
+        return float(f)
 
     def to_dict(self) -> dict:
         d = {
@@ -668,7 +675,10 @@ def diagnose(flight_data: pd.DataFrame, vehicle, models: dict[str, ChannelModel]
             sse_a = _heldout_sse(Xa.to_numpy(float), y, win)
             eiv = _simex_fraction(simex, model, c, y, est, simex_cache)
             est_simex = est * (1.0 - eiv) if math.isfinite(eiv) else est
-            p_simex = float(2.0 * scipy.stats.t.sf(abs(est_simex) / se, fa.dof_eff)) if se > 0 else float("nan")
+            # one-sided in the estimate's own direction: a SIMEX estimate of the opposite sign
+            # (eiv_fraction > 1) says angle errors made the whole term, so p = 1
+            p_simex = (float(2.0 * scipy.stats.t.sf(max(math.copysign(1.0, est) * est_simex, 0.0) / se, fa.dof_eff))
+                       if se > 0 else float("nan"))
             d = sse_b - sse_a
             d = d[np.isfinite(d)]
             tot = float(np.sum(np.abs(d)))
