@@ -16,6 +16,9 @@ significant, and how the channel's error falls when the effect is added:
 
     python bench/bench_modelling_loop.py --seeds 0-9 --jobs 2
     -> bench/results/modelling_loop_runs.csv and bench/results/modelling_loop.md
+    python bench/bench_modelling_loop.py --seeds 0-9 --noise-scale 0.5
+    -> the same with every sensor's sigma halved: bench/results/modelling_loop_noise0.5.{md,csv}
+       (how far the bars are set by the sensor noise; docs/modelling-loop.md section 5)
 """
 from __future__ import annotations
 
@@ -37,7 +40,21 @@ def _rms(x) -> float:
     return float(np.sqrt(np.mean(np.square(x))))
 
 
-def one(job: tuple[str, float, int]) -> dict:
+def _scaled_noise(case, factor: float):
+    """The case with every sensor's 1-sigma noise multiplied by `factor` (1: seed Table 2)."""
+    from dataclasses import replace
+
+    if factor == 1.0:
+        return case
+    s = case.sensors
+    sensors = replace(s, accel_noise_m_s2=tuple(factor * v for v in s.accel_noise_m_s2),
+                      gyro_noise_rad_s=tuple(factor * v for v in s.gyro_noise_rad_s),
+                      fin_noise_rad=factor * s.fin_noise_rad, V_noise_m_s=factor * s.V_noise_m_s,
+                      h_noise_m=factor * s.h_noise_m)
+    return replace(case, sensors=sensors)
+
+
+def one(job: tuple[str, float, int, float]) -> dict:
     from aerosid.diagnosis import diagnose
     from aerosid.effects import CATALOGUE
     from aerosid.ebm import process_telemetry
@@ -46,9 +63,9 @@ def one(job: tuple[str, float, int]) -> dict:
     from aerosid.models import default_models, parse_term, signals_from_flight_data
     from aerosid.simulation import load_case, simulate
 
-    name, scale, seed = job
+    name, scale, seed, noise = job
     t0 = time.perf_counter()
-    case = load_case("seed-rlv")
+    case = _scaled_noise(load_case("seed-rlv"), noise)
     vehicle = case.vehicle
     effects = () if name == "none" else ((CATALOGUE[name], scale),)
     flight = simulate(case, effects, seed=seed)
@@ -114,14 +131,18 @@ def _seeds(text: str) -> list[int]:
     return list(range(int(a), int(b) + 1)) if b else [int(a)]
 
 
-def _report(df: pd.DataFrame, seeds: list[int], wall_s: float) -> str:
+def _report(df: pd.DataFrame, seeds: list[int], wall_s: float, noise_scale: float = 1.0) -> str:
     from machine import cpu_model, loadavg  # bench/machine.py (the script's folder is on sys.path)
 
     n = len(seeds)
     lines = [f"# The modelling loop on the real pipeline, {n} seeds per row", "",
              f"{date.today()}, {cpu_model()}, {os.cpu_count()} cores, load {loadavg()}; wall {wall_s / 60:.1f} min. "
-             f"`python bench/bench_modelling_loop.py --seeds {seeds[0]}-{seeds[-1]}`.", "",
-             "Each run: simulate seed-rlv with one hidden effect (default noise, dropouts, outliers, sync gap), "
+             f"`python bench/bench_modelling_loop.py --seeds {seeds[0]}-{seeds[-1]}"
+             + (f" --noise-scale {noise_scale:g}" if noise_scale != 1.0 else "") + "`.", "",
+             *([f"**Sensor noise x {noise_scale:g}**: every sensor's 1-sigma noise (accelerometers, gyros, fins, V, h) is "
+                f"{noise_scale:g} x the seed's Table 2; everything else as in `modelling_loop.md`.", ""]
+               if noise_scale != 1.0 else []),
+             "Each run: simulate seed-rlv with one hidden effect (sensor noise of Table 2 unless stated above, dropouts, outliers, sync gap), "
              "preprocess, EKF + MBF smoother, flight data, regression on |M - 12.4| <= 0.5, `diagnose` the "
              "default models, then refit with the effect added. `model error` = RMS(model on the true signals - true coefficient); "
              "`residual` = RMS(model - measured coefficient); `floor` = RMS(measured - true coefficient), the "
@@ -146,7 +167,8 @@ def _report(df: pd.DataFrame, seeds: list[int], wall_s: float) -> str:
     if len(pd_rows):
         lines += ["", "Smallest |Cm_q| this flight could call significant (p < 0.001 with the coloured-residual "
                       f"sigma), median over runs: {pd_rows['detectable_size'].median():.0f} per rad (truth at scale 1: -30)."]
-    lines += ["", "Per-run rows: `bench/results/modelling_loop_runs.csv`."]
+    stem = "modelling_loop" if noise_scale == 1.0 else f"modelling_loop_noise{noise_scale:g}"
+    lines += ["", f"Per-run rows: `bench/results/{stem}_runs.csv`."]
     return "\n".join(lines) + "\n"
 
 
@@ -158,26 +180,30 @@ def main() -> None:
     ap.add_argument("--scales", default="1,0.5")
     ap.add_argument("--extra", default="pitch_damping=2,pitch_damping=3",
                     help="extra NAME=SCALE rows (a detection curve)")
+    ap.add_argument("--noise-scale", type=float, default=1.0,
+                    help="multiply every sensor's noise sigma (1 = seed Table 2); the results get a suffix")
     ap.add_argument("--out", default=str(Path(__file__).parent / "results"))
     args = ap.parse_args()
     from aerosid.effects import CATALOGUE
 
     seeds = _seeds(args.seeds)
     names = list(CATALOGUE) if args.effects == "all" else args.effects.split(",")
-    jobs = [(n, float(s), seed) for n in names for s in args.scales.split(",") for seed in seeds]
+    ns = args.noise_scale
+    jobs = [(n, float(s), seed, ns) for n in names for s in args.scales.split(",") for seed in seeds]
     for item in filter(None, args.extra.split(",")):
         n, _, s = item.partition("=")
-        jobs += [(n, float(s), seed) for seed in seeds]
-    jobs += [("none", 0.0, seed) for seed in seeds]
+        jobs += [(n, float(s), seed, ns) for seed in seeds]
+    jobs += [("none", 0.0, seed, ns) for seed in seeds]
     t0 = time.perf_counter()
     with ProcessPoolExecutor(args.jobs) as pool:
         rows = list(pool.map(one, jobs))
     df = pd.DataFrame(rows)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    df.to_csv(out / "modelling_loop_runs.csv", index=False)
-    text = _report(df, seeds, time.perf_counter() - t0)
-    (out / "modelling_loop.md").write_text(text)
+    stem = "modelling_loop" if ns == 1.0 else f"modelling_loop_noise{ns:g}"
+    df.to_csv(out / f"{stem}_runs.csv", index=False)
+    text = _report(df, seeds, time.perf_counter() - t0, ns)
+    (out / f"{stem}.md").write_text(text)
     print(text)
     print(platform.platform())
 
