@@ -131,6 +131,11 @@ def _seeds(text: str) -> list[int]:
     return list(range(int(a), int(b) + 1)) if b else [int(a)]
 
 
+def _stem(noise_scale: float) -> str:
+    """Result file stem: the plain name at the seed's noise, a suffix otherwise."""
+    return "modelling_loop" if noise_scale == 1.0 else f"modelling_loop_noise{noise_scale:g}"
+
+
 def _report(df: pd.DataFrame, seeds: list[int], wall_s: float, noise_scale: float = 1.0) -> str:
     from machine import cpu_model, loadavg  # bench/machine.py (the script's folder is on sys.path)
 
@@ -167,8 +172,7 @@ def _report(df: pd.DataFrame, seeds: list[int], wall_s: float, noise_scale: floa
     if len(pd_rows):
         lines += ["", "Smallest |Cm_q| this flight could call significant (p < 0.001 with the coloured-residual "
                       f"sigma), median over runs: {pd_rows['detectable_size'].median():.0f} per rad (truth at scale 1: -30)."]
-    stem = "modelling_loop" if noise_scale == 1.0 else f"modelling_loop_noise{noise_scale:g}"
-    lines += ["", f"Per-run rows: `bench/results/{stem}_runs.csv`."]
+    lines += ["", f"Per-run rows: `bench/results/{_stem(noise_scale)}_runs.csv`."]
     return "\n".join(lines) + "\n"
 
 
@@ -200,7 +204,7 @@ def main() -> None:
     df = pd.DataFrame(rows)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    stem = "modelling_loop" if ns == 1.0 else f"modelling_loop_noise{ns:g}"
+    stem = _stem(ns)
     df.to_csv(out / f"{stem}_runs.csv", index=False)
     text = _report(df, seeds, time.perf_counter() - t0, ns)
     (out / f"{stem}.md").write_text(text)
