@@ -26,6 +26,7 @@ import argparse
 import os
 import platform
 import time
+from dataclasses import replace
 from concurrent.futures import ProcessPoolExecutor
 from datetime import date
 from pathlib import Path
@@ -40,20 +41,6 @@ def _rms(x) -> float:
     return float(np.sqrt(np.mean(np.square(x))))
 
 
-def _scaled_noise(case, factor: float):
-    """The case with every sensor's 1-sigma noise multiplied by `factor` (1: seed Table 2)."""
-    from dataclasses import replace
-
-    if factor == 1.0:
-        return case
-    s = case.sensors
-    sensors = replace(s, accel_noise_m_s2=tuple(factor * v for v in s.accel_noise_m_s2),
-                      gyro_noise_rad_s=tuple(factor * v for v in s.gyro_noise_rad_s),
-                      fin_noise_rad=factor * s.fin_noise_rad, V_noise_m_s=factor * s.V_noise_m_s,
-                      h_noise_m=factor * s.h_noise_m)
-    return replace(case, sensors=sensors)
-
-
 def one(job: tuple[str, float, int, float]) -> dict:
     from aerosid.diagnosis import diagnose
     from aerosid.effects import CATALOGUE
@@ -65,7 +52,8 @@ def one(job: tuple[str, float, int, float]) -> dict:
 
     name, scale, seed, noise = job
     t0 = time.perf_counter()
-    case = _scaled_noise(load_case("seed-rlv"), noise)
+    case = load_case("seed-rlv")
+    case = replace(case, sensors=case.sensors.scaled(noise))
     vehicle = case.vehicle
     effects = () if name == "none" else ((CATALOGUE[name], scale),)
     flight = simulate(case, effects, seed=seed)

@@ -2,7 +2,7 @@
 from __future__ import annotations
 
 import tomllib
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
 
 from aerosid.vehicle import DATA_DIR, Vehicle, load_vehicle
@@ -17,6 +17,12 @@ class SensorSpec:
     fin_noise_rad: float = 3.5e-4
     V_noise_m_s: float = 0.3
     h_noise_m: float = 3.0
+
+    def scaled(self, factor: float) -> "SensorSpec":
+        """Every sensor's 1-sigma noise multiplied by `factor` [-] (a sensitivity study)."""
+        return SensorSpec(**{f.name: (tuple(factor * v for v in getattr(self, f.name))
+                                      if isinstance(getattr(self, f.name), tuple) else factor * getattr(self, f.name))
+                             for f in fields(self)})
 
 
 @dataclass(frozen=True)

@@ -151,3 +151,17 @@ def test_fast_atmosphere_matches_ambiance():
 def test_unknown_effect_is_a_clear_error():
     with pytest.raises(KeyError, match="unknown effect 'pitch_dampin'"):
         parse_effect_spec("pitch_dampin")
+
+
+def test_sensor_noise_scaling_multiplies_every_sigma():
+    """SensorSpec.scaled (the modelling-loop bench's --noise-scale): every field, tuples element-wise,
+    so a sensor added later cannot be left at full noise."""
+    from dataclasses import astuple, fields
+
+    s = load_case("seed-rlv").sensors
+    half = s.scaled(0.5)
+    for f in fields(s):
+        assert np.allclose(np.asarray(getattr(half, f.name)), 0.5 * np.asarray(getattr(s, f.name))), f.name
+        assert type(getattr(half, f.name)) is type(getattr(s, f.name))
+    assert s.scaled(1.0) == s
+    assert not any(np.any(np.asarray(v)) for v in astuple(s.scaled(0.0)))
