@@ -21,13 +21,14 @@ def zero_phase_low_pass(x: np.ndarray, fs_hz: float, cutoff_hz: float | None) ->
 
 
 def smooth_derivative(t_s: np.ndarray, y: np.ndarray, groups: np.ndarray | None = None,
-                      half_window_s: float = DERIVATIVE_HALF_WINDOW_S) -> np.ndarray:
+                      half_window_s: float | None = DERIVATIVE_HALF_WINDOW_S) -> np.ndarray:
     """dy/dt by a Savitzky-Golay (quadratic) derivative, computed per contiguous group.
 
     Inside a group the samples are put on a uniform grid (median step; linear
     interpolation over missing rows), differentiated, and read back at the
     original times.  A derivative amplifies noise by ~2 pi f: the window
     (2 x ``half_window_s``) is a low-pass at roughly 1/(2 half_window_s) Hz.
+    ``half_window_s=None``: the central difference (for signals already band-limited).
     """
     t_s = np.asarray(t_s, float)
     y = np.asarray(y, float)
@@ -45,6 +46,9 @@ def smooth_derivative(t_s: np.ndarray, y: np.ndarray, groups: np.ndarray | None 
             continue
         grid = np.arange(t[0], t[-1] + 0.5 * dt, dt)
         vg = np.interp(grid, t, v)
+        if half_window_s is None:
+            out[idx] = np.interp(t, grid, np.gradient(vg, dt))
+            continue
         half = max(2, int(round(half_window_s / dt)))
         win = min(2 * half + 1, grid.size - (1 - grid.size % 2))
         if win < 5:

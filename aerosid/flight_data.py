@@ -11,10 +11,12 @@ from aerosid.aerodb import AeroDatabase
 from aerosid.atmosphere import H_MAX_M, H_MIN_M
 from aerosid.flight_coefficients import flight_coefficients
 from aerosid.derivatives import zero_phase_low_pass
+from aerosid.identification.band import band_limited_signals, finite_runs, low_pass_runs
 from aerosid.inversion import invert_alpha_beta, total_angles
 from aerosid.vehicle import Vehicle
 
 FIN_COLUMNS = ("d1_rad", "d2_rad", "d3_rad", "d4_rad")
+BAND_IMU = ("ax_m_s2", "ay_m_s2", "az_m_s2", "p_rad_s", "q_rad_s", "r_rad_s")
 
 
 def load_database(vehicle: Vehicle) -> AeroDatabase | None:
@@ -42,10 +44,18 @@ def _span(t: np.ndarray) -> str:
 
 
 def build_flight_data(smoothed: pd.DataFrame, measured: pd.DataFrame, vehicle: Vehicle, db: AeroDatabase | None,
-                      flight: str = "flight") -> pd.DataFrame:
+                      flight: str = "flight", signals: str = "band") -> pd.DataFrame:
     """smoothed: a SmoothedSegment frame; measured: the preprocessed rows of the same
     segment (same t_s), whose ``*_clean`` columns give fins, V and h.  Rows where V, h
-    or a fin is unavailable (inside an unfilled gap) are left out."""
+    or a fin is unavailable (inside an unfilled gap) are left out.
+
+    signals: "band" (default) -- rates, angular and linear accelerations from the
+    measured gyros and accelerometers, and every regressor, through one common
+    low-pass (aerosid.identification.band: the band edge from the flight's gyro
+    spectrum, or the vehicle file's ``[estimation] band_hz``); the smoother's states
+    then serve the checks (NIS, gates, divergence) and the per-sample sigma.
+    "smoother" -- the smoother's states as the method's seed has it (each chain with
+    the bandwidth its process noise gives it)."""
     t = smoothed["t_s"].to_numpy()
     if len(measured) != len(t) or not np.allclose(measured["t_s"].to_numpy(), t, atol=1e-9, rtol=0):
         raise ValueError("smoothed and measured frames are not on the same time grid")
@@ -62,22 +72,52 @@ def build_flight_data(smoothed: pd.DataFrame, measured: pd.DataFrame, vehicle: V
     if h_out.any():
         raise ValueError(f"segment {segment}: column 'h_m' outside the US-1976 atmosphere's {H_MIN_M:g}.."
                          f"{H_MAX_M:g} m at {int(h_out.sum())} rows, t = {_span(t[h_out])}")
+    band_hz = np.nan
+    if signals == "band":
+        imu = {c: measured[f"{c}_clean"].to_numpy(dtype=float) for c in BAND_IMU}
+        bl = band_limited_signals(t, np.column_stack([imu[c] for c in BAND_IMU[3:]]),
+                                  np.column_stack([imu[c] for c in BAND_IMU[:3]]),
+                                  (vehicle.Ixx_kg_m2, vehicle.Iyy_kg_m2, vehicle.Izz_kg_m2, vehicle.Ixz_kg_m2),
+                                  vehicle.accel_offset_m, vehicle.band_hz, ok)
+        fs = 1.0 / float(np.median(np.diff(t)))
+        runs = finite_runs(bl.used)
+        clean = {c: low_pass_runs(v, fs, bl.band_hz, runs) for c, v in clean.items()}
+        ok = bl.used
+        band_hz = bl.band_hz
+        band_rates = bl.rates_rad_s[ok]
+        acc, ang = bl.accel_cg_m_s2[ok], bl.ang_accel_rad_s2[ok]
+    elif signals != "smoother":
+        raise ValueError(f"signals must be 'band' or 'smoother', not {signals!r}")
     s = smoothed.loc[ok].reset_index(drop=True)
     fins = [clean[c][ok] for c in FIN_COLUMNS]
     V, h = clean["V_m_s"][ok], clean["h_m"][ok]
     delta_r, delta_p, delta_y = (np.asarray(x) for x in vehicle.mix(*fins))
-    acc = s[["X1_m_s2", "Y1_m_s2", "Z1_m_s2"]].to_numpy()
-    ang = s[["L1_rad_s2", "M1_rad_s2", "N1_rad_s2"]].to_numpy()
+    if signals == "smoother":
+        acc = s[["X1_m_s2", "Y1_m_s2", "Z1_m_s2"]].to_numpy()
+        ang = s[["L1_rad_s2", "M1_rad_s2", "N1_rad_s2"]].to_numpy()
     acc_sig = s[["sigma_X1_m_s2", "sigma_Y1_m_s2", "sigma_Z1_m_s2"]].to_numpy()
     ang_sig = s[["sigma_L1_rad_s2", "sigma_M1_rad_s2", "sigma_N1_rad_s2"]].to_numpy()
     fc = flight_coefficients(vehicle, V, h, acc, ang, acc_sig, ang_sig)
-    if vanes:
+    if vanes and signals == "band":  # the vanes went through the common low-pass above
+        alpha = clean[vehicle.alpha_column][ok] - vehicle.alpha_bias_rad
+        beta = clean[vehicle.beta_column][ok] - vehicle.beta_bias_rad
+        alpha_r, phi_r = total_angles(alpha, beta)
+        inv_J = np.zeros(len(alpha))
+    elif vanes:
         alpha, beta, alpha_r, phi_r = _vane_angles(measured, ok, vehicle, t)
         inv_J = np.zeros(len(alpha))
     else:
         alpha, beta, alpha_r, phi_r, inv_J = _inverted_angles(fc, s, delta_p, delta_y, vehicle, db, segment)
+    # errors in variables: the 1-sigma of the white noise whose band-limited part is in the
+    # angles (vanes: the vehicle file's vane noise; inverted angles: the accelerometers' noise
+    # through the inversion's sensitivity), for the SIMEX correction of aerosid.eiv
+    eiv_a = eiv_b = np.full(len(V), vehicle.vane_noise_rad if vanes else 0.0)
+    if not vanes and signals == "band":
+        eiv_a, eiv_b = _inversion_noise(fc, delta_p, delta_y, vehicle, db, alpha, beta, bl.accel_noise_m_s2)
     coef = {"CA": fc.CA, "CY": fc.CY, "CN": fc.CN, "Cl": fc.Cl, "Cm": fc.Cm, "Cn": fc.Cn}
     rates = {c: s[c].to_numpy() for c in ("p_rad_s", "q_rad_s", "r_rad_s")}
+    if signals == "band":
+        rates = {c: band_rates[:, j] for j, c in enumerate(("p_rad_s", "q_rad_s", "r_rad_s"))}
     return pd.DataFrame({
         "t_s": s["t_s"].to_numpy(),
         "flight": flight,
@@ -90,6 +130,8 @@ def build_flight_data(smoothed: pd.DataFrame, measured: pd.DataFrame, vehicle: V
         "alpha_r_rad": alpha_r, "phi_r_rad": phi_r, "inversion_J": inv_J,
         "delta_p_rad": delta_p, "delta_y_rad": delta_y, "delta_r_rad": delta_r,
         **rates,
+        "band_hz": np.full(len(V), band_hz),
+        "eiv_sigma_alpha_rad": eiv_a, "eiv_sigma_beta_rad": eiv_b,
     })
 
 
@@ -109,8 +151,23 @@ def _inverted_angles(fc, s: pd.DataFrame, delta_p, delta_y, vehicle: Vehicle, db
     return inv.alpha_rad, inv.beta_rad, inv.alpha_r_rad, inv.phi_r_rad, inv.J
 
 
+def _inversion_noise(fc, delta_p, delta_y, vehicle: Vehicle, db: AeroDatabase, alpha, beta, accel_noise):
+    """Per-sample white-noise 1-sigma [rad] of the inverted alpha and beta: the accelerometers'
+    white noise (a_z for C_N, a_y for C_Y) scaled to a coefficient by m/(qbar S), through the
+    inversion's local sensitivity d alpha/d C_N, d beta/d C_Y (finite differences)."""
+    scale = vehicle.mass_kg / (fc.air.qbar_pa * vehicle.S_m2)
+    sig_cn, sig_cy = scale * float(accel_noise[2]), scale * float(accel_noise[1])
+    eps = 1e-4
+    up_n = invert_alpha_beta(fc.CN + eps, fc.CY, fc.air.mach, delta_p, delta_y, db, vehicle.preflight)
+    up_y = invert_alpha_beta(fc.CN, fc.CY + eps, fc.air.mach, delta_p, delta_y, db, vehicle.preflight)
+    da = np.abs(up_n.alpha_rad - alpha) / eps
+    db_ = np.abs(up_y.beta_rad - beta) / eps
+    med = lambda x: np.nan_to_num(x, nan=float(np.nanmedian(x)) if np.isfinite(x).any() else 0.0)  # noqa: E731
+    return med(da * sig_cn), med(db_ * sig_cy)
+
+
 def build_flight_data_segments(preprocessed: pd.DataFrame, smoothed: list[pd.DataFrame], vehicle: Vehicle,
-                               db: AeroDatabase | None, flight: str = "flight") -> pd.DataFrame:
+                               db: AeroDatabase | None, flight: str = "flight", signals: str = "band") -> pd.DataFrame:
     """Flight data of several smoothed segments of one preprocessed flight, pooled:
     each segment is matched to the preprocessed rows of its own time span."""
     t = preprocessed["t_s"].to_numpy()
@@ -119,5 +176,5 @@ def build_flight_data_segments(preprocessed: pd.DataFrame, smoothed: list[pd.Dat
         ts = sm["t_s"].to_numpy()
         start = int(np.searchsorted(t, ts[0] - 1e-9))
         rows = preprocessed.iloc[start:start + len(ts)].reset_index(drop=True)
-        parts.append(build_flight_data(sm, rows, vehicle, db, flight))
+        parts.append(build_flight_data(sm, rows, vehicle, db, flight, signals))
     return pd.concat(parts, ignore_index=True)

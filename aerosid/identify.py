@@ -84,9 +84,31 @@ def format_table(table: pd.DataFrame) -> str:
     return "\n".join(lines)
 
 
-def _eiv_corrected(fd: pd.DataFrame, vehicle: Vehicle, models: dict, fits: dict) -> dict:
-    """The fits with their estimates corrected for the vanes' noise (aerosid.eiv, SIMEX)."""
-    ok = {ch: f for ch, f in fits.items() if np.all(np.isfinite(f.estimate)) and f.n_dropped == 0}
+def _eiv_sigma(fd: pd.DataFrame, vehicle: Vehicle):
+    """(sigma_alpha, sigma_beta) [rad] of the white noise in the angles (per sample), or None
+    when the angles are taken as exact: the flight data's eiv_sigma_* columns
+    (aerosid.flight_data), else the vehicle file's vane noise for vanes."""
+    if {"eiv_sigma_alpha_rad", "eiv_sigma_beta_rad"} <= set(fd.columns):
+        sa, sb = (fd[c].to_numpy(float) for c in ("eiv_sigma_alpha_rad", "eiv_sigma_beta_rad"))
+        if np.all(np.isfinite(sa)) and np.all(np.isfinite(sb)) and (sa.max() > 0 or sb.max() > 0):
+            return sa, sb
+        return None
+    if vehicle.air_data_source == "vanes" and vehicle.vane_noise_rad > 0:
+        return vehicle.vane_noise_rad, vehicle.vane_noise_rad
+    return None
+
+
+#: Channels whose flight values define the angles for a vehicle without vanes (alpha, beta
+#: are inverted from C_N and C_Y): their fits are identities, not estimates.
+INVERSION_CHANNELS = ("CN", "CY")
+
+
+def _eiv_corrected(fd: pd.DataFrame, vehicle: Vehicle, models: dict, fits: dict, sigma) -> dict:
+    """The fits with their estimates corrected for the noise in alpha and beta (aerosid.eiv,
+    SIMEX); for inverted angles the force channels they come from are left as they are."""
+    skip = INVERSION_CHANNELS if vehicle.air_data_source != "vanes" else ()
+    ok = {ch: f for ch, f in fits.items()
+          if np.all(np.isfinite(f.estimate)) and f.n_dropped == 0 and ch not in skip}
     if not ok:
         return fits
 
@@ -94,11 +116,24 @@ def _eiv_corrected(fd: pd.DataFrame, vehicle: Vehicle, models: dict, fits: dict)
         sig = vehicle_signals(frame, vehicle)
         return {ch: models[ch].regressors(sig).to_numpy(float) for ch in ok}
 
-    corrected = simex_estimates(fd, {ch: fd[ch].to_numpy(float) for ch in ok}, design, vehicle.vane_noise_rad,
-                                vehicle.vane_cutoff_hz)
-    note = (f"estimates corrected for the vane noise (SIMEX, sigma {vehicle.vane_noise_rad:g} rad); "
-            "sigma and residual statistics are the uncorrected fit's")
-    return {ch: with_corrected_estimate(f, corrected[ch], note) if ch in corrected else f for ch, f in fits.items()}
+    corrected = simex_estimates(fd, {ch: fd[ch].to_numpy(float) for ch in ok}, design, sigma,
+                                angle_cutoff_hz(fd, vehicle))
+    what = "the vane noise" if vehicle.air_data_source == "vanes" else "the noise the accelerometers put into the inverted angles"
+    note = (f"estimates corrected for {what} (SIMEX, median sigma alpha {float(np.median(sigma[0])):.2g} rad, "
+            f"beta {float(np.median(sigma[1])):.2g} rad); sigma scaled by the correction and combined with the "
+            "extrapolation's spread; residual statistics are the uncorrected fit's")
+    return {ch: with_corrected_estimate(f, corrected[ch].corrected, note, corrected[ch].std_error(f.std_error))
+            if ch in corrected else f for ch, f in fits.items()}
+
+
+def angle_cutoff_hz(fd: pd.DataFrame, vehicle: Vehicle) -> float | None:
+    """The low-pass the vane angles went through [Hz]: the flight data's common band
+    (aerosid.identification.band) when it has one, else the vehicle file's vane corner."""
+    if "band_hz" in fd.columns:
+        band = fd["band_hz"].to_numpy(float)
+        if band.size and np.all(np.isfinite(band)):
+            return float(np.median(band))
+    return vehicle.vane_cutoff_hz
 
 
 def mach_window_mask(mach: np.ndarray, reference: float, half_width: float | None) -> np.ndarray:
@@ -124,8 +159,9 @@ def identify(flight_data: pd.DataFrame, vehicle: Vehicle, models: dict[str, Chan
     for channel, model in models.items():
         X = model.regressors(signals)
         fits[channel] = fit_linear(fd[channel].to_numpy(float), X, names=model.names, channel=channel, cov=cov)
-    if vehicle.air_data_source == "vanes" and vehicle.vane_noise_rad > 0:
-        fits = _eiv_corrected(fd, vehicle, models, fits)
+    sigma = _eiv_sigma(fd, vehicle)
+    if sigma is not None:
+        fits = _eiv_corrected(fd, vehicle, models, fits, sigma)
     refs = AeroModel.preflight(vehicle).linear_truth() if vehicle.preflight is not None else {}
     window = (float(fd["mach"].min()), float(fd["mach"].max()))
     return Identification(fits, dict(models), refs, len(fd), window)

@@ -491,16 +491,25 @@ def _identifiability(X: np.ndarray, names: Sequence[str]):
     return keep, intercept, warns
 
 
-def with_corrected_estimate(fit: LinearFit, estimate: np.ndarray, note: str) -> LinearFit:
+def with_corrected_estimate(fit: LinearFit, estimate: np.ndarray, note: str,
+                            std_error: np.ndarray | None = None) -> LinearFit:
     """The same fit with another estimate vector (e.g. corrected for errors in the
-    regressors); t, p and the intervals follow it, sigma and the residual statistics
-    stay those of the fit; `note` is added to its warnings."""
+    regressors); t, p and the intervals follow it; `std_error` (optional) replaces the
+    corrected sigma (the covariance is rescaled to it, correlations kept); the plain OLS
+    sigma and the residual statistics stay those of the fit; `note` is added to its warnings."""
     est = np.asarray(estimate, dtype=float)
+    se, cov = fit.std_error, fit.cov
+    if std_error is not None:
+        se = np.asarray(std_error, dtype=float)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            k = np.where(fit.std_error > 0, se / fit.std_error, 1.0)
+        cov = fit.cov * np.outer(k, k)
     with np.errstate(invalid="ignore", divide="ignore"):
-        t = est / fit.std_error
+        t = est / se
     p = 2.0 * scipy.stats.t.sf(np.abs(t), fit.dof_eff)
-    return dataclasses.replace(fit, estimate=_as_readonly(est), t_values=_as_readonly(t),
-                               p_values=_as_readonly(p), warnings=tuple(fit.warnings) + (note,))
+    return dataclasses.replace(fit, estimate=_as_readonly(est), std_error=_as_readonly(se), cov=_as_readonly(cov),
+                               t_values=_as_readonly(t), p_values=_as_readonly(p),
+                               warnings=tuple(fit.warnings) + (note,))
 
 
 def fit_linear(

@@ -98,6 +98,9 @@ class Vehicle:
     surfaces: tuple[str, ...] = ("fin 1", "fin 2", "fin 3", "fin 4")  # what d1..d4 are
     #: the vehicle's default model terms per channel (None: method.md §11 defaults)
     default_terms: dict | None = None
+    #: the regression's common low-pass edge [Hz] ([estimation] band_hz; None: from each
+    #: segment's gyro spectrum, aerosid.identification.band)
+    band_hz: float | None = None
 
     @property
     def length_pitch_m(self) -> float:
@@ -284,7 +287,9 @@ def load_vehicle(name_or_path: str | Path = "seed-rlv") -> Vehicle:
         mach_reference=float(doc["aero"]["mach_reference"]),
         database_path=database_path,
         preflight=preflight,
-        estimation={k: (tuple(v) if isinstance(v, list) else v) for k, v in doc.get("estimation", {}).items()},
+        estimation={k: (tuple(v) if isinstance(v, list) else v) for k, v in doc.get("estimation", {}).items()
+                    if k != "band_hz"},
+        band_hz=positive("estimation", "band_hz") if "band_hz" in doc.get("estimation", {}) else None,
         source=src,
         vehicle_class=vclass,
         chord_m=chord,

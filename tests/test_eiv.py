@@ -28,9 +28,13 @@ def test_simex_recovers_a_slope_attenuated_by_filtered_vane_noise(sigma):
     measured = alpha + filtered_noise(rng, np.zeros(t.size), t, sigma, 2.0)
     fd = _frame(measured, t)
     naive = np.linalg.lstsq(_design(fd)["Cm"], y, rcond=None)[0][1]
-    corrected = simex_estimates(fd, {"Cm": y}, _design, sigma, 2.0)["Cm"][1]
+    res = simex_estimates(fd, {"Cm": y}, _design, sigma, 2.0)["Cm"]
+    corrected = res.corrected[1]
     assert naive > -1.8 * 0.9  # attenuated by the noise (the test can fail)
     assert abs(corrected / -1.8 - 1) < 0.4 * abs(naive / -1.8 - 1)  # most of the attenuation removed
+    # the corrected sigma grows with the correction and covers what is left of the bias
+    se = res.std_error(np.array([0.0, 1e-6]))
+    assert abs(corrected + 1.8) <= 2.5 * se[1]
 
 
 def test_simex_without_noise_changes_nothing():
@@ -38,4 +42,5 @@ def test_simex_without_noise_changes_nothing():
     alpha = 0.01 * np.sin(2 * np.pi * 0.3 * t)
     y = 0.1 - 1.8 * alpha
     out = simex_estimates(_frame(alpha, t), {"Cm": y}, _design, 0.0, 2.0)["Cm"]
-    assert out == pytest.approx([0.1, -1.8], rel=1e-9)
+    assert out.corrected == pytest.approx([0.1, -1.8], rel=1e-9)
+    assert out.std_error(np.array([1e-3, 2e-3])) == pytest.approx([1e-3, 2e-3], rel=1e-6)

@@ -58,7 +58,7 @@ from statsmodels.stats.diagnostic import acorr_ljungbox
 
 from aerosid.diagnosis.candidates import Candidate, default_candidates, derived_signals
 from aerosid.expressions import evaluate
-from aerosid.identify import mach_window_mask
+from aerosid.identify import angle_cutoff_hz, mach_window_mask
 from aerosid.eiv import with_angle_noise
 from aerosid.models import ChannelModel, default_models, vehicle_signals
 from aerosid.regression import LinearFit, fit_linear, residual_autocovariance
@@ -728,7 +728,7 @@ def _simex_signals(fd: pd.DataFrame, vehicle, groups: np.ndarray, sigma: float) 
     (alpha_r, phi_r and the derivatives recomputed from them), SIMEX_REPLICATES per
     lambda in SIMEX_LAMBDAS; deterministic (SIMEX_SEED)."""
     rng = np.random.default_rng(SIMEX_SEED)
-    cutoff = vehicle.vane_cutoff_hz if vehicle.air_data_source == "vanes" else None
+    cutoff = angle_cutoff_hz(fd, vehicle) if vehicle.air_data_source == "vanes" else None
     out: dict = {}
     for lam in SIMEX_LAMBDAS:
         out[lam] = []

@@ -1,0 +1,1 @@
+"""Identification: from flight signals to coefficients (the regression's inputs and checks)."""
