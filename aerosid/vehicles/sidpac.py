@@ -74,11 +74,12 @@ class _SidpacFile:
 
     def __init__(self, path: Path):
         from scipy.io import loadmat
+        from scipy.io.matlab import MatReadError
 
         self.path, self.src = path, str(path)
         try:
             mat = loadmat(path, squeeze_me=True, struct_as_record=False)
-        except (ValueError, TypeError, OSError, NotImplementedError) as exc:
+        except (MatReadError, ValueError, TypeError, OSError, NotImplementedError) as exc:
             raise ImportDataError(path, f"not a MATLAB file scipy can read ({exc})") from None
         if "fdata" not in mat:
             names = sorted(k for k in mat if not k.startswith("__"))
