@@ -284,6 +284,8 @@ from aerosid.cli_modelling import diagnose, fit, history  # noqa: E402  (the mod
 main.add_command(diagnose)
 main.add_command(fit)
 main.add_command(history)
+from aerosid.cli_import import import_group  # noqa: E402  (aerosid import sidpac|csv)
+main.add_command(import_group)
 
 if __name__ == "__main__":  # pragma: no cover
     sys.exit(main())

@@ -67,18 +67,23 @@ def write_json_atomic(document, path: str | Path) -> Path:
     return _atomic(Path(path), write, lambda tmp: json.loads(tmp.read_text()))
 
 
-def write_text_atomic(text: str, path: str | Path) -> Path:
-    return _atomic(Path(path), lambda tmp: tmp.write_text(text))
+def write_text_atomic(text: str, path: str | Path, check: Callable[[Path], None] | None = None) -> Path:
+    return _atomic(Path(path), lambda tmp: tmp.write_text(text), check)
 
 
 def telemetry_vehicle(path: str | Path, default: str = "seed-rlv") -> str:
-    """The built-in vehicle a telemetry file names in its Parquet metadata
-    (``aerosid.case``, written by ``aerosid simulate``), else `default`."""
+    """The vehicle a telemetry file names in its Parquet metadata: a vehicle file
+    (``aerosid.vehicle_file``, relative to the telemetry's folder, written by
+    ``aerosid import``) when it exists, else a built-in vehicle (``aerosid.case``,
+    written by ``aerosid simulate``), else `default`."""
     from aerosid.vehicle import builtin_vehicles
 
     try:
         meta = pq.read_schema(path).metadata or {}
     except (OSError, pa.ArrowInvalid):  # unreadable: the preprocessing stage reports it with the file name
         return default
+    vehicle_file = meta.get(b"aerosid.vehicle_file", b"").decode("utf-8", "replace")
+    if vehicle_file and (Path(path).parent / vehicle_file).is_file():
+        return str((Path(path).parent / vehicle_file).resolve())
     case = meta.get(b"aerosid.case", b"").decode("utf-8", "replace")
     return case if case in builtin_vehicles() else default

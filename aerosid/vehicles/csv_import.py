@@ -1,0 +1,200 @@
+"""Import a flight-test CSV with a map file naming each raw column's source and unit.
+
+The map (TOML)::
+
+    vehicle = "vehicle.toml"      # a vehicle file to copy (relative to the map) or a built-in name;
+                                  # or, instead, a [vehicle] table in the vehicle-file layout
+    [csv]                         # optional reading options
+    delimiter = ","
+    comment = "#"                 # lines starting with it are skipped
+    time_from_zero = false        # true: subtract the first time stamp
+
+    [columns]                     # raw column = { column = CSV header, unit = its unit [, sign = -1] }
+    t_s = { column = "time", unit = "s" }
+    q_rad_s = { column = "q", unit = "deg/s" }
+    ...
+
+Every raw contract column (schemas/telemetry.py RAW_COLUMNS) must be mapped; the
+vanes, measured air data and attitude columns (aerosid.vehicles.units.TARGET_UNITS)
+may be.  Units are read by pint (``g`` is standard gravity); each conversion is
+recorded in the Parquet metadata.  An example: aerosid/data/examples/twin-otter-018.map.toml.
+"""
+from __future__ import annotations
+
+import re
+import tomllib
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from aerosid.vehicles.importers import ImportDataError, ImportedFlight, check_time
+from aerosid.vehicles.units import TARGET_UNITS, Conversion, UnitError, conversion
+
+_ENTRY_KEYS = {"column", "unit", "sign"}
+_CSV_KEYS = {"delimiter", "comment", "time_from_zero"}
+
+
+@dataclass(frozen=True)
+class ColumnMap:
+    """One raw column's source: the CSV column, its unit and an optional sign flip."""
+
+    target: str
+    column: str
+    unit: str
+    sign: float = 1.0
+
+
+@dataclass(frozen=True)
+class CsvMap:
+    """A parsed map file."""
+
+    path: str
+    columns: tuple[ColumnMap, ...]
+    vehicle_toml: str  # the text written to vehicle.toml
+    vehicle_origin: str  # the file copied, or "inline [vehicle] table of MAP"
+    delimiter: str = ","
+    comment: str | None = None
+    time_from_zero: bool = False
+
+    def summary(self) -> str:
+        rows = [f"map {self.path}: vehicle from {self.vehicle_origin}"]
+        rows += [f"  {c.target} <- {'-' if c.sign < 0 else ''}{c.column!r} [{c.unit}]" for c in self.columns]
+        return "\n".join(rows)
+
+
+def load_csv_map(path: str | Path) -> CsvMap:
+    """Read and check a map file; errors name the map file and the entry."""
+    from schemas.telemetry import RAW_COLUMNS
+
+    path = Path(path)
+    src = str(path)
+    try:
+        doc = tomllib.loads(path.read_text())
+    except FileNotFoundError:
+        raise ImportDataError(path, "no such map file") from None
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+        raise ImportDataError(path, f"not valid TOML: {exc}") from None
+    unknown = set(doc) - {"csv", "columns", "vehicle"}
+    if unknown:
+        raise ImportDataError(path, f"unknown top-level keys {sorted(unknown)} (expected csv, columns, vehicle)")
+    opts = doc.get("csv", {})
+    if set(opts) - _CSV_KEYS:
+        raise ImportDataError(path, f"[csv] has unknown keys {sorted(set(opts) - _CSV_KEYS)} "
+                              f"(known: {', '.join(sorted(_CSV_KEYS))})")
+    table = doc.get("columns")
+    if not isinstance(table, dict) or not table:
+        raise ImportDataError(path, "no [columns] table: map each raw column to a CSV column and its unit")
+    missing = [c for c in RAW_COLUMNS if c not in table]
+    if missing:
+        raise ImportDataError(path, f"[columns] has no entry for the raw column(s) {missing} (every raw contract "
+                              f"column is needed: {', '.join(RAW_COLUMNS)})", column=missing[0])
+    entries = []
+    for target, entry in table.items():
+        if target not in TARGET_UNITS:
+            raise ImportDataError(path, f"[columns] {target!r} is not a raw telemetry column (known: "
+                                  f"{', '.join(TARGET_UNITS)})", column=target)
+        if not isinstance(entry, dict) or not {"column", "unit"} <= set(entry) or set(entry) - _ENTRY_KEYS:
+            raise ImportDataError(path, f"[columns] {target} must be {{ column = \"CSV header\", unit = \"...\" "
+                                  f"[, sign = -1] }}, got {entry!r}", column=target)
+        sign = entry.get("sign", 1)
+        if sign not in (1, -1):
+            raise ImportDataError(path, f"[columns] {target}: sign must be 1 or -1, got {sign!r}", column=target)
+        try:  # the unit is checked now, before any data is read
+            conversion(target, str(entry["unit"]), where=src)
+        except UnitError as exc:
+            raise ImportDataError(path, str(exc).removeprefix(f"{src}: "), column=target) from None
+        entries.append(ColumnMap(target, str(entry["column"]), str(entry["unit"]), float(sign)))
+    text, origin = _vehicle_text(doc.get("vehicle"), path)
+    return CsvMap(path=src, columns=tuple(entries), vehicle_toml=text, vehicle_origin=origin,
+                  delimiter=str(opts.get("delimiter", ",")), comment=opts.get("comment"),
+                  time_from_zero=bool(opts.get("time_from_zero", False)))
+
+
+def _vehicle_text(spec, map_path: Path) -> tuple[str, str]:
+    """The vehicle file's text: a copy of the file `spec` names, or the inline table written out."""
+    from aerosid.vehicle import VehicleError, resolve_vehicle_path
+
+    if spec is None:
+        raise ImportDataError(map_path, "no vehicle: give `vehicle = \"FILE_OR_BUILTIN\"` (before the tables) or a "
+                              "[vehicle] table in the vehicle-file layout (docs/vehicles.md)")
+    if isinstance(spec, dict) and set(spec) == {"file"}:
+        spec = spec["file"]
+    if isinstance(spec, str):
+        local = map_path.parent / spec
+        try:
+            source = local if local.is_file() else resolve_vehicle_path(spec)
+        except VehicleError:
+            raise ImportDataError(map_path, f"vehicle {spec!r}: no such file (relative to the map) or built-in "
+                                  "vehicle") from None
+        text = source.read_text()
+        database = tomllib.loads(text).get("aero", {}).get("database")
+        if database and not Path(database).is_absolute():  # keep the copy pointing at the original database
+            text, n = re.subn(r'(?m)^(\s*database\s*=\s*)"[^"\n]*"', lambda m: m.group(1) + _toml_str(
+                str((source.parent / database).resolve())), text, count=1)
+            if n != 1:
+                raise ImportDataError(map_path, f"vehicle {source}: cannot rewrite its relative [aero] database path")
+        return f"# copied by `aerosid import csv` from {source}\n" + text, str(source)
+    if isinstance(spec, dict):
+        import tomli_w
+
+        head = f"# written by `aerosid import csv` from the [vehicle] table of {map_path}\n"
+        return head + tomli_w.dumps(spec), f"inline [vehicle] table of {map_path}"
+    raise ImportDataError(map_path, f"vehicle must be a file name or a [vehicle] table, got {spec!r}")
+
+
+def _toml_str(text: str) -> str:
+    import json
+
+    return json.dumps(text)
+
+
+def import_csv(csv_path: str | Path, map_path: str | Path) -> ImportedFlight:
+    """Convert a flight-test CSV to aerosid's raw contract with the map's columns and units."""
+    cmap = load_csv_map(map_path)
+    csv_path = Path(csv_path)
+    if not csv_path.is_file():
+        raise ImportDataError(csv_path, "no such CSV file")
+    try:
+        frame = pd.read_csv(csv_path, sep=cmap.delimiter, comment=cmap.comment, dtype=str, keep_default_na=False,
+                            skipinitialspace=True)
+    except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as exc:
+        raise ImportDataError(csv_path, f"not a readable CSV ({exc})") from None
+    frame.columns = [str(c).strip() for c in frame.columns]
+    convs: list[Conversion] = []
+    data: dict[str, np.ndarray] = {}
+    for entry in cmap.columns:
+        if entry.column not in frame.columns:
+            raise ImportDataError(csv_path, f"not found in the CSV (mapped to {entry.target} by {cmap.path}); the "
+                                  f"CSV has {list(frame.columns)}", column=entry.column)
+        values = _numbers(frame[entry.column], csv_path, entry.column)
+        conv = conversion(entry.target, entry.unit, source=f"CSV column {entry.column!r}", sign=entry.sign,
+                          where=cmap.path)
+        if entry.target == "t_s":
+            check_time(values, str(csv_path), entry.column)
+            if cmap.time_from_zero:
+                conv = replace(conv, offset=conv.offset - float(conv.apply(values[:1])[0]),
+                               source=f"{conv.source} minus its first value")
+        convs.append(conv)
+        data[entry.target] = conv.apply(values)
+    telemetry = pd.DataFrame(data)
+    vehicle_name = str(tomllib.loads(cmap.vehicle_toml).get("name", "vehicle"))
+    notes = (f"vehicle file from {cmap.vehicle_origin}",)
+    from aerosid.provenance import sha256_file
+
+    return ImportedFlight(importer="csv", source=str(csv_path), telemetry=telemetry, vehicle_toml=cmap.vehicle_toml,
+                          vehicle_name=vehicle_name, conversions=tuple(convs), notes=notes,
+                          extra_metadata={"aerosid.map": cmap.path, "aerosid.map_sha256": sha256_file(cmap.path)})
+
+
+def _numbers(column: pd.Series, csv_path: Path, name: str) -> np.ndarray:
+    """A CSV column as floats: empty cells and NaN are dropouts; any other text is an error."""
+    text = column.astype(str).str.strip()
+    empty = text.eq("") | text.str.lower().isin(["nan", "na", "null"])
+    values = pd.to_numeric(text.where(~empty, None), errors="coerce").to_numpy(dtype=float)
+    bad = np.flatnonzero(np.isnan(values) & ~empty.to_numpy())
+    if bad.size:
+        raise ImportDataError(csv_path, f"not a number at rows {bad[:10].tolist()} (e.g. {text.iloc[bad[0]]!r}; "
+                              "row 0 is the first data line)", column=name)
+    return values
