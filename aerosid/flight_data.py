@@ -82,6 +82,10 @@ def build_flight_data(smoothed: pd.DataFrame, measured: pd.DataFrame, vehicle: V
         fs = 1.0 / float(np.median(np.diff(t)))
         runs = finite_runs(bl.used)
         clean = {c: low_pass_runs(v, fs, bl.band_hz, runs) for c, v in clean.items()}
+        if not bl.used.any():
+            raise ValueError(f"segment {segment}: no run of {int(np.ceil(0.5 * fs / bl.band_hz))} consecutive samples "
+                             f"with every IMU channel, control, V and h available (t = {_span(t)}): nothing to "
+                             "low-pass for the regression")
         ok = bl.used
         band_hz = bl.band_hz
         band_rates = bl.rates_rad_s[ok]

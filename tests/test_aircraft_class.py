@@ -4,6 +4,8 @@ class).  Independent of JSBSim: a small aircraft file written here."""
 from __future__ import annotations
 
 import numpy as np
+
+from aerosid.identification.band import low_pass_runs
 import pandas as pd
 import pytest
 
@@ -161,13 +163,20 @@ def _smoothed_like(pre: pd.DataFrame) -> pd.DataFrame:
 def test_flight_data_reads_alpha_beta_from_the_vanes_minus_their_bias(aircraft):
     raw, alpha, beta = _raw()
     pre = preprocess(raw).frame
-    fd = build_flight_data(_smoothed_like(pre), pre, aircraft, load_database(aircraft), "f1")
+    # the smoother's states as the seed has them: the vanes minus their bias, as read
+    fd = build_flight_data(_smoothed_like(pre), pre, aircraft, load_database(aircraft), "f1", signals="smoother")
     np.testing.assert_allclose(fd["alpha_rad"], alpha, atol=1e-12)
     np.testing.assert_allclose(fd["beta_rad"], beta, atol=1e-12)
     ta, tb = np.tan(alpha), np.tan(beta)
     np.testing.assert_allclose(fd["alpha_r_rad"], np.arctan(np.hypot(ta, tb)), atol=1e-12)
     assert fd["delta_p_rad"].mean() == pytest.approx(-0.02, abs=1e-4)
     assert fd["delta_r_rad"].mean() == pytest.approx(0.01, abs=1e-4)
+    # the common band (default): the same, through the band's low-pass like every signal
+    fd = build_flight_data(_smoothed_like(pre), pre, aircraft, load_database(aircraft), "f1")
+    band = float(fd["band_hz"].iloc[0])
+    expect = low_pass_runs(alpha, 100.0, band, [slice(0, len(alpha))])
+    np.testing.assert_allclose(fd["alpha_rad"], expect[:len(fd)], atol=1e-12)
+    assert fd["delta_p_rad"].mean() == pytest.approx(-0.02, abs=1e-4)
 
 
 def test_missing_vane_column_is_a_clear_error(aircraft):

@@ -34,7 +34,7 @@ What this module does instead (documented choice, measured in bench/):
 
 The filter runs over contiguous runs of finite samples only: a long gap is not
 bridged (a filter across a gap would smear the join over 1/band seconds); runs
-shorter than :data:`MIN_RUN_CYCLES` periods of the band edge are left out.
+shorter than :data:`MIN_RUN_CYCLES` period of the band edge (and 16 samples) are left out.
 """
 from __future__ import annotations
 
@@ -48,8 +48,9 @@ from aerosid.rigid_body import inertia_constants
 #: Significance of a signal bin in noise-floor multiples (method.md §3's test; a noise
 #: bin exceeds it with probability exp(-15) = 3e-7).
 BAND_KAPPA = 15.0
-#: A run of finite samples shorter than this many periods of the band edge is left out.
-MIN_RUN_CYCLES = 2.0
+#: A run of finite samples shorter than this many periods of the band edge is left out
+#: (the zero-phase filter's start and end transients would be most of it).
+MIN_RUN_CYCLES = 0.5
 #: The band edge is kept within [BAND_MIN_HZ, 0.4 x the sample rate].
 BAND_MIN_HZ = 0.2
 #: Share of the gyros' signal power (above the noise floor) inside the band.
