@@ -194,6 +194,12 @@ def run(telemetry, vehicle, out_dir, flight, windows, model_spec, mach_half_widt
                                    "earlier outputs are left as they were") from exc
     click.echo(f"flight {summary['flight']}: {summary['status']}; segments ok "
                f"{[d['segment'] for d in summary['segments_ok']]}, failed {summary['segments_failed']}")
+    if summary.get("findings"):
+        from aerosid.estimation.findings import Finding
+
+        click.echo(f"{len(summary['findings'])} finding(s) -- the spans marked 'cut' were left out of the regression:")
+        for f in summary["findings"]:
+            click.echo(f"  {Finding(**f).summary()}")
     if "coefficients" in summary:
         import pandas as pd
 

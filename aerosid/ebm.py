@@ -10,6 +10,7 @@ from dataclasses import dataclass
 
 import pandas as pd
 
+from aerosid.estimation.findings import Finding
 from aerosid.flight_data import build_flight_data_segments, load_database
 from aerosid.identify import Identification, identify
 from aerosid.models import ChannelModel
@@ -26,8 +27,16 @@ class EBMRun:
     flight_data: pd.DataFrame
     identification: Identification
 
+    @property
+    def findings(self) -> list[dict]:
+        """Every finding of the run (aerosid.estimation.findings): the smoother's and the
+        flight data's, in segment order."""
+        return [f.as_dict() for s in self.smoothed for f in s.findings] + list(self.flight_data.attrs.get("findings", []))
+
     def summary(self) -> str:
+        found = [Finding(**f).summary() for f in self.findings]
         return "\n\n".join([self.preprocessed.summary(), *(s.result.summary() for s in self.smoothed),
+                            *(["findings:\n  " + "\n  ".join(found)] if found else []),
                             self.identification.summary()])
 
 
@@ -40,5 +49,8 @@ def process_telemetry(raw: pd.DataFrame, vehicle: Vehicle, *, flight: str = "fli
     db = load_database(vehicle)
     smoothed = [smooth_segment_frame(pre.frame.iloc[seg.start:seg.stop].reset_index(drop=True), vehicle,
                                      smoothing_options, seg.segment_id) for seg in segments]
+    smoothed = [s for s in smoothed if not s.lost]  # as the flow fails them (tasks.stages)
+    if not smoothed:
+        raise ValueError("no segment could be processed: every segment lost more than half its samples to findings")
     fd = build_flight_data_segments(pre.frame, [s.frame for s in smoothed], vehicle, db, flight)
     return EBMRun(pre, tuple(smoothed), fd, identify(fd, vehicle, models, mach_half_width))

@@ -11,7 +11,9 @@ from aerosid.aerodb import AeroDatabase
 from aerosid.atmosphere import H_MAX_M, H_MIN_M
 from aerosid.flight_coefficients import flight_coefficients
 from aerosid.derivatives import zero_phase_low_pass
-from aerosid.identification.band import band_limited_signals, finite_runs, low_pass_runs
+from aerosid.estimation.findings import DEPARTURE_MIN_S, DEPARTURE_SIGMA, dilate, span_findings
+from aerosid.identification.band import (band_limited_signals, band_noise_gain, finite_runs, low_pass_runs,
+                                         white_noise_sigma)
 from aerosid.inversion import invert_alpha_beta, total_angles
 from aerosid.vehicle import Vehicle
 
@@ -73,20 +75,11 @@ def build_flight_data(smoothed: pd.DataFrame, measured: pd.DataFrame, vehicle: V
         raise ValueError(f"segment {segment}: column 'h_m' outside the US-1976 atmosphere's {H_MIN_M:g}.."
                          f"{H_MAX_M:g} m at {int(h_out.sum())} rows, t = {_span(t[h_out])}")
     band_hz = np.nan
+    findings: list = []
     if signals == "band":
-        imu = {c: measured[f"{c}_clean"].to_numpy(dtype=float) for c in BAND_IMU}
-        bl = band_limited_signals(t, np.column_stack([imu[c] for c in BAND_IMU[3:]]),
-                                  np.column_stack([imu[c] for c in BAND_IMU[:3]]),
-                                  (vehicle.Ixx_kg_m2, vehicle.Iyy_kg_m2, vehicle.Izz_kg_m2, vehicle.Ixz_kg_m2),
-                                  vehicle.accel_offset_m, vehicle.band_hz, ok)
+        bl, ok, findings = _band_signals(t, measured, smoothed, vehicle, ok, segment)
         fs = 1.0 / float(np.median(np.diff(t)))
-        runs = finite_runs(bl.used)
-        clean = {c: low_pass_runs(v, fs, bl.band_hz, runs) for c, v in clean.items()}
-        if not bl.used.any():
-            raise ValueError(f"segment {segment}: no run of {int(np.ceil(0.5 * fs / bl.band_hz))} consecutive samples "
-                             f"with every IMU channel, control, V and h available (t = {_span(t)}): nothing to "
-                             "low-pass for the regression")
-        ok = bl.used
+        clean = {c: low_pass_runs(v, fs, bl.band_hz, finite_runs(ok)) for c, v in clean.items()}
         band_hz = bl.band_hz
         band_rates = bl.rates_rad_s[ok]
         acc, ang = bl.accel_cg_m_s2[ok], bl.ang_accel_rad_s2[ok]
@@ -111,7 +104,17 @@ def build_flight_data(smoothed: pd.DataFrame, measured: pd.DataFrame, vehicle: V
         alpha, beta, alpha_r, phi_r = _vane_angles(measured, ok, vehicle, t)
         inv_J = np.zeros(len(alpha))
     else:
-        alpha, beta, alpha_r, phi_r, inv_J = _inverted_angles(fc, s, delta_p, delta_y, vehicle, db, segment)
+        alpha, beta, alpha_r, phi_r, inv_J, edge = _inverted_angles(fc, s, delta_p, delta_y, vehicle, db, segment,
+                                                                    strict=signals != "band")
+        if edge.any() and signals == "band":
+            ts = s["t_s"].to_numpy()
+            margin = int(np.ceil(0.5 / float(np.median(np.diff(ts))) / band_hz)) if len(ts) > 1 else 0
+            f, _ = span_findings("database_edge", segment, "alpha/beta", ts, edge, 1, True,
+                                 "alpha/beta inverted at the force database's edge (alpha_r at the table's "
+                                 f"limit or Mach outside {db.mach_range()[0]:g}..{db.mach_range()[1]:g}): "
+                                 "the table is clamped there, the angle would be made up")
+            findings += f
+            drop_rows = dilate(edge, margin)
     # errors in variables: the 1-sigma of the white noise whose band-limited part is in the
     # angles (vanes: the vehicle file's vane noise; inverted angles: the accelerometers' noise
     # through the inversion's sensitivity), for the SIMEX correction of aerosid.eiv
@@ -122,7 +125,7 @@ def build_flight_data(smoothed: pd.DataFrame, measured: pd.DataFrame, vehicle: V
     rates = {c: s[c].to_numpy() for c in ("p_rad_s", "q_rad_s", "r_rad_s")}
     if signals == "band":
         rates = {c: band_rates[:, j] for j, c in enumerate(("p_rad_s", "q_rad_s", "r_rad_s"))}
-    return pd.DataFrame({
+    frame = pd.DataFrame({
         "t_s": s["t_s"].to_numpy(),
         "flight": flight,
         "segment": s["segment"].to_numpy(),
@@ -137,13 +140,75 @@ def build_flight_data(smoothed: pd.DataFrame, measured: pd.DataFrame, vehicle: V
         "band_hz": np.full(len(V), band_hz),
         "eiv_sigma_alpha_rad": eiv_a, "eiv_sigma_beta_rad": eiv_b,
     })
+    if not vanes and signals == "band" and edge.any():
+        frame = frame.loc[~drop_rows].reset_index(drop=True)
+        if frame.empty:
+            raise ValueError(f"segment {segment}: alpha/beta at the force database's edge on every sample "
+                             f"({findings[-1].summary()})")
+    frame.attrs["findings"] = [f.as_dict() for f in findings]
+    return frame
 
 
-def _inverted_angles(fc, s: pd.DataFrame, delta_p, delta_y, vehicle: Vehicle, db: AeroDatabase, segment: str):
-    """alpha, beta, alpha_r, phi_r [rad] and the inversion cost from the force database."""
+def _band_signals(t, measured: pd.DataFrame, smoothed: pd.DataFrame, vehicle: Vehicle, ok: np.ndarray, segment: str):
+    """The band-limited signals of a segment with the smoother's condemned samples (the
+    ``suspect`` column) and the spans where the smoothed signals depart from their
+    measurement cut out, each with a margin of one band period.  Returns the signals, the
+    rows kept and the findings (aerosid.estimation.findings)."""
+    imu = np.column_stack([measured[f"{c}_clean"].to_numpy(dtype=float) for c in BAND_IMU])
+    inertia = (vehicle.Ixx_kg_m2, vehicle.Iyy_kg_m2, vehicle.Izz_kg_m2, vehicle.Ixz_kg_m2)
+    fs = 1.0 / float(np.median(np.diff(t)))
+
+    def signals(keep):
+        return band_limited_signals(t, imu[:, 3:], imu[:, :3], inertia, vehicle.accel_offset_m, vehicle.band_hz, keep)
+
+    bl = signals(ok)
+    margin = int(np.ceil(fs / bl.band_hz))
+    suspect = smoothed["suspect"].to_numpy(bool) if "suspect" in smoothed else np.zeros(len(t), bool)
+    keep = ok & ~dilate(suspect, margin)
+    if suspect.any():
+        bl = signals(keep)
+    findings = []
+    if bl.used.any():  # departures: smoothed states against the band-limited measurements
+        runs = finite_runs(bl.used)
+        pairs = [("p_rad_s", bl.rates_rad_s[:, 0]), ("q_rad_s", bl.rates_rad_s[:, 1]), ("r_rad_s", bl.rates_rad_s[:, 2]),
+                 ("X1_m_s2", bl.accel_cg_m_s2[:, 0]), ("Y1_m_s2", bl.accel_cg_m_s2[:, 1]),
+                 ("Z1_m_s2", bl.accel_cg_m_s2[:, 2])]
+        gain = band_noise_gain(fs, bl.band_hz)
+        noise = {"X1_m_s2": bl.accel_noise_m_s2[0], "Y1_m_s2": bl.accel_noise_m_s2[1],
+                 "Z1_m_s2": bl.accel_noise_m_s2[2]}
+        gone = np.zeros(len(t), bool)
+        for col, meas in pairs:
+            sm = low_pass_runs(smoothed[col].to_numpy(float), fs, bl.band_hz, runs)
+            white = noise.get(col, white_noise_sigma(imu[:, 3 + ("p_rad_s", "q_rad_s", "r_rad_s").index(col)]
+                                                     if col.endswith("rad_s") else imu[:, 0], runs))
+            sig_sm = smoothed[f"sigma_{col}"].to_numpy(float) if f"sigma_{col}" in smoothed else 0.0
+            sigma = np.hypot(gain * white, sig_sm)
+            with np.errstate(invalid="ignore"):
+                off = np.abs(meas - sm) > DEPARTURE_SIGMA * sigma
+            f, hit = span_findings("departure", segment, col, t, off & bl.used, int(np.ceil(DEPARTURE_MIN_S * fs)),
+                                   True, f"the smoothed {col} departs from its band-limited measurement by more "
+                                   f"than {DEPARTURE_SIGMA:g} sigma")
+            findings += f
+            gone |= hit
+        if gone.any():
+            keep &= ~dilate(gone, margin)
+            bl = signals(keep)
+    if not bl.used.any():
+        raise ValueError(f"segment {segment}: no run of {int(np.ceil(0.5 * fs / bl.band_hz))} consecutive samples "
+                         f"with every IMU channel, control, V and h available and not condemned (t = {_span(t)}): "
+                         "nothing to low-pass for the regression")
+    return bl, bl.used, findings
+
+
+def _inverted_angles(fc, s: pd.DataFrame, delta_p, delta_y, vehicle: Vehicle, db: AeroDatabase, segment: str,
+                     strict: bool = True):
+    """alpha, beta, alpha_r, phi_r [rad], the inversion cost, and the samples at the force
+    database's edge (alpha_r at the table's first or last angle, or Mach outside the table:
+    the table is clamped there).  strict: Mach outside the table is an error (the seed's
+    smoother path); else those samples are marked as edge and their angles left NaN."""
     m_lo, m_hi = db.mach_range()
     outside = ~((fc.air.mach >= m_lo) & (fc.air.mach <= m_hi))
-    if outside.any():
+    if outside.any() and (strict or outside.all()):
         # the inversion would clamp the table at its edge: alpha and beta there would be made up
         ts = s["t_s"].to_numpy()[outside]
         m = fc.air.mach[outside]
@@ -151,8 +216,14 @@ def _inverted_angles(fc, s: pd.DataFrame, delta_p, delta_y, vehicle: Vehicle, db
                          f"at {int(outside.sum())} samples, t = {_span(ts)}, outside the aerodynamic database's "
                          f"Mach {m_lo:g}..{m_hi:g} ({vehicle.database_path}); alpha/beta cannot be inverted "
                          "there: restrict the run to the database's range (--window T0 T1) or extend the database")
-    inv = invert_alpha_beta(fc.CN, fc.CY, fc.air.mach, delta_p, delta_y, db, vehicle.preflight)
-    return inv.alpha_rad, inv.beta_rad, inv.alpha_r_rad, inv.phi_r_rad, inv.J
+    mach = np.clip(fc.air.mach, m_lo, m_hi)
+    inv = invert_alpha_beta(fc.CN, fc.CY, mach, delta_p, delta_y, db, vehicle.preflight)
+    grid = np.asarray(db.alpha_r_rad, float)
+    step = float(np.min(np.diff(grid))) if grid.size > 1 else 0.0
+    edge = outside | ~np.isfinite(inv.alpha_r_rad) | (inv.alpha_r_rad >= grid[-1] - 1e-3 * step)
+    if grid[0] > 0:
+        edge |= inv.alpha_r_rad <= grid[0] + 1e-3 * step
+    return inv.alpha_rad, inv.beta_rad, inv.alpha_r_rad, inv.phi_r_rad, inv.J, edge
 
 
 def _inversion_noise(fc, delta_p, delta_y, vehicle: Vehicle, db: AeroDatabase, alpha, beta, accel_noise):
@@ -181,4 +252,6 @@ def build_flight_data_segments(preprocessed: pd.DataFrame, smoothed: list[pd.Dat
         start = int(np.searchsorted(t, ts[0] - 1e-9))
         rows = preprocessed.iloc[start:start + len(ts)].reset_index(drop=True)
         parts.append(build_flight_data(sm, rows, vehicle, db, flight, signals))
-    return pd.concat(parts, ignore_index=True)
+    frame = pd.concat(parts, ignore_index=True)
+    frame.attrs["findings"] = [f for part in parts for f in part.attrs.get("findings", [])]
+    return frame

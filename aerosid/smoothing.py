@@ -12,13 +12,17 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
-from aerosid.estimation import EBMOptions, EBMResult, smooth_flight
+from aerosid.estimation import EBMOptions, EBMResult
+from aerosid.estimation.adaptive import smooth_flight_adaptive
+from aerosid.estimation.findings import smoother_findings
 from aerosid.preprocess import usable_mask
 from aerosid.vehicle import Vehicle
 from schemas.smoothed import RATE_DERIVATIVE_COLUMNS, STATE_COLUMNS
 
 IMU_CHANNELS = ("ax_m_s2", "ay_m_s2", "az_m_s2", "p_rad_s", "q_rad_s", "r_rad_s")
 MIN_USABLE_SAMPLES = 16  # the seven-point parabola fits and the spectra need some data
+#: A segment whose condemned samples (gated runs, NIS excursions) exceed this share is failed.
+MAX_SUSPECT_FRACTION = 0.5
 
 
 @dataclass(frozen=True)
@@ -26,6 +30,13 @@ class SmoothedSegmentResult:
     segment_id: str
     frame: pd.DataFrame
     result: EBMResult
+    findings: tuple = ()  # aerosid.estimation.findings.Finding: gated runs, NIS excursions, mean NIS
+    process_noise_note: str = ""  # aerosid.estimation.adaptive: escalations of the chains' process noise
+
+    @property
+    def lost(self) -> bool:
+        """More than half the segment is condemned (the ``suspect`` column): not worth keeping."""
+        return bool(self.frame["suspect"].mean() > MAX_SUSPECT_FRACTION) if len(self.frame) else True
 
     def divergence_note(self) -> str:
         """Where the filter's windowed NIS left its band (sample times) [s]."""
@@ -40,7 +51,7 @@ class SmoothedSegmentResult:
 
     def nis_record(self) -> str:
         r = self.result
-        return json.dumps({"mean_nis_filter": r.mean_nis_filter, "mean_nis_smoother": r.mean_nis_smoother,
+        return json.dumps({"process_noise": self.process_noise_note, "mean_nis_filter": r.mean_nis_filter, "mean_nis_smoother": r.mean_nis_smoother,
                            "band": list(r.nis_band), "R_sigma": list(map(float, r.R_sigma))})
 
 
@@ -64,9 +75,11 @@ def smooth_segment_frame(rows: pd.DataFrame, vehicle: Vehicle, options: dict | N
                          f"{int(counts.min())} usable samples of {len(rows)} (the rest dropout or flagged); "
                          f"at least {MIN_USABLE_SAMPLES} per channel are needed to initialise the filter")
     filled = pd.DataFrame(z).interpolate(limit_direction="both").to_numpy()
-    res = smooth_flight(t, np.where(valid, z, np.nan), valid,
-                        (vehicle.Ixx_kg_m2, vehicle.Iyy_kg_m2, vehicle.Izz_kg_m2, vehicle.Ixz_kg_m2),
-                        vehicle.accel_offset_m, z_filled=filled, options=smoothing_options(vehicle, options))
+    adaptive = smooth_flight_adaptive(t, np.where(valid, z, np.nan), valid,
+                                      (vehicle.Ixx_kg_m2, vehicle.Iyy_kg_m2, vehicle.Izz_kg_m2, vehicle.Ixz_kg_m2),
+                                      vehicle.accel_offset_m, z_filled=filled,
+                                      options=smoothing_options(vehicle, options))
+    res = adaptive.result
     data = {"t_s": t, "segment": np.full(len(t), segment_id, dtype=object)}
     for j, name in enumerate(res.state_names):
         data[STATE_COLUMNS[name]] = res.x_smooth[:, j]
@@ -81,6 +94,11 @@ def smooth_segment_frame(rows: pd.DataFrame, vehicle: Vehicle, options: dict | N
     data["updated"] = res.used.any(axis=1)
     for j, m in enumerate(res.meas_names):
         data[f"gated_{m}"] = res.gate_flags[:, j]
+    excursion = np.zeros(len(t), bool)
+    excursion[np.asarray(res.divergence_samples, dtype=int)] = True
+    findings, suspect = smoother_findings(t, {m: res.gate_flags[:, j] for j, m in enumerate(res.meas_names)},
+                                          excursion, res.mean_nis_filter, tuple(res.nis_band), segment_id)
+    data["suspect"] = suspect
     frame = pd.DataFrame(data)
     frame["segment"] = frame["segment"].astype(str)
-    return SmoothedSegmentResult(segment_id, frame, res)
+    return SmoothedSegmentResult(segment_id, frame, res, tuple(findings), adaptive.summary())

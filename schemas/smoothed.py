@@ -5,6 +5,8 @@ in the column names; ``sigma_<column>`` is the smoothed 1-sigma of each.
 """
 from __future__ import annotations
 
+from typing import Optional
+
 import numpy as np
 import pandas as pd
 import pandera.pandas as pa
@@ -43,6 +45,8 @@ class SmoothedSegment(pa.DataFrameModel):
     segment: Series[str] = pa.Field(metadata={"description": "segment id within the flight"})
     nis_filter: Series[float] = pa.Field(nullable=True, metadata={"unit": "-", "description": "EKF NIS; NaN where no update"})
     nis_smoother: Series[float] = pa.Field(nullable=True, metadata={"unit": "-"})
+    suspect: Optional[Series[bool]] = pa.Field(metadata={
+        "unit": "-", "description": "sample condemned by a finding (gated run, NIS excursion): cut from the regression"})
     updated: Series[bool] = pa.Field(metadata={"description": "a measurement update happened at this sample"})
 
     class Config:

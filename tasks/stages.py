@@ -84,13 +84,18 @@ def smooth_segment_task(pre_path: str, run_dir: str, ctx: StageContext, segment:
         pre = read_validated(pre_path, PreprocessedTelemetry)
         rows = pre.iloc[segment["start"]:segment["stop"]].reset_index(drop=True)
         smoothed = smooth_segment_frame(rows, load_vehicle(vehicle), options, segment["segment_id"])
-        if smoothed.result.diverged:
-            raise StageFailed(f"segment {segment['segment_id']}: filter diverged: {smoothed.divergence_note()}")
-        return Produced(smoothed.frame, {"aerosid.nis": smoothed.nis_record()}, rows_in=len(rows),
+        if smoothed.lost:
+            raise StageFailed(f"segment {segment['segment_id']}: more than half the samples condemned "
+                              f"({'; '.join(f.summary() for f in smoothed.findings)})")
+        findings_seen.extend(f.as_dict() for f in smoothed.findings)
+        return Produced(smoothed.frame, {"aerosid.nis": smoothed.nis_record(),
+                                         "aerosid.findings": json.dumps(list(findings_seen))}, rows_in=len(rows),
                         flagged_rows=int(smoothed.result.gate_flags.any(axis=1).sum()),
                         note=smoothed.result.summary())
 
-    return execute("smooth", ctx, [pre_path, *vehicle_files(vehicle)], out, params, SmoothedSegment, produce)
+    findings_seen: list = []
+    result = execute("smooth", ctx, [pre_path, *vehicle_files(vehicle)], out, params, SmoothedSegment, produce)
+    return {**result, "findings": findings_seen or stored_findings(result["path"])}
 
 
 @task(name="flight-data", **IO_RETRIES)
@@ -103,10 +108,22 @@ def flight_data_task(pre_path: str, smoothed_paths: list[str], run_dir: str, ctx
         pre = read_validated(pre_path, PreprocessedTelemetry)
         smoothed = [read_validated(path, SmoothedSegment) for path in smoothed_paths]
         frame = build_flight_data_segments(pre, smoothed, veh, db, ctx.flight)
-        return Produced(frame, {}, rows_in=sum(len(sm) for sm in smoothed))
+        findings_seen.extend(frame.attrs.get("findings", []))
+        return Produced(frame, {"aerosid.findings": json.dumps(list(findings_seen))},
+                        rows_in=sum(len(sm) for sm in smoothed))
 
-    return execute("flight_data", ctx, [pre_path, *smoothed_paths, *vehicle_files(vehicle)], out,
-                   {"vehicle": vehicle, "flight": ctx.flight}, FlightData, produce)
+    findings_seen: list = []
+    result = execute("flight_data", ctx, [pre_path, *smoothed_paths, *vehicle_files(vehicle)], out,
+                     {"vehicle": vehicle, "flight": ctx.flight}, FlightData, produce)
+    return {**result, "findings": findings_seen or stored_findings(result["path"])}
+
+
+def stored_findings(path: str) -> list:
+    """The findings a stage recorded in its Parquet file's metadata (a reused output)."""
+    import pyarrow.parquet as pq
+
+    meta = pq.read_schema(path).metadata or {}
+    return json.loads(meta.get(b"aerosid.findings", b"[]"))
 
 
 @task(name="regression", **IO_RETRIES)

@@ -115,6 +115,18 @@ def signal_band_edge_hz(x: np.ndarray, dt_s: float, kappa: float = BAND_KAPPA,
     return float(np.clip(edge, BAND_MIN_HZ, 0.8 * nyq))
 
 
+def band_noise_gain(fs_hz: float, band_hz: float) -> float:
+    """Standard deviation of unit white noise after :func:`low_pass_runs` (the square root
+    of the sum of the squared impulse response of the forward-backward filter)."""
+    if band_hz >= 0.5 * fs_hz:
+        return 1.0
+    n = int(40 * fs_hz / band_hz) | 1
+    x = np.zeros(n)
+    x[n // 2] = 1.0
+    h = low_pass_runs(x, fs_hz, band_hz, [slice(0, n)])
+    return float(np.sqrt(np.sum(h * h)))
+
+
 def white_noise_sigma(x: np.ndarray, runs: list[slice]) -> float:
     """1-sigma of the white noise on a smooth signal [x units]: 1.4826 MAD of the first
     differences over sqrt(2) (the signal's own change between two samples is negligible

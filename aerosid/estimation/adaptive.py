@@ -1,0 +1,80 @@
+"""Process noise chosen per flight and per chain from the filter's own gate.
+
+The chains' spectral process noise (method.md §3) comes from the measured spectra,
+which cannot show a chain's bandwidth where the signal sinks under the sensor noise.
+With a chain too stiff for the flight, the filter cannot follow a sharp manoeuvre:
+the innovation gate starts rejecting that channel's samples, or the windowed NIS
+leaves its band, and the smoother loses the vehicle there (JSBSim c172x seed 0: a_z gated for 3.3 s during the elevator
+3-2-1-1, the smoothed a_z off by up to 69 m/s^2).  Instead of a per-vehicle factor
+calibrated on simulated truth, the flight itself decides: while a channel has a run
+of gated samples (or the windowed NIS an excursion: then the channels whose mean
+standardised innovation exceeds 1.5, or the worst one), the chains that channel sees get ESCALATION times more process
+noise and the segment is smoothed again (at most MAX_ESCALATIONS times).  What is
+still gated afterwards is reported and cut (aerosid.estimation.findings).
+"""
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+
+import numpy as np
+
+from aerosid.estimation.findings import GATED_RUN_MIN_S, true_runs
+from aerosid.estimation.pipeline import EBMOptions, EBMResult, smooth_flight
+
+#: Factor on a chain's process-noise intensity per escalation.
+ESCALATION = 30.0
+#: At most this many re-runs of the smoother per segment.
+MAX_ESCALATIONS = 3
+#: Chains (X, Y, Z, L, M, N) each measurement channel (ax, ay, az, p, q, r) depends on:
+#: the accelerometers see their force chain and, through the lever arm, the angular ones.
+CHAINS_OF_CHANNEL = ((0, 4, 5), (1, 3, 5), (2, 3, 4), (3, 5), (4,), (5, 3))
+
+
+@dataclass(frozen=True)
+class AdaptiveSmoothing:
+    """The final smoother result, the chain factors it used and what was escalated."""
+
+    result: EBMResult
+    q_chain_scale: tuple
+    escalations: tuple  # (attempt, channels with gated runs) per re-run
+
+    def summary(self) -> str:
+        if not self.escalations:
+            return "process noise: spectral, no escalation needed"
+        steps = "; ".join(f"run {a}: gated {', '.join(ch)}" for a, ch in self.escalations)
+        return f"process noise escalated on gated channels ({steps}); chain factors {self.q_chain_scale}"
+
+
+def gated_channels(result: EBMResult, min_run_s: float = GATED_RUN_MIN_S) -> list[int]:
+    """Measurement channels with a run of gated samples of at least min_run_s."""
+    t = result.t_s
+    dt = float(np.median(np.diff(t))) if t.size > 1 else 1.0
+    need = max(1, int(np.ceil(min_run_s / dt)))
+    return [j for j in range(result.gate_flags.shape[1])
+            if any(b - a >= need for a, b in true_runs(result.gate_flags[:, j]))]
+
+
+def smooth_flight_adaptive(t_s, z, valid, inertia_kg_m2, sensor_offset_m, z_filled=None,
+                           options: EBMOptions | None = None) -> AdaptiveSmoothing:
+    """:func:`aerosid.estimation.pipeline.smooth_flight`, re-run with more process noise on
+    the chains of any channel that has a run of gated samples (module doc)."""
+    opt = options or EBMOptions()
+    scale = np.asarray(opt.q_chain_scale, dtype=float).copy()
+    escalations = []
+    result = smooth_flight(t_s, z, valid, inertia_kg_m2, sensor_offset_m, z_filled, opt)
+    for attempt in range(1, MAX_ESCALATIONS + 1):
+        bad = gated_channels(result)
+        excursion = np.asarray(result.divergence_samples).size > 0
+        if not bad and not excursion:
+            break
+        if not bad:  # a windowed-NIS excursion without a gated run: the channels that fit worst
+            misfit = np.asarray(result.chan_nis_filter, float)
+            bad = [int(j) for j in np.nonzero(misfit > 1.5)[0]] or [int(np.nanargmax(misfit))]
+        chains = {c for j in bad for c in CHAINS_OF_CHANNEL[j]}
+        for c in chains:
+            scale[c] *= ESCALATION
+        escalations.append((attempt, tuple(result.meas_names[j] for j in bad) or ("none: NIS excursion",)))
+        result = smooth_flight(t_s, z, valid, inertia_kg_m2, sensor_offset_m, z_filled,
+                               dataclasses.replace(opt, q_chain_scale=tuple(float(v) for v in scale)))
+    return AdaptiveSmoothing(result, tuple(float(v) for v in scale), tuple(escalations))

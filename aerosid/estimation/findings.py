@@ -1,0 +1,108 @@
+"""Findings: what went wrong in a segment, where, and what was cut because of it.
+
+A run must not say "ok" over a failure that only shows in a number nobody reads.
+Each check below names its time span; the samples it condemns are cut from the
+regression (with a margin) and the rest of the segment is kept:
+
+* ``gated``: a run of samples the filter's innovation gate rejected on one channel
+  (the measurement and every other sensor disagree there: a sensor fault or a filter
+  that has lost the vehicle) -- cut;
+* ``nis_excursion``: the windowed NIS far outside its band (the divergence test of
+  aerosid.estimation.pipeline) -- cut;
+* ``nis_mean``: the segment's mean NIS outside its chi-square band, either way (R or Q
+  mis-set for this flight: the smoother's sigma are not to be trusted) -- reported;
+* ``departure``: the smoothed signal departs from its band-limited measurement by more
+  than DEPARTURE_SIGMA of their combined uncertainty -- cut;
+* ``database_edge``: alpha/beta inverted at an edge of the force database (the table is
+  clamped there: the angle would be made up), or Mach outside it -- cut.
+"""
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+#: A run of gated samples on one channel at least this long is a finding [s].
+GATED_RUN_MIN_S = 0.1
+#: Departure threshold in sigma of (measured - smoothed) after the common band.
+DEPARTURE_SIGMA = 6.0
+#: A departure must last this long to count [s].
+DEPARTURE_MIN_S = 0.1
+
+
+@dataclass(frozen=True)
+class Finding:
+    """One finding of one segment: kind (see the module), segment id, channel (or ''),
+    time span t0_s..t1_s [s], samples involved, whether those samples were cut from the
+    regression, and a sentence for the engineer."""
+
+    kind: str
+    segment: str
+    channel: str
+    t0_s: float
+    t1_s: float
+    n_samples: int
+    cut: bool
+    detail: str
+
+    def summary(self) -> str:
+        where = f" {self.channel}" if self.channel else ""
+        action = "cut from the regression" if self.cut else "reported"
+        return (f"{self.segment}{where}: {self.kind} at t = {self.t0_s:.2f}..{self.t1_s:.2f} s "
+                f"({self.n_samples} samples, {action}): {self.detail}")
+
+    def as_dict(self) -> dict:
+        return asdict(self)
+
+
+def true_runs(mask: np.ndarray) -> list[tuple[int, int]]:
+    """[start, stop) index pairs of the runs of True."""
+    m = np.asarray(mask, bool)
+    d = np.diff(np.concatenate([[0], m.astype(np.int8), [0]]))
+    return list(zip(np.nonzero(d == 1)[0].tolist(), np.nonzero(d == -1)[0].tolist()))
+
+
+def dilate(mask: np.ndarray, margin: int) -> np.ndarray:
+    """mask grown by `margin` samples on each side."""
+    m = np.asarray(mask, bool)
+    if margin <= 0 or not m.any():
+        return m.copy()
+    k = np.ones(2 * margin + 1)
+    return np.convolve(m.astype(float), k, mode="same") > 0
+
+
+def span_findings(kind: str, segment: str, channel: str, t_s: np.ndarray, mask: np.ndarray, min_samples: int,
+                  cut: bool, detail: str) -> tuple[list[Finding], np.ndarray]:
+    """Findings for the runs of `mask` of at least `min_samples`, and the mask of those runs."""
+    out, hit = [], np.zeros(len(t_s), bool)
+    for a, b in true_runs(mask):
+        if b - a >= max(1, min_samples):
+            out.append(Finding(kind, segment, channel, float(t_s[a]), float(t_s[b - 1]), int(b - a), cut, detail))
+            hit[a:b] = True
+    return out, hit
+
+
+def smoother_findings(t_s: np.ndarray, gated: dict[str, np.ndarray], excursion: np.ndarray,
+                      mean_nis: float, nis_band: tuple[float, float], segment: str,
+                      ) -> tuple[list[Finding], np.ndarray]:
+    """Findings of a smoothed segment: gated runs per channel, windowed-NIS excursions,
+    the mean NIS against its band.  Returns them and the mask of samples to cut."""
+    t = np.asarray(t_s, float)
+    dt = float(np.median(np.diff(t))) if t.size > 1 else 1.0
+    found, cut = [], np.zeros(t.size, bool)
+    for ch, g in gated.items():
+        f, hit = span_findings("gated", segment, ch, t, g, int(np.ceil(GATED_RUN_MIN_S / dt)), True,
+                               "the filter's innovation gate rejected this channel's samples throughout")
+        found += f
+        cut |= hit
+    f, hit = span_findings("nis_excursion", segment, "", t, excursion, 1, True,
+                           "windowed NIS far outside its chi-square band (the filter lost the vehicle here)")
+    found += f
+    cut |= hit
+    lo, hi = nis_band
+    if np.isfinite(mean_nis) and not (lo <= mean_nis <= hi):
+        side = "above" if mean_nis > hi else "below"
+        found.append(Finding("nis_mean", segment, "", float(t[0]), float(t[-1]), int(t.size), False,
+                             f"mean NIS {mean_nis:.2f} {side} its band {lo:.2f}..{hi:.2f}: the noise model does "
+                             "not fit this flight, the smoother's sigma are not to be trusted"))
+    return found, cut
