@@ -284,6 +284,8 @@ from aerosid.cli_modelling import diagnose, fit, history  # noqa: E402  (the mod
 main.add_command(diagnose)
 main.add_command(fit)
 main.add_command(history)
+from aerosid.cli_validate import validate  # noqa: E402  (aerosid validate: predict another manoeuvre)
+main.add_command(validate)
 
 if __name__ == "__main__":  # pragma: no cover
     sys.exit(main())
