@@ -67,6 +67,10 @@ INPUT_COLUMNS = ("t_s", "span", "V_m_s", "mach", "qbar_pa", "g_m_s2", "phi_rad",
                  "delta_p_rad", "delta_y_rad", "delta_r_rad", "alpha_rad", "beta_rad", "p_rad_s", "q_rad_s",
                  "r_rad_s", "alpha_dot_hat", "beta_dot_hat", "ax_cg_m_s2", "ay_cg_m_s2", "az_cg_m_s2",
                  "p_dot_rad_s2", "q_dot_rad_s2", "r_dot_rad_s2")
+#: how controls vary between samples: linear (sampled continuous signals), hold (zero-order hold, as a
+#: digital controller commands them; the seed-rlv simulator holds its fins over each step)
+CONTROL_MODES = ("linear", "hold")
+_CONTROLS = ("delta_p_rad", "delta_y_rad", "delta_r_rad")
 MAX_STEP_S = 0.01
 R_EARTH_M = 6_371_000.0  # as aerosid.simulation.dynamics
 MAX_ANGLE_RAD = 1.5  # a simulated alpha or beta beyond this has left any model's range: stop
@@ -196,7 +200,7 @@ class _Plant:
 
 
 def simulate_span(model: IdentifiedModel, inputs: pd.DataFrame, vehicle: Vehicle, axis: str,
-                  values: dict | None = None) -> tuple[np.ndarray, float | None]:
+                  values: dict | None = None, controls: str = "linear") -> tuple[np.ndarray, float | None]:
     """Predicted outputs (n, n_outputs) of one contiguous span of the inputs frame,
     from its first sample's measured (smoothed) state; NaN after a divergence, whose
     time is returned (else None)."""
@@ -209,9 +213,12 @@ def simulate_span(model: IdentifiedModel, inputs: pd.DataFrame, vehicle: Vehicle
     x = np.array([first["alpha_rad"], first["q_rad_s"]] if axis == "lon"
                  else [first["beta_rad"], first["p_rad_s"], first["r_rad_s"]])
     t = U[:, -1]
+    held = [names.index(c) for c in _CONTROLS] if controls == "hold" else []
 
     def f(k: int, frac: float, state):
         row = U[k] if frac == 0.0 else U[k] + frac * (U[k + 1] - U[k])
+        if held and frac:
+            row[held] = U[k, held]
         d, y = plant.rhs(state, dict(zip(names, row)))
         return np.asarray(d), y
 
@@ -255,12 +262,12 @@ class AxisPrediction:
         return AXIS_OUTPUTS[self.axis]
 
 
-def _simulate_all(model, inputs, vehicle, axis, values):
+def _simulate_all(model, inputs, vehicle, axis, values, controls):
     outs, diverged = [], {}
     for sp, rows in inputs.groupby("span", sort=True):
         if sp < 0:
             continue
-        y, t_div = simulate_span(model, rows, vehicle, axis, values)
+        y, t_div = simulate_span(model, rows, vehicle, axis, values, controls)
         if t_div is not None:
             diverged[int(sp)] = t_div
         outs.append((rows.index.to_numpy(), y))
@@ -280,13 +287,16 @@ def _offsets(meas: np.ndarray, pred: np.ndarray, spans: np.ndarray) -> np.ndarra
 
 
 def predict_axis(model: IdentifiedModel, inputs: pd.DataFrame, measured: pd.DataFrame, vehicle: Vehicle,
-                 axis: str, bias: str = "offsets") -> AxisPrediction:
+                 axis: str, bias: str = "offsets", controls: str = "linear") -> AxisPrediction:
     """Simulate one axis over every span of `inputs` (rows with span >= 0) and compare
-    with `measured` (same rows; one column per output name, NaN where not measured)."""
+    with `measured` (same rows; one column per output name, NaN where not measured).
+    controls: how the controls vary between samples (CONTROL_MODES)."""
     if axis not in AXES:
         raise ValueError(f"unknown axis {axis!r}; axes: {', '.join(AXES)}")
     if bias not in BIAS_MODES:
         raise ValueError(f"unknown bias treatment {bias!r}; choose one of {', '.join(BIAS_MODES)}")
+    if controls not in CONTROL_MODES:
+        raise ValueError(f"unknown control interpolation {controls!r}; choose one of {', '.join(CONTROL_MODES)}")
     missing = [c for c in INPUT_COLUMNS if c not in inputs.columns]
     if missing:
         raise ValueError(f"the prediction inputs lack column(s) {missing}")
@@ -303,9 +313,9 @@ def predict_axis(model: IdentifiedModel, inputs: pd.DataFrame, measured: pd.Data
         if not names:
             notes.append(f"no constant term in the {axis} channels' models: only output offsets are removed")
         else:
-            values = _fit_intercepts(model, inputs, meas, use, vehicle, axis, names)
+            values = _fit_intercepts(model, inputs, meas, use, vehicle, axis, names, controls)
             intercepts = {k: (float(model.values[k]), float(values[k])) for k in names}
-    sims, diverged = _simulate_all(model, inputs, vehicle, axis, values)
+    sims, diverged = _simulate_all(model, inputs, vehicle, axis, values, controls)
     pred = np.full((len(inputs), len(outs)), np.nan)
     for idx, y in sims:
         pred[idx] = y
@@ -322,7 +332,7 @@ def predict_axis(model: IdentifiedModel, inputs: pd.DataFrame, measured: pd.Data
     return AxisPrediction(axis, bias, pd.DataFrame(frame), intercepts, diverged, tuple(notes))
 
 
-def _fit_intercepts(model, inputs, meas, use, vehicle, axis, names) -> dict:
+def _fit_intercepts(model, inputs, meas, use, vehicle, axis, names, controls) -> dict:
     """Output-error estimate of the constant terms `names` (the other coefficients fixed),
     output offsets projected out per span, each output scaled by its measured std."""
     spans = inputs["span"].to_numpy()
@@ -332,7 +342,7 @@ def _fit_intercepts(model, inputs, meas, use, vehicle, axis, names) -> dict:
     x0 = np.array([float(model.values[k]) if math.isfinite(float(model.values[k])) else 0.0 for k in names])
 
     def residuals(x):
-        sims, _ = _simulate_all(model, inputs, vehicle, axis, dict(zip(names, x)))
+        sims, _ = _simulate_all(model, inputs, vehicle, axis, dict(zip(names, x)), controls)
         pred = np.full(meas.shape, np.nan)
         for idx, y in sims:
             pred[idx] = y

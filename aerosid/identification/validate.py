@@ -292,6 +292,8 @@ def validate(run_dir: str | Path, telemetry: str | Path, *, vehicle: str | None 
     chosen, notes = choose_axes(model, axes)
     job = read_run_json(run_dir).get("job") or {}
     raw = read_raw_parquet(telemetry)
+    if chosen:  # a unit error in the attitude fails before the estimation's minutes, not after
+        attitude_on(raw, raw["t_s"].to_numpy(float), str(telemetry))
     est = estimate_flight_data(raw, veh, flight=Path(telemetry).stem, windows=windows,
                                preprocess_params=job.get("preprocess_params") or None,
                                smoothing_options=job.get("smoothing_options") or None,
