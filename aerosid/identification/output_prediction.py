@@ -157,7 +157,8 @@ class _Plant:
     def rhs(self, x, u: dict):
         """State derivative and the outputs at (x, u)."""
         V, qS, g = u["V_m_s"], u["qbar_pa"] * self.S, u["g_m_s2"]
-        sth, cth, sph, cph = math.sin(u["theta_rad"]), math.cos(u["theta_rad"]), math.sin(u["phi_rad"]), math.cos(u["phi_rad"])
+        th, ph = u["theta_rad"], u["phi_rad"]
+        sth, cth, sph, cph = math.sin(th), math.cos(th), math.sin(ph), math.cos(ph)
         gx, gy, gz = -g * sth, g * sph * cth, g * cph * cth
         if self.axis == "lon":
             alpha, q = x

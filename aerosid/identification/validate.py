@@ -28,7 +28,7 @@ import pandas as pd
 
 from aerosid.identification.identified import IdentifiedModel, load_identified_model, read_run_json
 from aerosid.identification.output_prediction import (AXIS_CHANNELS, AXIS_OUTPUTS, BIAS_MODES, OUTPUT_UNITS,
-                                                      AxisPrediction, predict_axis, prediction_inputs,
+                                                      predict_axis, prediction_inputs,
                                                       theil_inequality)
 from aerosid.identify import mach_window_mask
 from aerosid.models import vehicle_signals
@@ -99,7 +99,8 @@ class ValidationResult:
         bias = {"none": "none (the model as identified)",
                 "offsets": "output offsets (mean of measured - predicted per output and span, as SIDPAC's "
                            "prediction)",
-                "intercepts": "intercepts re-estimated on this manoeuvre by output error, plus output offsets"}[self.bias]
+                "intercepts": "intercepts re-estimated on this manoeuvre by output error, plus output offsets",
+                }[self.bias]
         lines = [f"validation of {self.run_dir} on {self.telemetry}",
                  f"  model {self.model.source}; vehicle {self.vehicle}",
                  f"  {self.n_predicted} of {self.n_samples} samples predicted (Mach {self.mach_window[0]:.3g}.."
@@ -339,6 +340,10 @@ def validate(run_dir: str | Path, telemetry: str | Path, *, vehicle: str | None 
                 off = float(np.nanmean(f[f"offset_{o}"][use])) if bias != "none" else float("nan")
                 out_metrics.append(fit_metric(o, OUTPUT_UNITS[o], f[f"measured_{o}"][use], f[f"predicted_{o}"][use],
                                               off, meas_src[o]))
+    worse = [m.name for m in out_metrics if m.nrms > 1]
+    if worse:
+        notes.append(f"{', '.join(worse)}: predicted worse than the measured mean (RMS error > std): the model "
+                     "does not describe this motion of this manoeuvre (an axis it was not identified on?)")
     mach = fd["mach"].to_numpy()[use]
     return ValidationResult(str(run_dir), str(telemetry), model, veh.name, bias,
                             (float(mach.min()), float(mach.max())), len(fd), int(use.sum()), coef_metrics,

@@ -13,7 +13,8 @@ from datetime import datetime, timezone
 from aerosid.report import _CSS, _e, _figure, _gaps, _note, _p, _svg, _table, _thin
 
 #: plotted in these units (the data stay SI/radians)
-_PLOT_SCALE = {"rad": (180 / math.pi, "deg"), "rad/s": (180 / math.pi, "deg/s"), "m/s^2": (1.0, "m/s^2"), "-": (1.0, "-")}
+_PLOT_SCALE = {"rad": (180 / math.pi, "deg"), "rad/s": (180 / math.pi, "deg/s"), "m/s^2": (1.0, "m/s^2"),
+               "-": (1.0, "-")}
 
 
 def _metric_rows(metrics) -> list:

@@ -26,9 +26,11 @@ def test_theil_inequality_closed_forms():
 def test_true_model_reproduces_the_independent_simulation(clean_flight, axis):
     veh, inputs, measured, model = clean_flight
     # the simulator holds its fins over each step: with the same hold the remaining error is
-    # the integration and the alpha ~ alpha_r cos(phi_r) approximation of the linear model
+    # the integration and the linear model's approximations of the resultant-plane aerodynamics
+    # (alpha ~ alpha_r cos(phi_r); in roll, cos(4 phi_r) with phi_r = atan2(tan beta, tan alpha)
+    # amplifying beta's error): lon 1e-5..5e-5, lat 4e-4..3e-3 (p)
     tics = _tics(predict_axis(model, inputs, measured, veh, axis, bias="none", controls="hold"))
-    assert max(tics.values()) < 0.003, tics
+    assert max(tics.values()) < {"lon": 1e-3, "lat": 4e-3}[axis], tics
     # with the controls interpolated linearly (real data), the half-step shift costs a little (most in
     # the fast roll axis)
     tics = _tics(predict_axis(model, inputs, measured, veh, axis, bias="none", controls="linear"))

@@ -128,7 +128,8 @@ def test_cli_validate_prints_and_writes_the_report(small_run):
         o = m["name"]
         assert 0 < m["tic"] < 1
         ok = rows[f"measured_{o}"].notna() & rows[f"predicted_{o}"].notna()
-        assert m["tic"] == pytest.approx(theil_inequality(rows.loc[ok, f"measured_{o}"], rows.loc[ok, f"predicted_{o}"]))
+        y, yhat = rows.loc[ok, f"measured_{o}"], rows.loc[ok, f"predicted_{o}"]
+        assert m["tic"] == pytest.approx(theil_inequality(y, yhat))
         assert f"{m['tic']:.3f}" in res.output
     html = (out / "validation.html").read_text()
     assert html.count("<svg") == 2  # the lon outputs and the coefficients
