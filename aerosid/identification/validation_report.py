@@ -26,7 +26,7 @@ def _metric_rows(metrics) -> list:
     return rows
 
 
-def _history_plot(frame, names: list[str], units: dict, key: str, label: str) -> str:
+def _history_plot(frame, names: list[str], units: dict, key: str, label: str, metrics=()) -> str:
     t = frame["t_s"].to_numpy(float)
     th = _thin(len(t))
     fig, axes = _figure((9, 1.9 * 2 * len(names)), nrows=2 * len(names), height_ratios=[2, 1] * len(names))
@@ -40,6 +40,9 @@ def _history_plot(frame, names: list[str], units: dict, key: str, label: str) ->
         top.plot(tt, yyh, "-", color="tab:red", lw=1.0, label="predicted")
         top.set_ylabel(f"{name.split('_')[0]} [{unit}]")
         top.legend(loc="upper right", fontsize=8)
+        m = next((m for m in metrics if m.name == name), None)
+        if m is not None and math.isfinite(m.tic):
+            top.set_title(f"{name}: TIC {m.tic:.3f}, RMS / std {m.nrms:.2f}", loc="left", fontsize=9)
         tt, rr = _gaps(t[th], (y - yh)[th])
         bottom.plot(tt, rr, "-", color="tab:blue", lw=0.8)
         bottom.axhline(0.0, color="0.5", lw=0.6)
@@ -81,7 +84,7 @@ def build_validation_report(result) -> str:
             units = {o: next(m.unit for m in result.outputs if m.name == o) for o in names}
             parts.append(_history_plot(pr.frame[pr.frame["span"] >= 0], names, units, f"ax-{pr.axis}",
                                        f"{pr.axis} axis: measured (grey) and predicted (red) outputs, residual "
-                                       "below (angles and rates in degrees)"))
+                                       "below (angles and rates in degrees)", result.outputs))
     else:
         parts.append(_note("No output prediction (see the notes above)."))
     if result.intercepts:
@@ -95,7 +98,8 @@ def build_validation_report(result) -> str:
     chans = [m.name for m in result.coefficients]
     if chans:
         parts.append(_history_plot(cf[cf["span"] >= 0], chans, {c: "-" for c in chans}, "coef",
-                                   "Flight-derived (grey) and predicted (red) coefficients, residual below"))
+                                   "Flight-derived (grey) and predicted (red) coefficients, residual below",
+                                   result.coefficients))
     model_rows = [[r.channel, r.coefficient, r.expression, r.estimate] for r in result.model.table().itertuples()]
     parts += ["</section>", "<section id=\"model\"><h2>The model</h2>",
               _table(["channel", "coefficient", "term", "value (SI per rad)"], model_rows, id="model-table"),
