@@ -74,7 +74,7 @@ def estimate_flight_data(raw: pd.DataFrame, vehicle: Vehicle, *, flight: str = "
     if not smoothed:
         why = "; ".join(f"{s}: {w}" for s, w in failed) or (
             f"no segment of at least {min_segment_s:g} s (minimum segment length) in "
-            f"{pre.frame['t_s'].iloc[0]:.2f}..{pre.frame['t_s'].iloc[-1]:.2f} s")
+            f"{round(pre.frame['t_s'].iloc[0], 2) + 0.0:.2f}..{pre.frame['t_s'].iloc[-1]:.2f} s")
         raise ValueError(f"{source}: no segment could be smoothed ({why})")
     fd = build_flight_data_segments(pre.frame, [s.frame for s in smoothed], vehicle, db, flight)
     return EBMFlightData(pre, tuple(smoothed), fd, tuple(failed))

@@ -2,6 +2,7 @@
 the attitude input, and the command on a small run (built without Prefect)."""
 import json
 import math
+from dataclasses import replace
 
 import numpy as np
 import pandas as pd
@@ -154,3 +155,13 @@ def test_cli_errors_are_one_clear_line(small_run, tmp_path):
                                     str(tmp_path / "v")])
     assert res.exit_code == 1 and "_rad' is outside" in res.output and "radians" in res.output
     assert not (tmp_path / "v").exists()
+
+
+def test_a_manoeuvre_outside_the_mach_window_is_refused_naming_the_window(small_run, tmp_path):
+    case = load_case("seed-rlv", duration_s=8.0)
+    fast = simulate(replace(case, faults=case.faults.without_faults()), seed=4)  # M 13.1..13.0: above 12.4 + 0.5
+    write_parquet_atomic(fast.telemetry, tmp_path / "fast.parquet", metadata={"aerosid.case": "seed-rlv"})
+    res = CliRunner().invoke(main, ["validate", str(small_run["run"]), str(tmp_path / "fast.parquet"), "--out",
+                                    str(tmp_path / "v")])
+    assert res.exit_code == 1 and "Traceback" not in res.output
+    assert "Mach window 12.4 +- 0.5" in res.output and "spans Mach 13" in res.output
