@@ -89,6 +89,11 @@ class ValidationResult:
     sources: dict = field(default_factory=dict)  # density, attitude, ... -> where from
     notes: tuple = ()
 
+    @property
+    def n_spans(self) -> int:
+        sp = self.coefficient_frame["span"].to_numpy()
+        return int(np.unique(sp[sp >= 0]).size)
+
     def metric(self, name: str) -> FitMetric:
         for m in (*self.coefficients, *self.outputs):
             if m.name == name:
@@ -103,8 +108,9 @@ class ValidationResult:
                 }[self.bias]
         lines = [f"validation of {self.run_dir} on {self.telemetry}",
                  f"  model {self.model.source}; vehicle {self.vehicle}",
-                 f"  {self.n_predicted} of {self.n_samples} samples predicted (Mach {self.mach_window[0]:.3g}.."
-                 f"{self.mach_window[1]:.3g}); bias treatment: {bias}"]
+                 f"  {self.n_predicted} of {self.n_samples} samples predicted in {self.n_spans} span(s) (each "
+                 f"simulated from its own initial state), Mach {self.mach_window[0]:.3g}..{self.mach_window[1]:.3g}; "
+                 f"bias treatment: {bias}"]
         lines += [f"  {k}: {v}" for k, v in self.sources.items()]
         head = f"  {'':<10}{'unit':<8}{'N':>6}{'TIC':>8}{'RMS':>12}{'RMS/std':>9}{'offset':>12}  measured by"
         if self.coefficients:
@@ -125,7 +131,7 @@ class ValidationResult:
     def to_json(self) -> dict:
         return {"run_dir": self.run_dir, "telemetry": self.telemetry, "model": self.model.source,
                 "vehicle": self.vehicle, "bias": self.bias, "mach_window": list(self.mach_window),
-                "n_samples": self.n_samples, "n_predicted": self.n_predicted,
+                "n_samples": self.n_samples, "n_predicted": self.n_predicted, "n_spans": self.n_spans,
                 "coefficients": [m.as_dict() for m in self.coefficients],
                 "outputs": [m.as_dict() for m in self.outputs],
                 "intercepts": {k: {"identified": a, "re_estimated": b} for k, (a, b) in self.intercepts.items()},
