@@ -292,6 +292,8 @@ main.add_command(fit)
 main.add_command(history)
 from aerosid.cli_import import import_group  # noqa: E402  (aerosid import sidpac|csv)
 main.add_command(import_group)
+from aerosid.cli_validate import validate  # noqa: E402  (aerosid validate: predict another manoeuvre)
+main.add_command(validate)
 
 if __name__ == "__main__":  # pragma: no cover
     sys.exit(main())

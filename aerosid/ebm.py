@@ -40,17 +40,62 @@ class EBMRun:
                             self.identification.summary()])
 
 
+@dataclass(frozen=True)
+class EBMFlightData:
+    """The estimation half of the method: preprocessed telemetry, smoothed segments and
+    the flight data the regression reads.  failed: (segment id, reason) of segments
+    left out (only with ``skip_failed``)."""
+
+    preprocessed: PreprocessResult
+    smoothed: tuple[SmoothedSegmentResult, ...]
+    flight_data: pd.DataFrame
+    failed: tuple[tuple[str, str], ...] = ()
+
+    def summary(self) -> str:
+        failed = [f"segment {s} left out: {why}" for s, why in self.failed]
+        return "\n\n".join([self.preprocessed.summary(), *(s.result.summary() for s in self.smoothed), *failed])
+
+
+def estimate_flight_data(raw: pd.DataFrame, vehicle: Vehicle, *, flight: str = "flight", windows=None,
+                         preprocess_params: dict | None = None, smoothing_options: dict | None = None,
+                         min_segment_s: float = 5.0, source: str = "<memory>",
+                         skip_failed: bool = False) -> EBMFlightData:
+    """Raw telemetry -> flight data (preprocess, segments, EKF + MBF smoother, air data,
+    coefficients, alpha/beta).  A segment that loses more than half its samples to
+    findings is left out and recorded, as the flow does; with skip_failed, so is one whose
+    smoothing fails; if none is left, ValueError."""
+    pre = preprocess(raw, PreprocessParams(**(preprocess_params or {})), source=source)
+    segments = split_segments(pre.frame["t_s"].to_numpy(), list(pre.long_gaps), windows, min_segment_s)
+    db = load_database(vehicle)
+    smoothed, failed = [], []
+    for seg in segments:
+        rows = pre.frame.iloc[seg.start:seg.stop].reset_index(drop=True)
+        try:
+            sm = smooth_segment_frame(rows, vehicle, smoothing_options, seg.segment_id)
+        except ValueError as exc:
+            if not skip_failed:
+                raise
+            failed.append((seg.segment_id, str(exc)))
+            continue
+        if sm.lost:  # more than half the segment condemned by findings: failed, as the flow does (tasks.stages)
+            failed.append((seg.segment_id, "more than half the samples condemned: "
+                           + "; ".join(f.summary() for f in sm.findings)))
+            continue
+        smoothed.append(sm)
+    if not smoothed:
+        why = "; ".join(f"{s}: {w}" for s, w in failed) or (
+            f"no segment of at least {min_segment_s:g} s (minimum segment length) in "
+            f"{round(pre.frame['t_s'].iloc[0], 2) + 0.0:.2f}..{pre.frame['t_s'].iloc[-1]:.2f} s")
+        raise ValueError(f"{source}: no segment could be smoothed ({why})")
+    fd = build_flight_data_segments(pre.frame, [s.frame for s in smoothed], vehicle, db, flight)
+    return EBMFlightData(pre, tuple(smoothed), fd, tuple(failed))
+
+
 def process_telemetry(raw: pd.DataFrame, vehicle: Vehicle, *, flight: str = "flight", windows=None,
                       models: dict[str, ChannelModel] | None = None, preprocess_params: dict | None = None,
                       smoothing_options: dict | None = None, mach_half_width: float | None = 0.5,
                       min_segment_s: float = 5.0, source: str = "<memory>") -> EBMRun:
-    pre = preprocess(raw, PreprocessParams(**(preprocess_params or {})), source=source)
-    segments = split_segments(pre.frame["t_s"].to_numpy(), list(pre.long_gaps), windows, min_segment_s)
-    db = load_database(vehicle)
-    smoothed = [smooth_segment_frame(pre.frame.iloc[seg.start:seg.stop].reset_index(drop=True), vehicle,
-                                     smoothing_options, seg.segment_id) for seg in segments]
-    smoothed = [s for s in smoothed if not s.lost]  # as the flow fails them (tasks.stages)
-    if not smoothed:
-        raise ValueError("no segment could be processed: every segment lost more than half its samples to findings")
-    fd = build_flight_data_segments(pre.frame, [s.frame for s in smoothed], vehicle, db, flight)
-    return EBMRun(pre, tuple(smoothed), fd, identify(fd, vehicle, models, mach_half_width))
+    est = estimate_flight_data(raw, vehicle, flight=flight, windows=windows, preprocess_params=preprocess_params,
+                               smoothing_options=smoothing_options, min_segment_s=min_segment_s, source=source)
+    fd = est.flight_data
+    return EBMRun(est.preprocessed, est.smoothed, fd, identify(fd, vehicle, models, mach_half_width))

@@ -11,7 +11,7 @@ whitelist are rejected with a message that says where.
 from __future__ import annotations
 
 import ast
-from typing import Mapping
+from typing import Callable, Mapping
 
 import numpy as np
 
@@ -101,3 +101,22 @@ def evaluate(expression: str, values: Mapping[str, np.ndarray], length: int | No
         n = length if length is not None else len(next(iter(values.values())))
         out = np.full(n, float(out))
     return out
+
+
+def compile_expression(expression: str, signals) -> Callable[[Mapping[str, np.ndarray]], np.ndarray]:
+    """Parse once, evaluate many times: a function of the named arrays (for loops that
+    evaluate the same term at every step, e.g. a simulation).  A constant expression
+    returns a 0-d array (it broadcasts)."""
+    tree = parse(expression, frozenset(signals))
+
+    def run(values: Mapping[str, np.ndarray]) -> np.ndarray:
+        with np.errstate(all="ignore"):
+            return np.asarray(_eval(tree.body, values), dtype=float)
+
+    return run
+
+
+def names_in(expression: str, signals) -> frozenset[str]:
+    """The signal names an expression reads (empty for a constant term)."""
+    tree = parse(expression, frozenset(signals))
+    return frozenset(n.id for n in ast.walk(tree) if isinstance(n, ast.Name))

@@ -1,0 +1,168 @@
+"""aerosid validate: the identified model of a run folder, coefficient prediction, spans,
+the attitude input, and the command on a small run (built without Prefect)."""
+import json
+import math
+from dataclasses import replace
+
+import numpy as np
+import pandas as pd
+import pytest
+from click.testing import CliRunner
+
+from aerosid.cli import main
+from aerosid.identification.identified import ModelSourceError, load_identified_model, model_from_table
+from aerosid.identification.output_prediction import theil_inequality
+from aerosid.identification.validate import attitude_on, predict_coefficients, spans_of
+from aerosid.io import write_json_atomic, write_parquet_atomic
+from aerosid.simulation import load_case, simulate
+
+TWENTY_S = {"duration_s": 20.0, "V0_m_s": 3780.0}  # starts at M 12.5: the whole flight is in the Mach window
+
+
+def _telemetry(tmp, name, seed, attitude=True, degrees=False):
+    flight = simulate(load_case("seed-rlv", **TWENTY_S), seed=seed)
+    tel = flight.telemetry.copy()
+    if attitude:
+        tr = flight.truth.set_index("t_s")
+        k = 180 / math.pi if degrees else 1.0
+        for col in ("phi_rad", "theta_rad"):
+            tel[col] = tr[col].reindex(tel["t_s"]).to_numpy() * k
+    path = tmp / name / "telemetry.parquet"
+    write_parquet_atomic(tel, path, metadata={"aerosid.case": "seed-rlv"})
+    return path
+
+
+@pytest.fixture(scope="module")
+def small_run(tmp_path_factory):
+    """RUN_DIR as `aerosid run` lays it out (flight_data.parquet, coefficients.parquet,
+    run.json), from the in-memory method on a 20 s seed-rlv flight; plus other manoeuvres."""
+    from aerosid.ebm import process_telemetry
+    from aerosid.vehicle import load_vehicle
+
+    tmp = tmp_path_factory.mktemp("validate")
+    own = _telemetry(tmp, "f0", 0)
+    run = process_telemetry(pd.read_parquet(own), load_vehicle("seed-rlv"), flight="f0")
+    run_dir = tmp / "run"
+    write_parquet_atomic(run.flight_data, run_dir / "flight_data.parquet")
+    write_parquet_atomic(run.identification.table(), run_dir / "coefficients.parquet")
+    write_json_atomic({"vehicle": "seed-rlv", "job": {"vehicle": "seed-rlv", "mach_half_width": 0.5,
+                                                      "preprocess_params": {}, "smoothing_options": {},
+                                                      "min_segment_s": 5.0}}, run_dir / "run.json")
+    return {"run": run_dir, "other": _telemetry(tmp, "f1", 1), "no_attitude": _telemetry(tmp, "f2", 2, False),
+            "degrees": _telemetry(tmp, "f3", 3, degrees=True), "tmp": tmp}
+
+
+def test_run_coefficients_are_the_model_and_a_version_takes_over(small_run, tmp_path):
+    import shutil
+
+    from aerosid.versions import fit_version, models_from_spec
+
+    run = tmp_path / "run"
+    shutil.copytree(small_run["run"], run)
+    m = load_identified_model(run)
+    table = pd.read_parquet(run / "coefficients.parquet")
+    assert m.source.endswith("coefficients.parquet")
+    assert m.values["Cm_alpha"] == table.set_index("coefficient").loc["Cm_alpha", "estimate"]
+    assert m.models["Cm"].names == ("Cm_0", "Cm_alpha", "Cm_delta_p")
+    spec = tmp_path / "cmq.toml"
+    spec.write_text('[Cm]\nterms = ["Cm_0 = 1", "Cm_alpha = alpha", "Cm_delta_p = delta_p/2", "pitch_damping"]\n')
+    fit_version(run, models_from_spec(spec, run), note="add pitch damping")
+    latest = load_identified_model(run)
+    assert latest.source.endswith("models/v002") and "Cm_q" in latest.values
+    assert latest.models["Cm"].terms[-1].expression == "q_hat"
+    assert "Cm_q" not in load_identified_model(run, "v001").values
+    with pytest.raises(ModelSourceError, match="v009"):
+        load_identified_model(run, "v009")
+
+
+def test_a_table_without_expressions_is_refused():
+    with pytest.raises(ModelSourceError, match=r"old\.parquet.*expression"):
+        model_from_table(pd.DataFrame({"channel": ["Cm"], "coefficient": ["Cm_0"], "estimate": [0.1]}), "old.parquet")
+
+
+def test_spans_split_at_segments_holes_and_the_window():
+    t = np.r_[np.arange(0, 3, 0.01), np.arange(3.5, 6, 0.01), np.arange(6, 8, 0.01)]
+    fd = pd.DataFrame({"t_s": t, "segment": ["a"] * 550 + ["b"] * 200})
+    keep = np.ones(len(t), bool)
+    keep[100:110] = False          # out of the Mach window: 0..1 s and 1.1..3 s
+    keep[300:350] = False          # 3.5..4.0 out: 4.0..6 remains (a 2 s span)
+    span = spans_of(fd, keep, min_span_s=1.0)
+    assert (span[:110] == -1).all()  # 0..0.99 s is shorter than 1 s: dropped
+    assert (span[110:300] == 0).all()
+    assert (span[300:350] == -1).all()
+    assert (span[350:550] == 1).all()
+    assert (span[550:] == 2).all()  # a new segment starts a new span even without a hole
+
+
+def test_coefficient_prediction_of_the_true_model_is_exact_up_to_the_linearisation(clean_truth):
+    veh, tr, model = clean_truth
+    fd = tr.assign(flight="f", segment="s")
+    span = np.zeros(len(fd), int)
+    _, metrics = predict_coefficients(model, fd, veh, span, "none")
+    tic = {m.name: m.tic for m in metrics}
+    assert max(tic.values()) < 0.01, tic
+    wrong = model.with_values(Cm_alpha=1.2 * model.values["Cm_alpha"])
+    _, metrics = predict_coefficients(wrong, fd, veh, span, "none")
+    assert {m.name: m.tic for m in metrics}["Cm"] > 10 * tic["Cm"]
+
+
+def test_attitude_in_degrees_is_refused(small_run):
+    raw = pd.read_parquet(small_run["degrees"])
+    with pytest.raises(ValueError, match="f3: column '(phi|theta)_rad'.*it must be radians"):
+        attitude_on(raw, raw["t_s"].to_numpy(), "f3")
+    assert attitude_on(raw.drop(columns=["phi_rad"]), raw["t_s"].to_numpy(), "f3") is None
+
+
+def test_cli_validate_prints_and_writes_the_report(small_run):
+    out = small_run["tmp"] / "val"
+    res = CliRunner().invoke(main, ["validate", str(small_run["run"]), str(small_run["other"]), "--axes", "lon",
+                                    "--out", str(out)])
+    assert res.exit_code == 0, res.output
+    assert "output prediction" in res.output and "TIC" in res.output
+    doc = json.loads((out / "validation.json").read_text())
+    assert [m["name"] for m in doc["outputs"]] == ["alpha_rad", "q_rad_s", "az_m_s2"]
+    assert [m["name"] for m in doc["coefficients"]] == ["CN", "Cm", "CY", "Cn", "Cl"]
+    assert doc["sources"]["attitude"].startswith("telemetry phi_rad")
+    assert doc["n_spans"] == 2  # the simulated flight's sync gap splits it
+    frame = pd.read_parquet(out / "validation.parquet")
+    rows = frame[frame["span"] >= 0]
+    for m in doc["outputs"]:  # the printed/recorded numbers are those of the written time histories
+        o = m["name"]
+        assert 0 < m["tic"] < 1
+        ok = rows[f"measured_{o}"].notna() & rows[f"predicted_{o}"].notna()
+        y, yhat = rows.loc[ok, f"measured_{o}"], rows.loc[ok, f"predicted_{o}"]
+        assert m["tic"] == pytest.approx(theil_inequality(y, yhat))
+        assert f"{m['tic']:.3f}" in res.output
+    html = (out / "validation.html").read_text()
+    assert html.count("<svg") == 2  # the lon outputs and the coefficients
+    assert "<script" not in html and "http://" not in html and "https://" not in html
+    assert 'id="output-metrics"' in html and "q_rad_s" in html
+
+
+def test_cli_without_attitude_predicts_the_coefficients_and_says_why_not_the_outputs(small_run):
+    out = small_run["tmp"] / "val-noatt"
+    res = CliRunner().invoke(main, ["validate", str(small_run["run"]), str(small_run["no_attitude"]), "--out",
+                                    str(out)])
+    assert res.exit_code == 0, res.output
+    assert "no output prediction" in res.output and "phi_rad / theta_rad" in res.output
+    doc = json.loads((out / "validation.json").read_text())
+    assert doc["outputs"] == [] and len(doc["coefficients"]) == 5
+
+
+def test_cli_errors_are_one_clear_line(small_run, tmp_path):
+    res = CliRunner().invoke(main, ["validate", str(tmp_path / "nope"), str(small_run["other"])])
+    assert res.exit_code == 1 and "no such run folder" in res.output and "Traceback" not in res.output
+    res = CliRunner().invoke(main, ["validate", str(small_run["run"]), str(small_run["degrees"]), "--out",
+                                    str(tmp_path / "v")])
+    assert res.exit_code == 1 and "_rad' is outside" in res.output and "radians" in res.output
+    assert not (tmp_path / "v").exists()
+
+
+def test_a_manoeuvre_outside_the_mach_window_is_refused_naming_the_window(small_run, tmp_path):
+    case = load_case("seed-rlv", duration_s=8.0)
+    fast = simulate(replace(case, faults=case.faults.without_faults()), seed=4)  # M 13.1..13.0: above 12.4 + 0.5
+    write_parquet_atomic(fast.telemetry, tmp_path / "fast.parquet", metadata={"aerosid.case": "seed-rlv"})
+    res = CliRunner().invoke(main, ["validate", str(small_run["run"]), str(tmp_path / "fast.parquet"), "--out",
+                                    str(tmp_path / "v")])
+    assert res.exit_code == 1 and "Traceback" not in res.output
+    assert "Mach window 12.4 +- 0.5" in res.output and "spans Mach 13" in res.output
