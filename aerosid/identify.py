@@ -31,12 +31,19 @@ class Identification:
     references: dict  # coefficient -> preflight value about the CG (per rad)
     n_samples: int
     mach_window: tuple[float, float]
+    #: channels whose fit is an identity by construction (alpha, beta inverted from them)
+    identities: tuple[str, ...] = ()
 
     def table(self, alpha: float = 0.05) -> pd.DataFrame:
-        """The coefficients.parquet rows."""
+        """The coefficients.parquet rows.  A channel in ``identities`` is reported without
+        numbers: its fit returns the preflight database by construction (``note`` says so)."""
         rows = []
         for channel, fit in self.fits.items():
+            identity = channel in self.identities
             for rec in fit.as_records(alpha):
+                if identity:
+                    rec = {**rec, **{k: np.nan for k in ("estimate", "std_error", "std_error_ols", "ci_low",
+                                                         "ci_high", "t_value", "p_value")}}
                 ident = bool(np.isfinite(rec["estimate"]))
                 rows.append({
                     "channel": channel, "coefficient": rec["coefficient"],
@@ -44,7 +51,7 @@ class Identification:
                     "std_error_ols": float(rec["std_error_ols"]), "ci_low": float(rec["ci_low"]),
                     "ci_high": float(rec["ci_high"]), "reference": float(self.references.get(rec["coefficient"], np.nan)),
                     "t_value": float(rec["t_value"]), "p_value": float(rec["p_value"]),
-                    "identifiable": ident,
+                    "identifiable": ident, "note": IDENTITY_NOTE if identity else "",
                     "expression": next((t.expression for t in self.models[channel].terms
                                         if t.coefficient == rec["coefficient"]), ""),
                     "f_stat": float(fit.f_stat), "f_stat_corrected": float(fit.f_stat_corrected),
@@ -73,8 +80,8 @@ def format_table(table: pd.DataFrame) -> str:
             k = math.pi / 180 if row["expression"].replace(" ", "") in ANGLE_TERMS else 1.0
             ref = f"{row['reference'] * k:>12.5g}" if np.isfinite(row["reference"]) else f"{'-':>12}"
             if not np.isfinite(row["estimate"]):  # no number is printed for what the data cannot tell
-                lines.append(f"  {row['coefficient']:<18}{ref}"
-                             f"   not identifiable (no excitation in {row['expression']})")
+                why = row.get("note") or f"no excitation in {row['expression']}"
+                lines.append(f"  {row['coefficient']:<18}{ref}   not identifiable ({why})")
                 continue
             lines.append(f"  {row['coefficient']:<18}{ref}{row['estimate'] * k:>12.5g}"
                          f"{row['std_error'] * k:>11.2g}{row['std_error_ols'] * k:>11.2g}"
@@ -101,6 +108,8 @@ def _eiv_sigma(fd: pd.DataFrame, vehicle: Vehicle):
 #: Channels whose flight values define the angles for a vehicle without vanes (alpha, beta
 #: are inverted from C_N and C_Y): their fits are identities, not estimates.
 INVERSION_CHANNELS = ("CN", "CY")
+IDENTITY_NOTE = ("not identifiable from this telemetry: alpha/beta are inverted from this channel through the "
+                 "preflight force database, so the fit returns that database by construction")
 
 
 def _eiv_corrected(fd: pd.DataFrame, vehicle: Vehicle, models: dict, fits: dict, sigma) -> dict:
@@ -164,4 +173,5 @@ def identify(flight_data: pd.DataFrame, vehicle: Vehicle, models: dict[str, Chan
         fits = _eiv_corrected(fd, vehicle, models, fits, sigma)
     refs = AeroModel.preflight(vehicle).linear_truth() if vehicle.preflight is not None else {}
     window = (float(fd["mach"].min()), float(fd["mach"].max()))
-    return Identification(fits, dict(models), refs, len(fd), window)
+    identities = tuple(ch for ch in INVERSION_CHANNELS if ch in fits) if vehicle.air_data_source != "vanes" else ()
+    return Identification(fits, dict(models), refs, len(fd), window, identities)

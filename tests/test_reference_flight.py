@@ -48,8 +48,17 @@ def test_alpha_beta_inversion_errors_against_truth(reference_flight, reference_r
     assert fd["inversion_J"].max() < 1e-20  # the table is monotone: closed form, J = 0
 
 
-@pytest.mark.parametrize("name, bar", [("CN_alpha", 0.02), ("CN_delta_p", 0.02), ("Cm_alpha", 0.05),
-                                       ("Cm_delta_p", 0.05)])
+def test_force_channels_the_angles_come_from_are_reported_as_identities(reference_run):
+    """alpha/beta are inverted from C_N, C_Y through the preflight database: their fits return
+    that database by construction, so no number (and no near-zero interval) is reported."""
+    tab = reference_run.identification.table().set_index("coefficient")
+    for name in ("CN_alpha", "CN_delta_p", "CY_beta"):
+        assert not tab.loc[name, "identifiable"] and np.isnan(tab.loc[name, "estimate"])
+        assert np.isnan(tab.loc[name, "ci_low"]) and "inverted from this channel" in tab.loc[name, "note"]
+    assert np.isfinite(tab.loc["Cm_alpha", "estimate"]) and tab.loc["Cm_alpha", "note"] == ""
+
+
+@pytest.mark.parametrize("name, bar", [("Cm_alpha", 0.05), ("Cm_delta_p", 0.05)])
 def test_pitch_plane_coefficients_within_the_accuracy_bars_and_intervals(reference_flight, reference_run, name, bar):
     tab = reference_run.identification.table().set_index("coefficient")
     truth = reference_flight.coefficients[name]
