@@ -121,7 +121,9 @@ def _inverted_angles(fc, s: pd.DataFrame, delta_p, delta_y, vehicle: Vehicle, db
         # the inversion would clamp the table at its edge: alpha and beta there would be made up
         ts = s["t_s"].to_numpy()[outside]
         m = fc.air.mach[outside]
-        raise ValueError(f"segment {segment}: Mach (from columns 'V_m_s' and 'h_m') is {m.min():.3g}..{m.max():.3g} "
+        origin = ("from columns 'V_m_s' and 'h_m'" if "T_total_K" not in fc.air.sources["mach"]
+                  else "from columns 'V_m_s' and 'T_total_K'")
+        raise ValueError(f"segment {segment}: Mach ({origin}) is {m.min():.3g}..{m.max():.3g} "
                          f"at {int(outside.sum())} samples, t = {_span(ts)}, outside the aerodynamic database's "
                          f"Mach {m_lo:g}..{m_hi:g} ({vehicle.database_path}); alpha/beta cannot be inverted "
                          "there: restrict the run to the database's range (--window T0 T1) or extend the database")
