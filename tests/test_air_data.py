@@ -103,8 +103,9 @@ def us1976_density(h: np.ndarray) -> np.ndarray:
 
 @pytest.fixture(scope="module")
 def low_density(reference_flight, reference_run):
-    """The reference flight with a measured density 4.2 % below US-1976 (the Twin
-    Otter's day), through preprocessing; smoothing does not read air data, so the
+    """The reference flight with a measured density 4.2 % below US-1976 (the size of the
+    Twin Otter's discrepancy; its files hold 1.029 kg/m^3 against US-1976's 0.987, i.e.
+    4.2 % above), through preprocessing; smoothing does not read air data, so the
     reference run's smoothed segments serve both."""
     raw = reference_flight.telemetry.copy()
     raw["rho_kg_m3"] = 0.958 * us1976_density(raw["h_m"].to_numpy())
@@ -122,6 +123,17 @@ def test_preprocessing_carries_the_measured_density(low_density):
     good = frame["flags_rho_kg_m3"].to_numpy() == 0
     assert good.mean() > 0.9
     np.testing.assert_array_equal(frame["rho_kg_m3_clean"].to_numpy()[good], frame["rho_kg_m3"].to_numpy()[good])
+
+
+def test_a_constant_measured_density_is_carried_unflagged(reference_flight):
+    """SIDPAC's files log one density for the whole manoeuvre: a constant air-data
+    column is normal, not a frozen sensor (only the contract channels are checked for
+    frozen runs by default)."""
+    raw = reference_flight.telemetry.assign(rho_kg_m3=1.0292115)
+    frame = preprocess(raw).frame
+    present = np.isfinite(frame["t_raw_s"].to_numpy())
+    assert (frame["flags_rho_kg_m3"].to_numpy()[present] == 0).all()
+    assert (frame["rho_kg_m3_clean"].to_numpy()[present] == 1.0292115).all()
 
 
 def test_measured_density_scales_every_flight_coefficient_by_exactly_one_over_it(low_density):
