@@ -144,13 +144,14 @@ def _quiet_run_tracebacks() -> None:
 
 
 @main.command()
-@click.argument("telemetry", type=click.Path(exists=True, dir_okay=False, path_type=Path))
+@click.argument("telemetry", nargs=-1, required=True, type=click.Path(exists=True, dir_okay=False, path_type=Path))
 @click.option("--vehicle", default=None, metavar="NAME_OR_FILE",
-              help="Built-in vehicle name or a vehicle TOML file (default: the built-in vehicle the "
-                   "telemetry file names in its metadata, e.g. a simulated c172x flight; else seed-rlv).")
+              help="Built-in vehicle name or a vehicle TOML file (default: the vehicle the telemetry file "
+                   "names in its metadata, e.g. a simulated flight's; there is no default vehicle).")
 @click.option("--out", "out_dir", required=True, type=click.Path(file_okay=False, path_type=Path),
               help="Run folder: every stage's Parquet, coefficients.parquet, run.json, ledger.jsonl.")
-@click.option("--flight", default=None, help="Flight identifier (default: from the file name).")
+@click.option("--flight", default=None, help="Flight identifier (default: from the file name); with several "
+                                             "files, the pooled identification's (default: the run folder's name).")
 @click.option("--window", "windows", multiple=True, nargs=2, type=float, metavar="T0 T1",
               help="Only this time window [s] (repeatable: each window is a phase/segment).")
 @click.option("--model", "model_spec", type=click.Path(exists=True, dir_okay=False), default=None,
@@ -158,11 +159,16 @@ def _quiet_run_tracebacks() -> None:
 @click.option("--mach-half-width", type=float, default=0.5, show_default=True,
               help="Regress on samples with |M - M_ref| <= this (M_ref from the vehicle file).")
 def run(telemetry, vehicle, out_dir, flight, windows, model_spec, mach_half_width):
-    """Run the whole pipeline on one telemetry file (Prefect flow process_flight).
+    """Run the whole pipeline on one telemetry file (Prefect flow process_flight), or
+    identify one model from several manoeuvres of one aircraft (process_manoeuvres).
 
     \b
     Stages: preprocess -> split into segments at long gaps -> EKF + MBF smoother
     per segment -> air data, coefficients, alpha/beta inversion -> regression.
+    Several files: each is preprocessed and smoothed on its own (RUN_DIR/flights/<id>/),
+    their flight data are pooled into one regression. Measured air data columns
+    (rho_kg_m3, qbar_pa, p_static_pa, T_total_K) replace the US-1976 atmosphere;
+    run.json's air_data says where each quantity came from.
     Needs no Prefect server (ephemeral mode). Re-running with the same inputs and
     code reuses every stage's output; the ledger (RUN_DIR/ledger.jsonl) records all.
     """
@@ -170,60 +176,77 @@ def run(telemetry, vehicle, out_dir, flight, windows, model_spec, mach_half_widt
     from aerosid.preprocess import TelemetryError
     from aerosid.vehicle import VehicleError
 
+    pooled = len(telemetry) > 1
     try:
-        if vehicle is None:
-            from aerosid.io import telemetry_vehicle
-
-            vehicle = telemetry_vehicle(telemetry)
-        _preflight(telemetry, vehicle, model_spec)  # bad input fails here, before Prefect starts
-        from flows.pipeline import process_flight
+        if pooled and windows:
+            raise click.UsageError("--window applies to one telemetry file; cut each manoeuvre's file to its "
+                                   "window before pooling them")
+        # bad input fails here, before Prefect starts
+        named = [_preflight(t, vehicle, model_spec) for t in telemetry]
+        from flows.pipeline import pooled_vehicle, process_flight, process_manoeuvres
         from flows.steps import check_flight_id
 
         if flight is not None:
             check_flight_id(flight)
+        vehicle = pooled_vehicle([str(t) for t in telemetry], vehicle) if pooled else named[0]
         _quiet_run_tracebacks()
-        summary = process_flight(str(telemetry), str(out_dir), vehicle=vehicle, flight=flight,
-                                 windows=[list(w) for w in windows] or None,
-                                 model_spec=str(model_spec) if model_spec else None,
-                                 mach_half_width=mach_half_width)
+        if pooled:
+            summary = process_manoeuvres([str(t) for t in telemetry], str(out_dir), vehicle=vehicle, name=flight,
+                                         model_spec=str(model_spec) if model_spec else None,
+                                         mach_half_width=mach_half_width)
+        else:
+            summary = process_flight(str(telemetry[0]), str(out_dir), vehicle=vehicle, flight=flight,
+                                     windows=[list(w) for w in windows] or None,
+                                     model_spec=str(model_spec) if model_spec else None,
+                                     mach_half_width=mach_half_width)
     except (TelemetryError, VehicleError, ValueError) as exc:
         raise click.ClickException(str(exc)) from exc
     except OSError as exc:  # read-only or full output folder, a vanished file
         where = f" ({exc.filename})" if exc.filename else ""
         raise click.ClickException(f"cannot write the run folder {out_dir}: {exc.strerror or exc}{where}; "
                                    "earlier outputs are left as they were") from exc
-    click.echo(f"flight {summary['flight']}: {summary['status']}; segments ok "
-               f"{[d['segment'] for d in summary['segments_ok']]}, failed {summary['segments_failed']}")
-    if summary.get("findings"):
+    for fs in summary.get("flights", [summary]):
+        click.echo(f"flight {fs['flight']}: {fs['status']}; segments ok "
+                   f"{[d['segment'] for d in fs['segments_ok']]}, failed {fs['segments_failed']}")
+    for fid, src in (summary.get("air_data") or {}).items():
+        click.echo(f"air data of {fid}: " + "; ".join(f"{k} from {v}" for k, v in src.items()))
+    findings = [f for fs in summary.get("flights", [summary]) for f in fs.get("findings", [])]
+    if findings:
         from aerosid.estimation.findings import Finding
 
-        click.echo(f"{len(summary['findings'])} finding(s) -- the spans marked 'cut' were left out of the regression:")
-        for f in summary["findings"]:
+        click.echo(f"{len(findings)} finding(s) -- the spans marked 'cut' were left out of the regression:")
+        for f in findings:
             click.echo(f"  {Finding(**f).summary()}")
     if "coefficients" in summary:
         import pandas as pd
 
         from aerosid.identify import format_table
 
+        if pooled:
+            click.echo(f"pooled {len(summary['flights'])} manoeuvres into one identification: {summary['status']}")
         click.echo(format_table(pd.read_parquet(summary["coefficients"]["path"])))
         click.echo(f"wrote {out_dir}/coefficients.parquet, report.html, diagnosis.json, run.json, ledger.jsonl")
     if summary["status"] == "failed":
-        reasons = "; ".join(f"{f['segment']}: {f['error']}" for f in summary["segments_failed"])
-        raise click.ClickException(f"{telemetry}: no segment could be processed ({reasons or 'no segment'}); "
+        reasons = "; ".join(f"{f['segment']}: {f['error']}" for fs in summary.get("flights", [summary])
+                            for f in fs["segments_failed"])
+        what = ", ".join(str(t) for t in telemetry)
+        raise click.ClickException(f"{what}: no segment could be processed ({reasons or 'no segment'}); "
                                    f"see {out_dir}/ledger.jsonl")
 
 
-def _preflight(telemetry: Path, vehicle: str, model_spec: str | None) -> None:
+def _preflight(telemetry: Path, vehicle: str | None, model_spec: str | None) -> str:
     """Cheap checks of the inputs before any flow starts: the telemetry file is
     readable Parquet that follows RawTelemetry, has rows and no channel without a
-    single value; the vehicle file and the model specification load."""
+    single value; the vehicle (given, else the one the file names: there is no
+    default) and the model specification load.  Returns the vehicle."""
     import numpy as np
     import pyarrow.parquet as pq
 
+    from aerosid.io import telemetry_vehicle
     from aerosid.models import default_models, load_models
     from aerosid.preprocess import TelemetryError
     from aerosid.vehicle import load_vehicle
-    from schemas.telemetry import CHANNELS, RAW_COLUMNS, RawTelemetry, sentinel_mask
+    from schemas.telemetry import CHANNELS, MEASURED_AIR_DATA_CHANNELS, RAW_COLUMNS, RawTelemetry, sentinel_mask
     from tasks.runner import read_validated
 
     try:
@@ -244,6 +267,14 @@ def _preflight(telemetry: Path, vehicle: str, model_spec: str | None) -> None:
             raise TelemetryError(f"no value in the whole channel (all {len(frame)} rows NaN, infinite or a "
                                  "no-data sentinel): the pipeline needs every channel", file=str(telemetry),
                                  column=c, rows=range(len(frame)))
+    for c in (m for m in MEASURED_AIR_DATA_CHANNELS if m in frame.columns):
+        x = frame[c].to_numpy()
+        if not (np.isfinite(x) & ~sentinel_mask(x)).any():
+            raise TelemetryError(f"no value in the whole measured air-data column (all {len(frame)} rows NaN, "
+                                 "infinite or a no-data sentinel): fill it, or drop the column to use the US-1976 "
+                                 "atmosphere", file=str(telemetry), column=c, rows=range(len(frame)))
+    if vehicle is None:
+        vehicle = telemetry_vehicle(telemetry)  # the file was read: names its vehicle or raises
     veh = load_vehicle(vehicle)
     if veh.air_data_source == "vanes":
         for c in (veh.alpha_column, veh.beta_column):
@@ -253,6 +284,7 @@ def _preflight(telemetry: Path, vehicle: str, model_spec: str | None) -> None:
                                      file=str(telemetry), column=c)
     if model_spec:
         load_models(model_spec, base=default_models(veh))
+    return vehicle
 
 
 @main.command()

@@ -11,7 +11,7 @@ from dataclasses import dataclass
 import pandas as pd
 
 from aerosid.estimation.findings import Finding
-from aerosid.flight_data import build_flight_data_segments, load_database
+from aerosid.flight_data import build_flight_data_segments, build_pooled_flight_data, load_database
 from aerosid.identify import Identification, identify
 from aerosid.models import ChannelModel
 from aerosid.preprocess import PreprocessParams, PreprocessResult, preprocess
@@ -99,3 +99,41 @@ def process_telemetry(raw: pd.DataFrame, vehicle: Vehicle, *, flight: str = "fli
                                smoothing_options=smoothing_options, min_segment_s=min_segment_s, source=source)
     fd = est.flight_data
     return EBMRun(est.preprocessed, est.smoothed, fd, identify(fd, vehicle, models, mach_half_width))
+
+
+@dataclass(frozen=True)
+class PooledEBMRun:
+    """Several manoeuvres of one aircraft: each preprocessed and smoothed on its own
+    (``flights``: flight id -> its preprocessing and smoothed segments), one regression
+    on their pooled flight data."""
+
+    flights: dict  # flight id -> (PreprocessResult, tuple[SmoothedSegmentResult, ...])
+    flight_data: pd.DataFrame
+    identification: Identification
+
+    def summary(self) -> str:
+        parts = [f"{len(self.flights)} manoeuvres pooled: {', '.join(self.flights)}"]
+        for fid, (pre, smoothed) in self.flights.items():
+            parts += [f"[{fid}]", pre.summary(), *(s.result.summary() for s in smoothed)]
+        return "\n\n".join([*parts, self.identification.summary()])
+
+
+def process_manoeuvres(raws: dict[str, pd.DataFrame], vehicle: Vehicle, *, windows=None,
+                       models: dict[str, ChannelModel] | None = None, preprocess_params: dict | None = None,
+                       smoothing_options: dict | None = None, mach_half_width: float | None = 0.5,
+                       min_segment_s: float = 5.0, sources: dict[str, str] | None = None) -> PooledEBMRun:
+    """``raws``: flight id -> raw telemetry of one manoeuvre.  Each goes through
+    preprocessing, segmentation and smoothing alone; the regression fits them together
+    (the Prefect flow ``process_manoeuvres`` reproduces this)."""
+    db = load_database(vehicle)
+    per_flight, pooled = {}, []
+    for fid, raw in raws.items():
+        pre = preprocess(raw, PreprocessParams(**(preprocess_params or {})), source=(sources or {}).get(fid, fid))
+        segments = split_segments(pre.frame["t_s"].to_numpy(), list(pre.long_gaps), windows, min_segment_s)
+        smoothed = tuple(smooth_segment_frame(pre.frame.iloc[seg.start:seg.stop].reset_index(drop=True), vehicle,
+                                              smoothing_options, seg.segment_id) for seg in segments)
+        smoothed = tuple(s for s in smoothed if not getattr(s, "lost", False))  # as the flow fails them
+        per_flight[fid] = (pre, smoothed)
+        pooled.append((fid, pre.frame, [s.frame for s in smoothed]))
+    fd = build_pooled_flight_data(pooled, vehicle, db)
+    return PooledEBMRun(per_flight, fd, identify(fd, vehicle, models, mach_half_width))

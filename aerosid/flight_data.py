@@ -1,14 +1,16 @@
 """From a smoothed segment to the flight data the regression reads (method.md §7–§10):
-air data, flight coefficients, control mixing, and alpha/beta, either inverted from
-the force database (the finned class) or read from air-data vanes (a vehicle file
-with ``[air_data] source = "vanes"``)."""
+air data (the US-1976 atmosphere, or the measured ``rho_kg_m3``, ``qbar_pa``,
+``p_static_pa``, ``T_total_K`` columns when the telemetry has them: see
+``aerosid.atmosphere.air_data`` and ``flight_air_data_sources``), flight coefficients,
+control mixing, and alpha/beta, either inverted from the force database (the finned
+class) or read from air-data vanes (a vehicle file with ``[air_data] source = "vanes"``)."""
 from __future__ import annotations
 
 import numpy as np
 import pandas as pd
 
 from aerosid.aerodb import AeroDatabase
-from aerosid.atmosphere import H_MAX_M, H_MIN_M
+from aerosid.atmosphere import MEASURED, H_MAX_M, H_MIN_M, AirDataError, air_data, air_data_sources
 from aerosid.flight_coefficients import flight_coefficients
 from aerosid.derivatives import zero_phase_low_pass
 from aerosid.estimation.findings import DEPARTURE_MIN_S, DEPARTURE_SIGMA, dilate, span_findings
@@ -40,6 +42,18 @@ def _vane_angles(measured: pd.DataFrame, ok: np.ndarray, vehicle: Vehicle, t: np
     return (a, b, *total_angles(a, b))
 
 
+def measured_air_data_columns(columns) -> tuple[str, ...]:
+    """The measured air-data channels a preprocessed frame carries (as ``<name>_clean``)."""
+    have = set(columns)
+    return tuple(c for c in MEASURED if f"{c}_clean" in have)
+
+
+def flight_air_data_sources(columns) -> dict[str, str]:
+    """Where the flight data of a preprocessed frame with these columns takes its
+    density, static temperature, Mach and dynamic pressure from."""
+    return air_data_sources(measured_air_data_columns(columns))
+
+
 def _span(t: np.ndarray) -> str:
     """A time span for messages: 't0..t1 s (first t_s [...])'."""
     return f"{t[0]:.2f}..{t[-1]:.2f} s (first t_s {[round(float(v), 3) for v in t[:5]]})" if len(t) else "-"
@@ -48,8 +62,9 @@ def _span(t: np.ndarray) -> str:
 def build_flight_data(smoothed: pd.DataFrame, measured: pd.DataFrame, vehicle: Vehicle, db: AeroDatabase | None,
                       flight: str = "flight", signals: str = "band") -> pd.DataFrame:
     """smoothed: a SmoothedSegment frame; measured: the preprocessed rows of the same
-    segment (same t_s), whose ``*_clean`` columns give fins, V and h.  Rows where V, h
-    or a fin is unavailable (inside an unfilled gap) are left out.
+    segment (same t_s), whose ``*_clean`` columns give fins, V, h and any measured air
+    data.  Rows where V, h, a fin or a measured air-data value is unavailable (inside
+    an unfilled gap) are left out.
 
     signals: "band" (default) -- rates, angular and linear accelerations from the
     measured gyros and accelerometers, and every regressor, through one common
@@ -63,7 +78,8 @@ def build_flight_data(smoothed: pd.DataFrame, measured: pd.DataFrame, vehicle: V
         raise ValueError("smoothed and measured frames are not on the same time grid")
     segment = str(smoothed["segment"].iloc[0]) if len(smoothed) else "?"
     vanes = vehicle.air_data_source == "vanes"
-    cols = (*FIN_COLUMNS, "V_m_s", "h_m") + ((vehicle.alpha_column, vehicle.beta_column) if vanes else ())
+    airdata = measured_air_data_columns(measured.columns)
+    cols = (*FIN_COLUMNS, "V_m_s", "h_m", *airdata) + ((vehicle.alpha_column, vehicle.beta_column) if vanes else ())
     missing = [c for c in cols if f"{c}_clean" not in measured]
     if missing:
         raise ValueError(f"segment {segment}: the preprocessed telemetry has no column(s) "
@@ -94,7 +110,11 @@ def build_flight_data(smoothed: pd.DataFrame, measured: pd.DataFrame, vehicle: V
         ang = s[["L1_rad_s2", "M1_rad_s2", "N1_rad_s2"]].to_numpy()
     acc_sig = s[["sigma_X1_m_s2", "sigma_Y1_m_s2", "sigma_Z1_m_s2"]].to_numpy()
     ang_sig = s[["sigma_L1_rad_s2", "sigma_M1_rad_s2", "sigma_N1_rad_s2"]].to_numpy()
-    fc = flight_coefficients(vehicle, V, h, acc, ang, acc_sig, ang_sig)
+    try:
+        air = air_data(V, h, **{c: clean[c][ok] for c in airdata})
+    except AirDataError as exc:
+        raise ValueError(f"segment {segment}: {exc}, t = {_span(s['t_s'].to_numpy()[exc.positions])}") from None
+    fc = flight_coefficients(vehicle, V, h, acc, ang, acc_sig, ang_sig, air=air)
     if vanes and signals == "band":  # the vanes went through the common low-pass above
         alpha = clean[vehicle.alpha_column][ok] - vehicle.alpha_bias_rad
         beta = clean[vehicle.beta_column][ok] - vehicle.beta_bias_rad
@@ -212,7 +232,9 @@ def _inverted_angles(fc, s: pd.DataFrame, delta_p, delta_y, vehicle: Vehicle, db
         # the inversion would clamp the table at its edge: alpha and beta there would be made up
         ts = s["t_s"].to_numpy()[outside]
         m = fc.air.mach[outside]
-        raise ValueError(f"segment {segment}: Mach (from columns 'V_m_s' and 'h_m') is {m.min():.3g}..{m.max():.3g} "
+        origin = ("from columns 'V_m_s' and 'h_m'" if "T_total_K" not in fc.air.sources["mach"]
+                  else "from columns 'V_m_s' and 'T_total_K'")
+        raise ValueError(f"segment {segment}: Mach ({origin}) is {m.min():.3g}..{m.max():.3g} "
                          f"at {int(outside.sum())} samples, t = {_span(ts)}, outside the aerodynamic database's "
                          f"Mach {m_lo:g}..{m_hi:g} ({vehicle.database_path}); alpha/beta cannot be inverted "
                          "there: restrict the run to the database's range (--window T0 T1) or extend the database")
@@ -252,6 +274,21 @@ def build_flight_data_segments(preprocessed: pd.DataFrame, smoothed: list[pd.Dat
         start = int(np.searchsorted(t, ts[0] - 1e-9))
         rows = preprocessed.iloc[start:start + len(ts)].reset_index(drop=True)
         parts.append(build_flight_data(sm, rows, vehicle, db, flight, signals))
+    frame = pd.concat(parts, ignore_index=True)
+    frame.attrs["findings"] = [f for part in parts for f in part.attrs.get("findings", [])]
+    return frame
+
+
+def build_pooled_flight_data(flights: list[tuple[str, pd.DataFrame, list[pd.DataFrame]]], vehicle: Vehicle,
+                             db: AeroDatabase | None) -> pd.DataFrame:
+    """Flight data of several manoeuvres of one aircraft, pooled for one regression:
+    ``flights`` holds (flight id, preprocessed frame, its smoothed segments) per
+    manoeuvre, each preprocessed and smoothed on its own.  The ids must differ (the
+    regression's derivatives and residual correction work per flight)."""
+    ids = [f for f, _, _ in flights]
+    if len(set(ids)) < len(ids):
+        raise ValueError(f"pooled flights need distinct ids, got {ids}")
+    parts = [build_flight_data_segments(pre, smoothed, vehicle, db, fid) for fid, pre, smoothed in flights]
     frame = pd.concat(parts, ignore_index=True)
     frame.attrs["findings"] = [f for part in parts for f in part.attrs.get("findings", [])]
     return frame

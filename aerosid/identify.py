@@ -153,7 +153,10 @@ def mach_window_mask(mach: np.ndarray, reference: float, half_width: float | Non
 
 def identify(flight_data: pd.DataFrame, vehicle: Vehicle, models: dict[str, ChannelModel] | None = None,
              mach_half_width: float | None = 0.5, cov: str = "morelli_klein") -> Identification:
-    """Fit every channel's model on the samples with |M - M_ref| <= mach_half_width."""
+    """Fit every channel's model on the samples with |M - M_ref| <= mach_half_width.
+    Pooled flights (several values of ``flight``: manoeuvres of one aircraft) are fitted
+    together; the coloured-residual correction treats each flight as its own record
+    (``fit_linear(groups=...)``)."""
     models = models or default_models(vehicle)
     fd = flight_data.sort_values(["flight", "t_s"], kind="stable").reset_index(drop=True)
     mask = mach_window_mask(fd["mach"].to_numpy(), vehicle.mach_reference, mach_half_width)
@@ -164,10 +167,12 @@ def identify(flight_data: pd.DataFrame, vehicle: Vehicle, models: dict[str, Chan
         raise ValueError(f"only {len(fd)} samples inside Mach {vehicle.mach_reference} ± {mach_half_width}: "
                          f"too few to fit the models ({span})")
     signals = vehicle_signals(fd, vehicle)
+    flights = fd["flight"].astype(str).to_numpy()
     fits: dict[str, LinearFit] = {}
     for channel, model in models.items():
         X = model.regressors(signals)
-        fits[channel] = fit_linear(fd[channel].to_numpy(float), X, names=model.names, channel=channel, cov=cov)
+        fits[channel] = fit_linear(fd[channel].to_numpy(float), X, names=model.names, channel=channel, cov=cov,
+                                   groups=flights)
     sigma = _eiv_sigma(fd, vehicle)
     if sigma is not None:
         fits = _eiv_corrected(fd, vehicle, models, fits, sigma)

@@ -71,19 +71,48 @@ def write_text_atomic(text: str, path: str | Path, check: Callable[[Path], None]
     return _atomic(Path(path), lambda tmp: tmp.write_text(text), check)
 
 
-def telemetry_vehicle(path: str | Path, default: str = "seed-rlv") -> str:
-    """The vehicle a telemetry file names in its Parquet metadata: a vehicle file
-    (``aerosid.vehicle_file``, relative to the telemetry's folder, written by
-    ``aerosid import``) when it exists, else a built-in vehicle (``aerosid.case``,
-    written by ``aerosid simulate``), else `default`."""
+#: Parquet metadata keys that name a telemetry file's vehicle, in order of precedence:
+#: ``aerosid.vehicle_file`` (``aerosid import``'s vehicle file beside the telemetry),
+#: ``aerosid.vehicle`` (an importer's: a built-in name or a vehicle TOML path, relative
+#: to the telemetry file's folder or absolute) and ``aerosid.case`` (``aerosid simulate``'s
+#: case name, which is a built-in vehicle's).
+VEHICLE_METADATA_KEYS = ("aerosid.vehicle_file", "aerosid.vehicle", "aerosid.case")
+
+
+class NoVehicleError(ValueError):
+    """A telemetry file names no usable vehicle and none was given."""
+
+
+def telemetry_vehicle(path: str | Path) -> str | None:
+    """The vehicle a telemetry file names in its Parquet metadata (``VEHICLE_METADATA_KEYS``):
+    a built-in vehicle's name, or the absolute path of the vehicle TOML file it names
+    (a relative path is taken from the telemetry file's folder).
+
+    Raises ``NoVehicleError`` when the file names none, or names one that is neither
+    a built-in vehicle nor an existing file: there is no default vehicle (a wrong
+    vehicle's mass and inertia would silently scale every coefficient).  Returns None
+    when the file cannot be read at all: the preprocessing stage reports that, with
+    the file's name."""
     from aerosid.vehicle import builtin_vehicles
 
+    path = Path(path)
     try:
         meta = pq.read_schema(path).metadata or {}
-    except (OSError, pa.ArrowInvalid):  # unreadable: the preprocessing stage reports it with the file name
-        return default
-    vehicle_file = meta.get(b"aerosid.vehicle_file", b"").decode("utf-8", "replace")
-    if vehicle_file and (Path(path).parent / vehicle_file).is_file():
-        return str((Path(path).parent / vehicle_file).resolve())
-    case = meta.get(b"aerosid.case", b"").decode("utf-8", "replace")
-    return case if case in builtin_vehicles() else default
+    except (OSError, pa.ArrowInvalid):
+        return None
+    builtin = builtin_vehicles()
+    hint = (f"give the vehicle (aerosid run ... --vehicle NAME_OR_FILE): a built-in vehicle "
+            f"({', '.join(builtin)}) or a vehicle TOML file (docs/vehicles.md)")
+    for key in VEHICLE_METADATA_KEYS:
+        value = meta.get(key.encode(), b"").decode("utf-8", "replace").strip()
+        if not value:
+            continue
+        if value in builtin:
+            return value
+        candidate = Path(value) if Path(value).is_absolute() else path.parent / value
+        if candidate.is_file():
+            return str(candidate.resolve())
+        raise NoVehicleError(f"{path}: its metadata {key} = {value!r} names neither a built-in vehicle nor an "
+                             f"existing vehicle file (looked for {candidate}); {hint}")
+    raise NoVehicleError(f"{path}: the telemetry names no vehicle (no {' or '.join(VEHICLE_METADATA_KEYS)} in its "
+                         f"Parquet metadata) and none was given; {hint}")

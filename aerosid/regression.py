@@ -61,6 +61,19 @@ sigma).  Two corrections are provided:
 ``cov="ols"``
     Plain least squares; the corrected fields then equal the OLS ones.
 
+Several records (``groups``)
+----------------------------
+Pooled manoeuvres (or flights) are separate records: the residual of one is not
+correlated with the next one's across the junction.  With ``groups`` (one label per
+row, rows of a group contiguous) the residual autocovariance is the pooled
+within-group one, ``R(k) = (1/N) sum_g sum_i v_(g,i) v_(g,i+k)``, and the middle
+matrix is ``sum_g X_g' T X_g`` (no product of samples of two groups); the lag
+window's rule and N_eff use that R.  Treating the junction as contiguous instead
+would add products ``v_i v_j`` of the end of one record and the start of the next,
+within L samples of each other: a bias of order L/N_g that depends on the order in
+which the records are stacked.  A single group is exactly the ungrouped fit.  HAC
+uses statsmodels' ``hac-panel`` with the same groups.
+
 Effective sample size and interval quantiles
 --------------------------------------------
 ``N_eff = N / (1 + 2 sum_{k=1..L} w_k rho_k)`` (``rho`` the residual
@@ -146,12 +159,42 @@ def residual_autocovariance(v: np.ndarray, max_lag: int | None = None) -> np.nda
     return r
 
 
-def auto_max_lag(v: np.ndarray, multiple: int | None = None) -> int:
+def _group_slices(groups: Any) -> list[slice] | None:
+    """Row ranges of the contiguous groups; None for a single group (or no groups)."""
+    if groups is None:
+        return None
+    g = np.asarray(groups)
+    change = np.flatnonzero(g[1:] != g[:-1]) + 1
+    if change.size == 0:
+        return None
+    bounds = np.concatenate([[0], change, [g.size]])
+    labels = g[bounds[:-1]].tolist()
+    if len(set(labels)) < len(labels):
+        raise ValueError("groups must be contiguous: sort the rows by group (e.g. flight) first")
+    return [slice(int(a), int(b)) for a, b in zip(bounds[:-1], bounds[1:])]
+
+
+def _pooled_autocovariance(v: np.ndarray, slices: list[slice] | None, max_lag: int | None = None) -> np.ndarray:
+    """``residual_autocovariance`` pooled within groups: (1/N) sum over groups of the
+    lagged products inside each group (lags longer than a group get nothing from it)."""
+    if slices is None:
+        return residual_autocovariance(v, max_lag)
+    n = v.size
+    max_lag = n - 1 if max_lag is None else max_lag
+    r = np.zeros(max_lag + 1)
+    for s in slices:
+        vg = v[s]
+        rg = residual_autocovariance(vg, min(max_lag, vg.size - 1)) * vg.size
+        r[: rg.size] += rg
+    return r / n
+
+
+def auto_max_lag(v: np.ndarray, multiple: int | None = None, groups: Any = None) -> int:
     """Automatic lag-window half-width: ``multiple`` (default ``LAG_MULTIPLE``) x first
-    zero crossing of R_vv, at most N - 1."""
+    zero crossing of R_vv (pooled within ``groups``, see the module doc), at most N - 1."""
     if multiple is None:
         multiple = LAG_MULTIPLE
-    r = residual_autocovariance(v)
+    r = _pooled_autocovariance(np.asarray(v, dtype=float), _group_slices(groups))
     n = r.size
     nonpos = np.nonzero(r[1:] <= 0.0)[0]
     k0 = int(nonpos[0]) + 1 if nonpos.size else n - 1
@@ -172,20 +215,25 @@ def _effective_n(r_windowed: np.ndarray, n: int, p: int) -> float:
     return float(np.clip(n_eff, p + 1.0, n))
 
 
-def _morelli_klein(X: np.ndarray, v: np.ndarray, xtx_inv: np.ndarray, max_lag: int):
-    """Morelli-Klein coloured-residual covariance with a Parzen lag window.
+def _morelli_klein(X: np.ndarray, v: np.ndarray, xtx_inv: np.ndarray, max_lag: int,
+                   slices: list[slice] | None = None):
+    """Morelli-Klein coloured-residual covariance with a Parzen lag window (within each
+    group of ``slices`` when given).
 
     Returns (cov, n_eff) where cov already carries the N_eff/(N_eff - p) factor.
     """
     n, p = X.shape
-    r = residual_autocovariance(v, max_lag) * _parzen(max_lag)
+    r = _pooled_autocovariance(v, slices, max_lag) * _parzen(max_lag)
     n_eff = _effective_n(r, n, p)
     if max_lag == 0:
         middle = r[0] * (X.T @ X)
     else:
         r_sym = np.concatenate([r[:0:-1], r])  # lags -L..L
-        tx = scipy.signal.fftconvolve(X, r_sym[:, None], mode="full", axes=0)[max_lag : max_lag + n]
-        middle = X.T @ tx
+        middle = np.zeros((p, p))
+        for s in slices or [slice(0, n)]:
+            Xg = X[s]
+            tx = scipy.signal.fftconvolve(Xg, r_sym[:, None], mode="full", axes=0)[max_lag : max_lag + Xg.shape[0]]
+            middle += Xg.T @ tx
         middle = 0.5 * (middle + middle.T)
     cov = xtx_inv @ middle @ xtx_inv
     cov = 0.5 * (cov + cov.T) * (n_eff / max(n_eff - p, 1.0))
@@ -525,6 +573,7 @@ def fit_linear(
     add_intercept: bool = False,
     intercept_name: str | None = None,
     sigma2_max: float | None = None,
+    groups: Any = None,
 ) -> LinearFit:
     """Least-squares fit of ``y`` on the columns of ``X`` with honest uncertainty.
 
@@ -542,9 +591,12 @@ def fit_linear(
     add_intercept : prepend a column of ones named ``intercept_name``
         (default ``f"{channel}_0"`` or ``"const"``).
     sigma2_max : PSE a-priori fit-error variance bound (default: variance of y).
+    groups : optional (N,) labels of separate records (e.g. pooled manoeuvres), rows
+        of a group contiguous: the coloured-residual correction then takes no residual
+        products across two records (module doc).  One label = no groups.
 
     Rows with NaN in y, X or weights are dropped (``n_dropped``).  Data are
-    assumed to be one contiguous, equally spaced record.
+    assumed to be one contiguous, equally spaced record (per group).
     """
     if cov not in _METHODS:
         raise ValueError(f"cov must be one of {_METHODS}, got {cov!r}")
@@ -583,6 +635,12 @@ def fit_linear(
         if np.any(w[ok] < 0):
             raise ValueError("weights must be non-negative")
     n_dropped = int((~ok).sum())
+    if groups is not None:
+        groups = np.asarray(groups)
+        if groups.shape != yv.shape:
+            raise ValueError("groups must have one label per row")
+        groups = groups[ok]
+    slices = _group_slices(groups)
     yv, A = yv[ok], A[ok]
     sw = np.sqrt(w[ok]) if weights is not None else np.ones(yv.size)
     n, k = A.shape
@@ -611,17 +669,21 @@ def fit_linear(
     if cov == "ols":
         cov_k, n_eff, max_lag = cov_ols_k, float(n), 0
     elif cov == "morelli_klein":
-        max_lag = auto_max_lag(vw) if block is None else int(block)
+        max_lag = auto_max_lag(vw, groups=groups) if block is None else int(block)
         if not 0 <= max_lag <= n - 1:
             raise ValueError(f"block must be in [0, {n - 1}], got {max_lag}")
-        cov_k, n_eff = _morelli_klein(Xw, vw, xtx_inv, max_lag)
+        cov_k, n_eff = _morelli_klein(Xw, vw, xtx_inv, max_lag, slices)
     else:  # hac
-        max_lag = auto_max_lag(vw, HAC_LAG_MULTIPLE) if hac_maxlags is None else int(hac_maxlags)
+        max_lag = auto_max_lag(vw, HAC_LAG_MULTIPLE, groups) if hac_maxlags is None else int(hac_maxlags)
         if not 0 <= max_lag <= n - 1:
             raise ValueError(f"hac_maxlags must be in [0, {n - 1}], got {max_lag}")
-        hac = sm.OLS(yw, Xw).fit(cov_type="HAC", cov_kwds={"maxlags": max_lag, "use_correction": True})
+        if slices is None:
+            hac = sm.OLS(yw, Xw).fit(cov_type="HAC", cov_kwds={"maxlags": max_lag, "use_correction": True})
+        else:
+            codes = np.concatenate([np.full(s.stop - s.start, i) for i, s in enumerate(slices)])
+            hac = sm.OLS(yw, Xw).fit(cov_type="hac-panel", cov_kwds={"groups": codes, "maxlags": max_lag})
         cov_k = np.asarray(hac.cov_params(), dtype=float)
-        r = residual_autocovariance(vw, max_lag) * _parzen(max_lag)
+        r = _pooled_autocovariance(vw, slices, max_lag) * _parzen(max_lag)
         n_eff = _effective_n(r, n, p)
     dof_eff = max(n_eff - p, 1.0) if cov != "ols" else float(n - p)
 

@@ -354,8 +354,15 @@ def _s_header(run: _Run, generated: str) -> str:
     except Exception as exc:  # a broken install must not stop the report
         code_now = f"unknown ({type(exc).__name__})"
     status = run.run.get("status")
-    rows = [("flight", run.flight), ("vehicle", run.vehicle), ("telemetry file", telemetry or "unknown"),
+    subs = _flights(run)
+    if subs:  # pooled manoeuvres: one line per telemetry file
+        telemetry = "; ".join(f"{s.flight}: {s.run.get('telemetry')}" for s in subs)
+        sha = "; ".join(f"{s.flight}: {((s.last('preprocess') or {}).get('inputs') or [{}])[0].get('sha256')}"
+                        for s in subs)
+    rows = [("flight", run.flight), ("vehicle", run.vehicle),
+            ("telemetry files" if subs else "telemetry file", telemetry or "unknown"),
             ("telemetry SHA-256", sha or "unknown (no ledger record)"),
+            ("air data", _air_data_text(run)),
             ("run status", status or "unknown (no run.json)"),
             ("run folder", str(run.dir)),
             ("processed (UTC)", processed or "unknown"),
@@ -367,6 +374,42 @@ def _s_header(run: _Run, generated: str) -> str:
     if run.errors:
         body += "".join(_note(e) for e in run.errors)
     return body
+
+
+def _flights(run: _Run) -> list[_Run] | None:
+    """The manoeuvres of a pooled run (run.json ``flights``), each as a run of its own
+    folder ``flights/<id>/`` with its ledger records; None for a one-flight run."""
+    flights = run.run.get("flights")
+    if not isinstance(flights, list) or not flights:
+        return None
+    return [_Run(run.dir / "flights" / str(fs.get("flight")), fs,
+                 [r for r in run.ledger if r.get("flight") == fs.get("flight")]) for fs in flights]
+
+
+def _per_flight(run: _Run, section: Callable[[_Run], str]) -> str:
+    """A per-flight section once per manoeuvre of a pooled run."""
+    subs = _flights(run)
+    if subs is None:
+        return section(run)
+    return "\n".join(f'<h3 id={_q("manoeuvre-" + sub.flight)}>Manoeuvre {_e(sub.flight)}</h3>\n' + section(sub)
+                     for sub in subs)
+
+
+def _air_data_text(run: _Run) -> str:
+    """Where density, temperature, Mach and dynamic pressure came from, per flight
+    (run.json ``air_data``, else flight_data.parquet's aerosid.air_data metadata)."""
+    src = run.run.get("air_data")
+    if not src:
+        path = run.dir / "flight_data.parquet"
+        src = _jmeta(_meta(path), "aerosid.air_data", {}) if path.is_file() else {}
+    if not isinstance(src, dict) or not src:
+        return "unknown (no record)"
+    names = {"rho_kg_m3": "density", "T_static_K": "static temperature", "mach": "Mach", "qbar_pa": "dynamic pressure"}
+    groups: dict[str, list[str]] = {}  # flights with the same sources share a line
+    for fid, q in src.items():
+        text = "; ".join(f"{names.get(k, k)}: {v}" for k, v in (q or {}).items())
+        groups.setdefault(text, []).append(str(fid))
+    return " | ".join((f"{', '.join(f)}: " if len(src) > 1 else "") + text for text, f in groups.items())
 
 
 def _s_preprocessing(run: _Run) -> str:
@@ -989,8 +1032,8 @@ def build_report(run_dir: str | Path, *, diagnosis=None, truth=None) -> str:
     truth_c = _truth_coefficients(truth)
     generated = datetime.now(timezone.utc).isoformat(timespec="seconds")
     bodies = {
-        "preprocessing": lambda: _s_preprocessing(run),
-        "segments": lambda: _s_segments(run),
+        "preprocessing": lambda: _per_flight(run, _s_preprocessing),
+        "segments": lambda: _per_flight(run, _s_segments),
         "coefficients": lambda: _s_coefficients(run, truth_c),
         "comparison": lambda: _s_comparison(run, diag),
         "diagnosis": lambda: _s_diagnosis(doc, diag, source, run),

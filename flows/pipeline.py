@@ -1,4 +1,4 @@
-"""Prefect flows of aerosid: process_flight, reprocess_inbox, retry_failed, campaign.
+"""Prefect flows of aerosid: process_flight, process_manoeuvres, reprocess_inbox, retry_failed, campaign.
 
 Flows hold the order of work only; every number is computed in ``aerosid`` and
 every file is read and written by ``tasks``.
@@ -15,7 +15,7 @@ from prefect import flow, get_run_logger
 
 from aerosid.io import telemetry_vehicle
 from aerosid.provenance import sha256_file
-from flows.steps import FlightJob, check_flight_id, flight_id_from_path, run_flights
+from flows.steps import FlightJob, PoolJob, check_flight_id, flight_id_from_path, run_flights, run_pooled
 from tasks import ledger
 from tasks.ledger import LEDGER_NAME
 
@@ -26,10 +26,46 @@ def process_flight(telemetry: str, out_dir: str, vehicle: str | None = None, fli
                    preprocess_params: dict | None = None, smoothing_options: dict | None = None,
                    mach_half_width: float | None = 0.5) -> dict:
     """One telemetry file -> segments -> every stage -> coefficients (and run.json, ledger).
-    vehicle: a built-in name or a vehicle file; None = the one the file's metadata names, else seed-rlv."""
+    vehicle: a built-in name or a vehicle file; None = the one the file's metadata names
+    (aerosid.io.telemetry_vehicle: an error when it names none)."""
     job = FlightJob(str(telemetry), str(out_dir), check_flight_id(flight or flight_id_from_path(telemetry)),
                     vehicle or telemetry_vehicle(telemetry), windows, model_spec, preprocess_params or {}, smoothing_options or {}, mach_half_width)
     return run_flights([job])[0]
+
+
+def pooled_vehicle(telemetry_files: list[str], vehicle: str | None = None) -> str:
+    """The one vehicle of pooled manoeuvres: `vehicle` if given, else the vehicle every
+    file names (aerosid.io.telemetry_vehicle); files naming different vehicles (by the
+    content of their vehicle files) are refused."""
+    if vehicle:
+        return vehicle
+    from aerosid.vehicle import resolve_vehicle_path
+
+    # an unreadable file names nothing (None): its preprocessing reports it
+    named = {str(t): v for t in telemetry_files if (v := telemetry_vehicle(t)) is not None}
+    content = {t: resolve_vehicle_path(v).read_bytes() for t, v in named.items()}
+    if len(set(content.values())) > 1:
+        listing = "; ".join(f"{t}: {v}" for t, v in named.items())
+        raise ValueError(f"the telemetry files name different vehicles ({listing}): pool manoeuvres of one "
+                         "aircraft, or give the vehicle (--vehicle NAME_OR_FILE)")
+    return next(iter(named.values()), None)
+
+
+@flow(name="process-manoeuvres", log_prints=True)
+def process_manoeuvres(telemetry_files: list[str], out_dir: str, vehicle: str | None = None, name: str | None = None,
+                       windows: list | None = None, model_spec: str | None = None,
+                       preprocess_params: dict | None = None, smoothing_options: dict | None = None,
+                       mach_half_width: float | None = 0.5) -> dict:
+    """Several manoeuvres of one aircraft -> one identification: each file preprocessed
+    and smoothed on its own (its own flight id and segments, under OUT/flights/<id>/),
+    their flight data pooled into OUT/flight_data.parquet, one regression.  vehicle: as
+    for process_flight, and every file must name the same one.  name: the pooled
+    identification's id in the ledger (default: the run folder's name)."""
+    pool = PoolJob([str(t) for t in telemetry_files], str(out_dir),
+                   check_flight_id(name or flight_id_from_path(out_dir)),
+                   pooled_vehicle([str(t) for t in telemetry_files], vehicle), windows, model_spec,
+                   preprocess_params or {}, smoothing_options or {}, mach_half_width)
+    return run_pooled(pool)
 
 
 @flow(name="campaign", log_prints=True)
@@ -137,9 +173,9 @@ def reprocess_inbox(inbox: str, out_root: str, vehicle: str | None = None, patte
             if _processed_shas(ledger.read(led)).get(flight) == sha:  # done by a concurrent run meanwhile
                 report["unchanged"].append(flight)
                 continue
-            job = FlightJob(str(path), str(root / flight), flight, vehicle or telemetry_vehicle(path),
-                            ledger_path=str(led))
-            try:
+            try:  # a file naming no vehicle fails alone, like a bad file
+                job = FlightJob(str(path), str(root / flight), flight, vehicle or telemetry_vehicle(path),
+                                ledger_path=str(led))
                 summary = run_flights([job])[0]
             except Exception as exc:  # a bad file (the ledger has it) must not stop the scan of the others
                 logger.error("inbox file %s failed: %s", path, exc)
@@ -173,13 +209,28 @@ def retry_failed(out_root: str) -> dict:
             if rec.get("stage") == "smooth":
                 latest[(str(led), rec["flight"], rec["segment"])] = rec
     failed = {(led, flight) for (led, flight, _), rec in latest.items() if rec["status"] == "failed"}
-    results, errors = [], {}
+    results, errors, pools_done = [], {}, set()
     for led, flight in sorted(failed):
         # the failed record's own input is RUN_DIR/preprocessed.parquet: its folder is the run
         rec = next(r for (lp, fl, _), r in latest.items() if lp == led and fl == flight and r["status"] == "failed")
         run_dir = Path(rec["inputs"][0]["path"]).parent
         try:
             state = json.loads((run_dir / STATE_FILE).read_text())
+            if state.get("pooled_into"):  # a manoeuvre of a pooled identification: re-run the pool
+                pool_dir = run_dir.parent.parent  # POOL/flights/<id>/
+                if pool_dir in pools_done:
+                    continue
+                pools_done.add(pool_dir)
+                pool = PoolJob(**{**json.loads((pool_dir / STATE_FILE).read_text())["pool"], "ledger_path": led})
+                with _claim(root / ".locks" / f"{pool.name}.lock") as mine:
+                    if not mine:
+                        errors[pool.name] = "busy: another run holds this pooled identification"
+                        continue
+                    try:
+                        results.append(run_pooled(pool))
+                    except Exception as exc:  # recorded in the pool's run.json and ledger; the others go on
+                        errors[pool.name] = f"{type(exc).__name__}: {exc}"
+                continue
             job = FlightJob(**{**state["job"], "ledger_path": led})
             with _claim(root / ".locks" / f"{flight}.lock") as mine:
                 if not mine:

@@ -2,6 +2,7 @@
 flow's task runner (threads by default, Dask in a campaign).  No numerics."""
 from __future__ import annotations
 
+import json
 import re
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -14,8 +15,8 @@ from prefect.runtime import flow_run
 from tasks.ledger import LEDGER_NAME
 from tasks.report import report_task, truth_next_to
 from tasks.runner import StageContext
-from tasks.stages import (flight_data_task, plan_segments_task, preprocess_task, regression_task,
-                          smooth_segment_task)
+from tasks.stages import (flight_data_task, plan_segments_task, pooled_flight_data_task, preprocess_task,
+                          regression_task, smooth_segment_task)
 from tasks.summary import markdown_table, write_run_summary_task
 
 FLIGHT_ID = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,99}$")
@@ -58,18 +59,16 @@ class FlightJob:
         return StageContext(ledger, str(flow_run.get_id() or "local"), self.flight, segment)
 
 
-def run_flights(jobs: list[FlightJob], isolate: bool = False) -> list[dict]:
-    """Every stage of every job; segments of all flights are submitted together so a
-    parallel task runner can spread them.  A failed segment is recorded and left out;
-    the flight goes on with the others.  With `isolate` (campaigns, inbox scans) a
-    flight whose preprocessing, flight data or regression fails is recorded as failed
-    in its run.json and the other flights go on; otherwise the error is raised after
-    run.json says so."""
-    logger = get_run_logger()
+def _check_ids(jobs: list[FlightJob]) -> None:
     ids = [check_flight_id(job.flight) for job in jobs]
     if len(set(ids)) < len(ids):
         dup = sorted({i for i in ids if ids.count(i) > 1})
         raise ValueError(f"two telemetry files map to the same flight id {dup}: rename one (the id names the run folder)")
+
+
+def _start(jobs: list[FlightJob]):
+    """Submit every job's preprocessing, then its segments' smoothing: returns the
+    preprocessing futures, their results (None where it failed), plans and smoothing futures."""
     for job in jobs:
         Path(job.run_dir).mkdir(parents=True, exist_ok=True)
     pre_futures = [preprocess_task.submit(j.telemetry, j.run_dir, j.context(), j.preprocess_params) for j in jobs]
@@ -84,11 +83,50 @@ def run_flights(jobs: list[FlightJob], isolate: bool = False) -> list[dict]:
         pre.append(p), plans.append(plan)
         seg_futures.append([smooth_segment_task.submit(p["path"], job.run_dir, job.context(s["segment_id"]), s,
                                                        job.vehicle, job.smoothing_options) for s in plan])
+    return pre_futures, pre, plans, seg_futures
+
+
+def _flight_summary(job: FlightJob, p: dict | None, plan: list) -> dict:
+    return {"job": asdict(job), "flight": job.flight, "telemetry": job.telemetry, "vehicle": job.vehicle,
+            "preprocess": p, "segments": [s["segment_id"] for s in plan], "segments_ok": [],
+            "segments_failed": [], "status": "failed"}
+
+
+def _collect_segments(job: FlightJob, plan: list, futures: list, summary: dict, logger) -> list[dict]:
+    """Wait for a flight's segments; record which were smoothed and which failed."""
+    done, failed = summary["segments_ok"], summary["segments_failed"]
+    for seg, fut in zip(plan, futures):
+        fut.wait()
+        if fut.state.is_completed():
+            done.append(fut.result())
+        else:
+            err = fut.state.message or "failed"
+            failed.append({"segment": seg["segment_id"], "error": err})
+            logger.warning("flight %s segment %s failed: %s", job.flight, seg["segment_id"], err)
+    summary["status"] = "failed" if not done else ("partial" if failed else "ok")
+    return done
+
+
+def _air_data(flight_data_path: str) -> dict:
+    """flight -> where its density, temperature, Mach and dynamic pressure came from."""
+    from aerosid.io import read_parquet_metadata
+
+    return json.loads(read_parquet_metadata(flight_data_path).get("aerosid.air_data", "{}"))
+
+
+def run_flights(jobs: list[FlightJob], isolate: bool = False) -> list[dict]:
+    """Every stage of every job; segments of all flights are submitted together so a
+    parallel task runner can spread them.  A failed segment is recorded and left out;
+    the flight goes on with the others.  With `isolate` (campaigns, inbox scans) a
+    flight whose preprocessing, flight data or regression fails is recorded as failed
+    in its run.json and the other flights go on; otherwise the error is raised after
+    run.json says so."""
+    logger = get_run_logger()
+    _check_ids(jobs)
+    pre_futures, pre, plans, seg_futures = _start(jobs)
     summaries = []
     for job, p, plan, futures, pre_future in zip(jobs, pre, plans, seg_futures, pre_futures):
-        summary = {"job": asdict(job), "flight": job.flight, "telemetry": job.telemetry, "vehicle": job.vehicle,
-                   "preprocess": p, "segments": [s["segment_id"] for s in plan], "segments_ok": [],
-                   "segments_failed": [], "status": "failed"}
+        summary = _flight_summary(job, p, plan)
         try:
             if p is None:
                 summary["error"] = {"stage": "preprocess", "message": pre_future.state.message or "failed"}
@@ -106,21 +144,12 @@ def run_flights(jobs: list[FlightJob], isolate: bool = False) -> list[dict]:
 
 
 def _finish_flight(job: FlightJob, p: dict, plan: list, futures: list, summary: dict, logger) -> None:
-    done, failed = summary["segments_ok"], summary["segments_failed"]
-    for seg, fut in zip(plan, futures):
-        fut.wait()
-        if fut.state.is_completed():
-            done.append(fut.result())
-        else:
-            err = fut.state.message or "failed"
-            failed.append({"segment": seg["segment_id"], "error": err})
-            logger.warning("flight %s segment %s failed: %s", job.flight, seg["segment_id"], err)
-    summary["status"] = "failed" if not done else ("partial" if failed else "ok")
+    done = _collect_segments(job, plan, futures, summary, logger)
     if done:
         fd = flight_data_task(p["path"], [d["path"] for d in done], job.run_dir, job.context(), job.vehicle)
         coeffs = regression_task([fd["path"]], job.run_dir, job.context(), job.vehicle, job.model_spec,
                                  job.mach_half_width)
-        summary.update(flight_data=fd, coefficients=coeffs)
+        summary.update(flight_data=fd, coefficients=coeffs, air_data=_air_data(fd["path"]))
         # a run with findings (gated runs, NIS out of band, database edge, departures) is not "ok"
         summary["findings"] = [f for d in done for f in d.get("findings", [])] + list(fd.get("findings", []))
         if summary["findings"] and summary["status"] == "ok":
@@ -133,7 +162,7 @@ def _finish_flight(job: FlightJob, p: dict, plan: list, futures: list, summary: 
         write_run_summary_task(job.run_dir, summary)
 
 
-def _artifacts(job: FlightJob, summary: dict) -> None:
+def _artifacts(job, summary: dict) -> None:
     """Markdown tables of the results in Prefect's UI (keys: lowercase, digits, dashes)."""
     key = re.sub(r"[^a-z0-9-]+", "-", job.flight.lower()).strip("-") or "flight"
     table = pd.read_parquet(summary["coefficients"]["path"])
@@ -141,7 +170,108 @@ def _artifacts(job: FlightJob, summary: dict) -> None:
           "SI per radian, moments about the CG; sigma corrected for coloured residuals.", "",
           markdown_table(table[["channel", "coefficient", "estimate", "std_error", "std_error_ols", "ci_low",
                                 "ci_high", "reference"]])]
-    segs = [f"| {s} | {'ok' if any(d['segment'] == s for d in summary['segments_ok']) else 'failed'} |"
-            for s in summary["segments"]]
+    segs = [f"| {pre}{s} | {'ok' if any(d['segment'] == s for d in fs['segments_ok']) else 'failed'} |"
+            for pre, fs in ([(f"{f['flight']}/", f) for f in summary["flights"]] if "flights" in summary
+                            else [("", summary)]) for s in fs["segments"]]
     md += ["", "## Segments", "", "| segment | status |", "|---|---|", *segs]
     create_markdown_artifact("\n".join(md), key=f"coefficients-{key}", description=f"EBM results of {job.flight}")
+
+
+# ------------------------------------------------------------- several manoeuvres, one model
+POOLED_FLIGHTS_DIR = "flights"
+
+
+@dataclass
+class PoolJob:
+    """Several manoeuvres of one aircraft identified together: each telemetry file is
+    preprocessed and smoothed on its own under ``run_dir/flights/<flight id>/``; the
+    pooled flight data, coefficients, report and run.json are in ``run_dir``."""
+
+    telemetry: list
+    run_dir: str
+    name: str
+    vehicle: str
+    windows: list | None = None
+    model_spec: str | None = None
+    preprocess_params: dict = field(default_factory=dict)
+    smoothing_options: dict = field(default_factory=dict)
+    mach_half_width: float | None = 0.5
+    min_segment_s: float = 5.0
+    ledger_path: str | None = None
+
+    @property
+    def flight(self) -> str:  # the pooled identification's name (ledger records, artifacts)
+        return self.name
+
+    def flight_jobs(self) -> list[FlightJob]:
+        ledger = self.ledger_path or str(Path(self.run_dir) / LEDGER_NAME)
+        jobs = []
+        for path in self.telemetry:
+            fid = flight_id_from_path(path)
+            jobs.append(FlightJob(str(path), str(Path(self.run_dir) / POOLED_FLIGHTS_DIR / fid), fid, self.vehicle,
+                                  self.windows, self.model_spec, dict(self.preprocess_params),
+                                  dict(self.smoothing_options), self.mach_half_width, self.min_segment_s, ledger))
+        return jobs
+
+    def context(self) -> StageContext:
+        ledger = self.ledger_path or str(Path(self.run_dir) / LEDGER_NAME)
+        return StageContext(ledger, str(flow_run.get_id() or "local"), self.name, "")
+
+
+def _pooled_truth(telemetry: list[str]) -> str | None:
+    """The truth.json of simulated manoeuvres when every file has one and they hold the
+    same coefficients (the same vehicle and effects); else None."""
+    paths = [truth_next_to(t) for t in telemetry]
+    if not paths or None in paths:
+        return None
+    docs = [json.loads(Path(p).read_text()).get("coefficients") for p in paths]
+    return paths[0] if all(d == docs[0] for d in docs) else None
+
+
+def run_pooled(pool: PoolJob) -> dict:
+    """Every stage of a pooled identification (see PoolJob).  A file whose
+    preprocessing fails fails the run (run.json says so first); a failed segment, or a
+    manoeuvre none of whose segments could be smoothed, is left out and the run is
+    ``partial``.  Per-manoeuvre summaries go to ``flights/<id>/run.json`` (with
+    ``pooled_into``) and into the pooled run.json's ``flights``."""
+    logger = get_run_logger()
+    check_flight_id(pool.name)
+    jobs = pool.flight_jobs()
+    _check_ids(jobs)
+    Path(pool.run_dir).mkdir(parents=True, exist_ok=True)
+    summary = {"pool": asdict(pool), "flight": pool.name, "telemetry": [j.telemetry for j in jobs],
+               "vehicle": pool.vehicle, "flights": [], "status": "failed"}
+    try:
+        pre_futures, pre, plans, seg_futures = _start(jobs)
+        groups = []
+        for job, p, plan, futures, pre_future in zip(jobs, pre, plans, seg_futures, pre_futures):
+            fs = {**_flight_summary(job, p, plan), "pooled_into": pool.run_dir}
+            summary["flights"].append(fs)
+            if p is None:
+                fs["error"] = {"stage": "preprocess", "message": pre_future.state.message or "failed"}
+                write_run_summary_task(job.run_dir, fs)
+                pre_future.result()  # raises the stage's own error
+            done = _collect_segments(job, plan, futures, fs, logger)
+            write_run_summary_task(job.run_dir, fs)
+            if done:
+                groups.append({"flight": job.flight, "preprocessed": p["path"], "smoothed": [d["path"] for d in done]})
+        states = [fs["status"] for fs in summary["flights"]]
+        summary["status"] = "failed" if not groups else ("ok" if all(s == "ok" for s in states) else "partial")
+        if groups:
+            fd = pooled_flight_data_task(groups, pool.run_dir, pool.context(), pool.vehicle)
+            coeffs = regression_task([fd["path"]], pool.run_dir, pool.context(), pool.vehicle, pool.model_spec,
+                                     pool.mach_half_width)
+            summary.update(flight_data=fd, coefficients=coeffs, air_data=_air_data(fd["path"]))
+            _artifacts(pool, summary)
+        write_run_summary_task(pool.run_dir, summary)
+        if groups:
+            summary["report"] = report_task(pool.run_dir, pool.context(), [fd["path"], coeffs["path"]],
+                                            pool.model_spec, _pooled_truth(summary["telemetry"]),
+                                            pool.mach_half_width)
+            write_run_summary_task(pool.run_dir, summary)
+    except Exception as exc:
+        summary["status"] = "failed"
+        summary.setdefault("error", {"stage": "pool", "message": f"{type(exc).__name__}: {exc}"})
+        write_run_summary_task(pool.run_dir, summary)
+        raise
+    return summary

@@ -19,9 +19,10 @@ class FlightData(pa.DataFrameModel):
     segment: Series[str] = _f("-", "segment id within the flight")
     V_m_s: Series[float] = _f("m/s", "navigation speed", gt=0)
     h_m: Series[float] = _f("m", "altitude", ge=-5000, le=81000)
-    rho_kg_m3: Series[float] = _f("kg/m^3", "US-1976 density", gt=0)
-    mach: Series[float] = _f("-", "Mach number", gt=0)
-    qbar_pa: Series[float] = _f("Pa", "dynamic pressure", gt=0)
+    rho_kg_m3: Series[float] = _f("kg/m^3", "air density (US-1976 or measured: the file's aerosid.air_data "
+                                            "metadata names the source per flight)", gt=0)
+    mach: Series[float] = _f("-", "Mach number (source in aerosid.air_data)", gt=0)
+    qbar_pa: Series[float] = _f("Pa", "dynamic pressure (source in aerosid.air_data)", gt=0)
     CA: Series[float] = _f("-", "axial force coefficient")
     CY: Series[float] = _f("-", "side force coefficient (+ right)")
     CN: Series[float] = _f("-", "normal force coefficient (+ up, = -C_z)")

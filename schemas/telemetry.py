@@ -7,6 +7,8 @@
     (finding them is the preprocessing stage's job), but a channel whose finite,
     non-sentinel values are mostly (> ``RAW_MAX_OUT_OF_RANGE_FRACTION``) outside the
     physical bounds is rejected: that is a unit error (e.g. fins in degrees).
+    Optional columns: the vanes ``alpha_vane_rad, beta_vane_rad`` and the measured air
+    data ``rho_kg_m3, qbar_pa, p_static_pa, T_total_K`` (range-checked the same way).
 
 ``PreprocessedTelemetry(RawTelemetry)``
     The output of ``aerosid.preprocess.preprocess``: the raw columns (``t_s`` is now
@@ -42,10 +44,16 @@ RAW_COLUMNS: tuple[str, ...] = (
 )
 #: The 12 measurement channels (every raw column but time).
 CHANNELS: tuple[str, ...] = RAW_COLUMNS[1:]
-#: Optional air-data channels (vanes): cleaned like the others when a telemetry file
-#: carries them; a vehicle file with ``[air_data] source = "vanes"`` needs them.  They
-#: do not enter the ``flags`` OR (that stays the 12 contract channels').
-AIR_DATA_CHANNELS: tuple[str, ...] = ("alpha_vane_rad", "beta_vane_rad")
+#: Optional air-data vanes: a vehicle file with ``[air_data] source = "vanes"`` needs them.
+VANE_CHANNELS: tuple[str, ...] = ("alpha_vane_rad", "beta_vane_rad")
+#: Optional measured air data (issue 17): density, dynamic pressure, static pressure and
+#: total temperature.  When present they replace the US-1976 atmosphere in the flight
+#: coefficients (``aerosid.atmosphere.air_data``; the run records the source of each
+#: quantity).
+MEASURED_AIR_DATA_CHANNELS: tuple[str, ...] = ("rho_kg_m3", "qbar_pa", "p_static_pa", "T_total_K")
+#: Every optional air-data channel: cleaned like the others when a telemetry file
+#: carries it.  They do not enter the ``flags`` OR (that stays the 12 contract channels').
+AIR_DATA_CHANNELS: tuple[str, ...] = VANE_CHANNELS + MEASURED_AIR_DATA_CHANNELS
 
 #: SI unit of every raw column.
 UNITS: dict[str, str] = {
@@ -55,11 +63,17 @@ UNITS: dict[str, str] = {
     "d1_rad": "rad", "d2_rad": "rad", "d3_rad": "rad", "d4_rad": "rad",
     "V_m_s": "m/s", "h_m": "m",
     "alpha_vane_rad": "rad", "beta_vane_rad": "rad",
+    "rho_kg_m3": "kg/m^3", "qbar_pa": "Pa", "p_static_pa": "Pa", "T_total_K": "K",
 }
 
 #: Physical bounds (inclusive) per channel.  Accelerations ~100 g, body rates
 #: 10 rad/s (573 deg/s), fins 0.6 rad (34 deg: a fin column in degrees fails),
-#: navigation speed 0..12 km/s, altitude -500 m .. 150 km.
+#: navigation speed 0..12 km/s, altitude -500 m .. 150 km.  Measured air data: density
+#: 0..2 kg/m^3 (sea level on the coldest day ~1.5), dynamic pressure 0..2 MPa (a
+#: hypersonic vehicle's ~0.1 MPa with room), static pressure 0..120 kPa (-500 m on a
+#: high-pressure day ~108 kPa), total temperature 150..8000 K (Mach 12 at 220 K
+#: stagnates at ~6600 K).  These catch gross unit errors only (a temperature in deg C,
+#: a pressure in mbar x 1000): slug/ft^3 or psf values are inside, an importer converts.
 PHYSICAL_BOUNDS: dict[str, tuple[float, float]] = {
     "ax_m_s2": (-1000.0, 1000.0), "ay_m_s2": (-1000.0, 1000.0), "az_m_s2": (-1000.0, 1000.0),
     "p_rad_s": (-10.0, 10.0), "q_rad_s": (-10.0, 10.0), "r_rad_s": (-10.0, 10.0),
@@ -67,6 +81,7 @@ PHYSICAL_BOUNDS: dict[str, tuple[float, float]] = {
     "V_m_s": (0.0, 12000.0),
     "h_m": (-500.0, 150000.0),
     "alpha_vane_rad": (-1.6, 1.6), "beta_vane_rad": (-1.6, 1.6),
+    "rho_kg_m3": (0.0, 2.0), "qbar_pa": (0.0, 2.0e6), "p_static_pa": (0.0, 1.2e5), "T_total_K": (150.0, 8000.0),
 }
 
 _FLT_MAX = float(np.finfo(np.float32).max)
@@ -145,6 +160,10 @@ class RawTelemetry(pa.DataFrameModel):
     h_m: Series[float] = _raw("h_m")
     alpha_vane_rad: Optional[Series[float]] = _raw("alpha_vane_rad")
     beta_vane_rad: Optional[Series[float]] = _raw("beta_vane_rad")
+    rho_kg_m3: Optional[Series[float]] = _raw("rho_kg_m3")
+    qbar_pa: Optional[Series[float]] = _raw("qbar_pa")
+    p_static_pa: Optional[Series[float]] = _raw("p_static_pa")
+    T_total_K: Optional[Series[float]] = _raw("T_total_K")
 
     class Config:
         strict = False
@@ -158,7 +177,7 @@ class RawTelemetry(pa.DataFrameModel):
     def _t_increasing(cls, s: pd.Series) -> pd.Series:
         return strictly_increasing(s)
 
-    @pa.check(*CHANNELS, name="mostly_in_physical_range")
+    @pa.check(*CHANNELS, *MEASURED_AIR_DATA_CHANNELS, name="mostly_in_physical_range")
     def _mostly_in_range(cls, s: pd.Series) -> pd.Series:
         lo, hi = PHYSICAL_BOUNDS[s.name]
         x = s.to_numpy()
@@ -209,6 +228,14 @@ class PreprocessedTelemetry(RawTelemetry):
     beta_vane_rad_clean: Optional[Series[float]] = _clean("beta_vane_rad")
     flags_alpha_vane_rad: Optional[Series[np.uint16]] = _flags("alpha_vane_rad")
     flags_beta_vane_rad: Optional[Series[np.uint16]] = _flags("beta_vane_rad")
+    rho_kg_m3_clean: Optional[Series[float]] = _clean("rho_kg_m3")
+    qbar_pa_clean: Optional[Series[float]] = _clean("qbar_pa")
+    p_static_pa_clean: Optional[Series[float]] = _clean("p_static_pa")
+    T_total_K_clean: Optional[Series[float]] = _clean("T_total_K")
+    flags_rho_kg_m3: Optional[Series[np.uint16]] = _flags("rho_kg_m3")
+    flags_qbar_pa: Optional[Series[np.uint16]] = _flags("qbar_pa")
+    flags_p_static_pa: Optional[Series[np.uint16]] = _flags("p_static_pa")
+    flags_T_total_K: Optional[Series[np.uint16]] = _flags("T_total_K")
     flags: Series[np.uint16] = pa.Field(
         metadata={"unit": "bitmask", "description": "bitwise OR of the flags_<channel> columns"})
 

@@ -13,7 +13,8 @@ from pathlib import Path
 import pandas as pd
 from prefect import task
 
-from aerosid.flight_data import build_flight_data_segments, load_database
+from aerosid.flight_data import (build_flight_data_segments, build_pooled_flight_data, flight_air_data_sources,
+                                 load_database)
 from aerosid.identify import identify
 from aerosid.models import default_models, load_models
 from aerosid.preprocess import PreprocessParams, preprocess
@@ -109,7 +110,8 @@ def flight_data_task(pre_path: str, smoothed_paths: list[str], run_dir: str, ctx
         smoothed = [read_validated(path, SmoothedSegment) for path in smoothed_paths]
         frame = build_flight_data_segments(pre, smoothed, veh, db, ctx.flight)
         findings_seen.extend(frame.attrs.get("findings", []))
-        return Produced(frame, {"aerosid.findings": json.dumps(list(findings_seen))},
+        return Produced(frame, {"aerosid.air_data": {ctx.flight: flight_air_data_sources(pre.columns)},
+                                "aerosid.findings": json.dumps(list(findings_seen))},
                         rows_in=sum(len(sm) for sm in smoothed))
 
     findings_seen: list = []
@@ -124,6 +126,27 @@ def stored_findings(path: str) -> list:
 
     meta = pq.read_schema(path).metadata or {}
     return json.loads(meta.get(b"aerosid.findings", b"[]"))
+
+
+@task(name="pooled-flight-data", **IO_RETRIES)
+def pooled_flight_data_task(flights: list[dict], run_dir: str, ctx: StageContext, vehicle: str) -> dict:
+    """Flight data of several manoeuvres in one file: ``flights`` holds per manoeuvre
+    ``{"flight", "preprocessed", "smoothed": [paths]}`` (aerosid.flight_data.build_pooled_flight_data)."""
+    out = Path(run_dir) / "flight_data.parquet"
+    inputs = [p for f in flights for p in (f["preprocessed"], *f["smoothed"])]
+
+    def produce() -> Produced:
+        veh = load_vehicle(vehicle)
+        pooled, sources = [], {}
+        for f in flights:
+            pre = read_validated(f["preprocessed"], PreprocessedTelemetry)
+            pooled.append((f["flight"], pre, [read_validated(p, SmoothedSegment) for p in f["smoothed"]]))
+            sources[f["flight"]] = flight_air_data_sources(pre.columns)
+        frame = build_pooled_flight_data(pooled, veh, load_database(veh))
+        return Produced(frame, {"aerosid.air_data": sources}, rows_in=sum(len(sm) for _, _, s in pooled for sm in s))
+
+    return execute("flight_data", ctx, [*inputs, *vehicle_files(vehicle)], out,
+                   {"vehicle": vehicle, "flights": [f["flight"] for f in flights]}, FlightData, produce)
 
 
 @task(name="regression", **IO_RETRIES)

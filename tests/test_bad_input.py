@@ -212,7 +212,8 @@ def test_16_time_in_milliseconds_fails_in_the_flow_with_a_clear_error(prefect_ha
     from the preprocess task inside the flow, through the CLI, still without a traceback."""
     _, raw = flight
     bad = write(raw.assign(t_s=raw["t_s"] * 1000.0), tmp_path / "milliseconds.parquet")
-    run_fails([str(bad)], tmp_path / "run", str(bad), "column 't_s'", "sample rate", "is t_s in seconds?")
+    run_fails([str(bad), "--vehicle", "seed-rlv"], tmp_path / "run", str(bad), "column 't_s'", "sample rate",
+              "is t_s in seconds?")
 
 
 # --------------------------------------------------------------------------- 17-20 vehicle file
@@ -371,7 +372,7 @@ def test_26_27_dropout_segment_and_diverging_filter_fail_their_segments_only(pre
     bad.loc[(t > 9.0) & (t <= 13.0), "q_rad_s"] *= 10.0
     path = write(bad, tmp_path / "damaged.parquet")
     out = tmp_path / "run"
-    summary = process_flight(str(path), str(out), windows=[[0.0, 6.5], [6.5, 13.4], [13.4, 30.0]],
+    summary = process_flight(str(path), str(out), vehicle="seed-rlv", windows=[[0.0, 6.5], [6.5, 13.4], [13.4, 30.0]],
                              smoothing_options={"gate_probability": None, "auto_tune": False})
     assert summary["status"] == "partial"
     failed = {f["segment"]: f["error"] for f in summary["segments_failed"]}

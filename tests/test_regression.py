@@ -146,6 +146,68 @@ def test_morelli_klein_equals_brute_force_double_sum():
     np.testing.assert_allclose(residual_autocovariance(v, 10), r[:11], rtol=1e-9, atol=1e-18)
 
 
+def test_grouped_morelli_klein_equals_brute_force_within_group_double_sum():
+    """Pooled records (groups): the double sum takes products within each record only
+    (block-diagonal Toeplitz), R_vv pooled within the records, divided by the total N."""
+    rng = np.random.default_rng(4)
+    sizes, L = (180, 120, 200), 30
+    X = np.vstack([manoeuvre(rng, m) for m in sizes])
+    y = X @ TRUE + np.concatenate([ar1(rng, m, 0.9, 0.002) for m in sizes])
+    groups = np.repeat(["a", "b", "c"], sizes)
+    fit = fit_linear(y, X, names=NAMES, block=L, groups=groups)
+    n = len(y)
+    th, *_ = np.linalg.lstsq(X, y, rcond=None)
+    v = y - X @ th
+    edges = np.cumsum((0,) + sizes)
+    r = np.zeros(L + 1)
+    for a, b in zip(edges[:-1], edges[1:]):
+        vg = v[a:b]
+        r += np.array([vg[: len(vg) - k] @ vg[k:] for k in range(L + 1)])
+    r /= n
+    z = np.arange(L + 1) / (L + 1.0)
+    rw = r * np.where(z <= 0.5, 1 - 6 * z**2 + 6 * z**3, 2 * (1 - z) ** 3)
+    T = scipy.linalg.block_diag(*[scipy.linalg.toeplitz(np.r_[rw, np.zeros(m - L - 1)]) for m in sizes])
+    A = np.linalg.inv(X.T @ X)
+    cov = A @ (X.T @ T @ X) @ A
+    n_eff = np.clip(n / (1 + 2 * (rw[1:] / rw[0]).sum()), 4, n)
+    np.testing.assert_allclose(fit.cov, cov * n_eff / (n_eff - 3), rtol=1e-9)
+    np.testing.assert_allclose(fit.n_eff, n_eff, rtol=1e-12)
+
+
+def test_grouped_sigma_does_not_depend_on_the_order_of_the_records():
+    """Stacking two manoeuvres A,B or B,A is the same data: with groups the corrected
+    sigma is the same; treated as one record it is not (the junction's products)."""
+    rng = np.random.default_rng(5)
+    XA, XB = manoeuvre(rng, 1500), manoeuvre(rng, 1500)
+    vA, vB = ar1(rng, 1500, 0.995, 0.003) + 0.004, ar1(rng, 1500, 0.995, 0.003) + 0.004  # both end high
+    yA, yB = XA @ TRUE + vA, XB @ TRUE + vB
+    ab = dict(y=np.r_[yA, yB], X=np.vstack([XA, XB]), groups=np.repeat(["A", "B"], 1500))
+    ba = dict(y=np.r_[yB, yA], X=np.vstack([XB, XA]), groups=np.repeat(["B", "A"], 1500))
+    g_ab = fit_linear(ab["y"], ab["X"], names=NAMES, block=300, groups=ab["groups"])
+    g_ba = fit_linear(ba["y"], ba["X"], names=NAMES, block=300, groups=ba["groups"])
+    np.testing.assert_allclose(g_ab.std_error, g_ba.std_error, rtol=1e-9)
+    np.testing.assert_allclose(g_ab.estimate, g_ba.estimate, rtol=1e-9)
+    c_ab = fit_linear(ab["y"], ab["X"], names=NAMES, block=300)
+    c_ba = fit_linear(ba["y"], ba["X"], names=NAMES, block=300)
+    assert np.max(np.abs(c_ab.std_error / c_ba.std_error - 1)) > 1e-3
+    # one group is the ungrouped fit, bit for bit; groups must be contiguous
+    one = fit_linear(ab["y"], ab["X"], names=NAMES, groups=np.full(3000, "A"))
+    plain = fit_linear(ab["y"], ab["X"], names=NAMES)
+    np.testing.assert_array_equal(one.cov, plain.cov)
+    with pytest.raises(ValueError, match="contiguous"):
+        fit_linear(ab["y"], ab["X"], names=NAMES, groups=np.tile(["A", "B"], 1500))
+
+
+def test_grouped_hac_uses_statsmodels_panel_newey_west():
+    rng = np.random.default_rng(6)
+    X = np.vstack([manoeuvre(rng, 800), manoeuvre(rng, 600)])
+    y = X @ TRUE + np.r_[ar1(rng, 800, 0.9, 0.002), ar1(rng, 600, 0.9, 0.002)]
+    g = np.repeat([0, 1], [800, 600])
+    fit = fit_linear(y, X, names=NAMES, cov="hac", hac_maxlags=25, groups=g)
+    ref = sm.OLS(y, X).fit(cov_type="hac-panel", cov_kwds={"groups": g, "maxlags": 25})
+    np.testing.assert_allclose(fit.std_error, ref.bse, rtol=1e-10)
+
+
 # ----------------------------------------------------------------------------- (c) closed form
 def test_estimates_equal_lstsq_and_statsmodels():
     rng = np.random.default_rng(7)

@@ -40,8 +40,9 @@ def raw_frame(n: int = 400, seed: int = 0) -> pd.DataFrame:
 def test_raw_schema_declares_the_contract_with_units():
     schema = RawTelemetry.to_schema()
     assert list(schema.columns) == list(RAW_COLUMNS) + list(AIR_DATA_CHANNELS)
-    for c in AIR_DATA_CHANNELS:  # optional: only aircraft with vanes carry them
-        assert not schema.columns[c].required and schema.columns[c].metadata["unit"] == "rad"
+    for c in AIR_DATA_CHANNELS:  # optional: vanes (aircraft) and measured air data
+        assert not schema.columns[c].required and schema.columns[c].metadata["unit"] == UNITS[c]
+    assert all(UNITS[c] == "rad" for c in ("alpha_vane_rad", "beta_vane_rad"))
     for c in RAW_COLUMNS:
         col = schema.columns[c]
         assert str(col.dtype) == "float64"

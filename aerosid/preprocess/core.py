@@ -62,6 +62,9 @@ DEFAULT_MIN_NOISE_SCALE: tuple[tuple[str, float], ...] = (
     ("p_rad_s", 1e-4), ("q_rad_s", 1e-4), ("r_rad_s", 1e-4),
     ("d1_rad", 1e-5), ("d2_rad", 1e-5), ("d3_rad", 1e-5), ("d4_rad", 1e-5),
     ("V_m_s", 1e-3), ("h_m", 1e-2), ("alpha_vane_rad", 1e-5), ("beta_vane_rad", 1e-5),
+    # measured air data: without a floor a constant column (SIDPAC logs one density per
+    # manoeuvre) has noise scale 0 and every sample would be an "outlier"
+    ("rho_kg_m3", 1e-6), ("qbar_pa", 1e-2), ("p_static_pa", 1e-2), ("T_total_K", 1e-4),
 )
 
 #: Hard cap on the grid size (a clock jump would otherwise allocate without bound).
