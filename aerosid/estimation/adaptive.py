@@ -6,9 +6,10 @@ With a chain too stiff for the flight, the filter cannot follow a sharp manoeuvr
 the innovation gate starts rejecting that channel's samples, or the windowed NIS
 leaves its band, and the smoother loses the vehicle there (JSBSim c172x seed 0: a_z gated for 3.3 s during the elevator
 3-2-1-1, the smoothed a_z off by up to 69 m/s^2).  Instead of a per-vehicle factor
-calibrated on simulated truth, the flight itself decides: while a channel has a run
-of gated samples (or the windowed NIS an excursion: then the channels whose mean
-standardised innovation exceeds 1.5, or the worst one), the chains that channel sees get ESCALATION times more process
+calibrated on simulated truth, the flight itself decides: while a channel's gating is
+systematic -- several gated runs, or 5 % of the segment -- (or the windowed NIS has such
+excursions: then the channels whose mean standardised innovation exceeds 1.5, or the
+worst one), the chains that channel sees get ESCALATION times more process
 noise and the segment is smoothed again (at most MAX_ESCALATIONS times).  What is
 still gated afterwards is reported and cut (aerosid.estimation.findings).
 """
@@ -19,7 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from aerosid.estimation.findings import GATED_RUN_MIN_S, true_runs
+from aerosid.estimation.findings import GATED_RUN_MIN_S, MERGE_GAP_S, dilate, true_runs
 from aerosid.estimation.pipeline import EBMOptions, EBMResult, smooth_flight
 
 #: Factor on a chain's process-noise intensity per escalation.
@@ -46,13 +47,32 @@ class AdaptiveSmoothing:
         return f"process noise escalated on gated channels ({steps}); chain factors {self.q_chain_scale}"
 
 
+#: A channel's gating is the model's (escalate) rather than one local event (a sensor fault:
+#: report and cut) when it has at least this many gated runs, or this share of gated samples.
+SYSTEMATIC_RUNS = 2
+SYSTEMATIC_FRACTION = 0.05
+
+
+def _systematic(flags: np.ndarray, need: int, merge: int) -> bool:
+    """Runs of at least `need` samples exist, and after merging runs closer than `merge`
+    samples there are SYSTEMATIC_RUNS of them, or they cover SYSTEMATIC_FRACTION."""
+    if not any(b - a >= need for a, b in true_runs(flags)):
+        return False
+    merged = true_runs(dilate(flags, merge // 2))
+    return len(merged) >= SYSTEMATIC_RUNS or flags.mean() >= SYSTEMATIC_FRACTION
+
+
 def gated_channels(result: EBMResult, min_run_s: float = GATED_RUN_MIN_S) -> list[int]:
-    """Measurement channels with a run of gated samples of at least min_run_s."""
+    """Measurement channels whose gating is systematic: runs of gated samples of at least
+    min_run_s, at least SYSTEMATIC_RUNS of them or SYSTEMATIC_FRACTION of the segment.  One
+    short gated run is a local event -- a sensor step, a bias jump -- that more process
+    noise would let into the smoothed signals (a 1.5 s, +25 m/s^2 a_z step on seed-rlv,
+    absorbed that way, took C_m_alpha to -90 % without a word): it stays a finding."""
     t = result.t_s
     dt = float(np.median(np.diff(t))) if t.size > 1 else 1.0
     need = max(1, int(np.ceil(min_run_s / dt)))
-    return [j for j in range(result.gate_flags.shape[1])
-            if any(b - a >= need for a, b in true_runs(result.gate_flags[:, j]))]
+    merge = int(round(MERGE_GAP_S / dt))
+    return [j for j in range(result.gate_flags.shape[1]) if _systematic(result.gate_flags[:, j], need, merge)]
 
 
 def smooth_flight_adaptive(t_s, z, valid, inertia_kg_m2, sensor_offset_m, z_filled=None,
@@ -65,7 +85,10 @@ def smooth_flight_adaptive(t_s, z, valid, inertia_kg_m2, sensor_offset_m, z_fill
     result = smooth_flight(t_s, z, valid, inertia_kg_m2, sensor_offset_m, z_filled, opt)
     for attempt in range(1, MAX_ESCALATIONS + 1):
         bad = gated_channels(result)
-        excursion = np.asarray(result.divergence_samples).size > 0
+        flagged = np.zeros(result.t_s.size, bool)
+        flagged[np.asarray(result.divergence_samples, dtype=int)] = True
+        dt = float(np.median(np.diff(result.t_s))) if result.t_s.size > 1 else 1.0
+        excursion = _systematic(flagged, 1, int(round(MERGE_GAP_S / dt)))
         if not bad and not excursion:
             break
         if not bad:  # a windowed-NIS excursion without a gated run: the channels that fit worst

@@ -24,6 +24,9 @@ import numpy as np
 
 #: A run of gated samples on one channel at least this long is a finding [s].
 GATED_RUN_MIN_S = 0.1
+#: Gated runs of one channel closer than this are one event [s]: a sensor step is gated at
+#: its two edges while the filter adapts in between, and the whole step is the fault.
+MERGE_GAP_S = 2.0
 #: Departure threshold in sigma of (measured - smoothed) after the common band.
 DEPARTURE_SIGMA = 6.0
 #: A departure must last this long to count [s].
@@ -62,6 +65,16 @@ def true_runs(mask: np.ndarray) -> list[tuple[int, int]]:
     return list(zip(np.nonzero(d == 1)[0].tolist(), np.nonzero(d == -1)[0].tolist()))
 
 
+def merge_close(mask: np.ndarray, gap: int) -> np.ndarray:
+    """mask with the gaps shorter than `gap` samples between two runs filled."""
+    m = np.asarray(mask, bool).copy()
+    runs = true_runs(m)
+    for (a0, b0), (a1, b1) in zip(runs, runs[1:]):
+        if a1 - b0 < gap:
+            m[b0:a1] = True
+    return m
+
+
 def dilate(mask: np.ndarray, margin: int) -> np.ndarray:
     """mask grown by `margin` samples on each side."""
     m = np.asarray(mask, bool)
@@ -91,8 +104,10 @@ def smoother_findings(t_s: np.ndarray, gated: dict[str, np.ndarray], excursion: 
     dt = float(np.median(np.diff(t))) if t.size > 1 else 1.0
     found, cut = [], np.zeros(t.size, bool)
     for ch, g in gated.items():
-        f, hit = span_findings("gated", segment, ch, t, g, int(np.ceil(GATED_RUN_MIN_S / dt)), True,
-                               "the filter's innovation gate rejected this channel's samples throughout")
+        f, hit = span_findings("gated", segment, ch, t, merge_close(g, int(round(MERGE_GAP_S / dt))),
+                               int(np.ceil(GATED_RUN_MIN_S / dt)), True,
+                               "the filter's innovation gate rejected this channel's samples (runs less than "
+                               f"{MERGE_GAP_S:g} s apart taken as one event)")
         found += f
         cut |= hit
     f, hit = span_findings("nis_excursion", segment, "", t, excursion, 1, True,
