@@ -13,14 +13,20 @@ from aerosid.aerodb import AeroDatabase
 from aerosid.atmosphere import MEASURED, H_MAX_M, H_MIN_M, AirDataError, air_data, air_data_sources
 from aerosid.flight_coefficients import flight_coefficients
 from aerosid.derivatives import zero_phase_low_pass
-from aerosid.estimation.findings import DEPARTURE_MIN_S, DEPARTURE_SIGMA, dilate, span_findings
+from aerosid.estimation.findings import DEPARTURE_MIN_S, DEPARTURE_SIGMA, Finding, dilate, span_findings
 from aerosid.identification.band import (band_limited_signals, band_noise_gain, finite_runs, low_pass_runs,
                                          white_noise_sigma)
 from aerosid.inversion import invert_alpha_beta, total_angles
 from aerosid.vehicle import Vehicle
 
 FIN_COLUMNS = ("d1_rad", "d2_rad", "d3_rad", "d4_rad")
+#: The margin cut around a condemned span: one band period, at most this [s].
+MAX_MARGIN_S = 1.0
 BAND_IMU = ("ax_m_s2", "ay_m_s2", "az_m_s2", "p_rad_s", "q_rad_s", "r_rad_s")
+
+
+class SegmentUnusable(ValueError):
+    """A segment with nothing left for the regression (every run too short or condemned)."""
 
 
 def load_database(vehicle: Vehicle) -> AeroDatabase | None:
@@ -128,7 +134,7 @@ def build_flight_data(smoothed: pd.DataFrame, measured: pd.DataFrame, vehicle: V
                                                                     strict=signals != "band")
         if edge.any() and signals == "band":
             ts = s["t_s"].to_numpy()
-            margin = int(np.ceil(0.5 / float(np.median(np.diff(ts))) / band_hz)) if len(ts) > 1 else 0
+            margin = int(np.ceil(min(0.5 / band_hz, MAX_MARGIN_S) / float(np.median(np.diff(ts))))) if len(ts) > 1 else 0
             f, _ = span_findings("database_edge", segment, "alpha/beta", ts, edge, 1, True,
                                  "alpha/beta inverted at the force database's edge (alpha_r at the table's "
                                  f"limit or Mach outside {db.mach_range()[0]:g}..{db.mach_range()[1]:g}): "
@@ -182,7 +188,7 @@ def _band_signals(t, measured: pd.DataFrame, smoothed: pd.DataFrame, vehicle: Ve
         return band_limited_signals(t, imu[:, 3:], imu[:, :3], inertia, vehicle.accel_offset_m, vehicle.band_hz, keep)
 
     bl = signals(ok)
-    margin = int(np.ceil(fs / bl.band_hz))
+    margin = int(np.ceil(min(1.0 / bl.band_hz, MAX_MARGIN_S) * fs))
     suspect = smoothed["suspect"].to_numpy(bool) if "suspect" in smoothed else np.zeros(len(t), bool)
     keep = ok & ~dilate(suspect, margin)
     if suspect.any():
@@ -202,9 +208,14 @@ def _band_signals(t, measured: pd.DataFrame, smoothed: pd.DataFrame, vehicle: Ve
             white = noise.get(col, white_noise_sigma(imu[:, 3 + ("p_rad_s", "q_rad_s", "r_rad_s").index(col)]
                                                      if col.endswith("rad_s") else imu[:, 0], runs))
             sig_sm = smoothed[f"sigma_{col}"].to_numpy(float) if f"sigma_{col}" in smoothed else 0.0
-            sigma = np.hypot(gain * white, sig_sm)
+            diff = meas - sm
+            d = diff[np.isfinite(diff)]
+            typical = 1.4826 * float(np.median(np.abs(d - np.median(d)))) if d.size else 0.0
+            # the larger of the expected (noise through the band, smoother sigma) and the
+            # typical difference: a departure stands out from this segment's own agreement
+            sigma = np.maximum(np.hypot(gain * white, sig_sm), typical)
             with np.errstate(invalid="ignore"):
-                off = np.abs(meas - sm) > DEPARTURE_SIGMA * sigma
+                off = np.abs(diff) > DEPARTURE_SIGMA * sigma
             f, hit = span_findings("departure", segment, col, t, off & bl.used, int(np.ceil(DEPARTURE_MIN_S * fs)),
                                    True, f"the smoothed {col} departs from its band-limited measurement by more "
                                    f"than {DEPARTURE_SIGMA:g} sigma")
@@ -214,7 +225,7 @@ def _band_signals(t, measured: pd.DataFrame, smoothed: pd.DataFrame, vehicle: Ve
             keep &= ~dilate(gone, margin)
             bl = signals(keep)
     if not bl.used.any():
-        raise ValueError(f"segment {segment}: no run of {int(np.ceil(0.5 * fs / bl.band_hz))} consecutive samples "
+        raise SegmentUnusable(f"segment {segment}: no run of {int(np.ceil(0.5 * fs / bl.band_hz))} consecutive samples "
                          f"with every IMU channel, control, V and h available and not condemned (t = {_span(t)}): "
                          "nothing to low-pass for the regression")
     return bl, bl.used, findings
@@ -268,14 +279,20 @@ def build_flight_data_segments(preprocessed: pd.DataFrame, smoothed: list[pd.Dat
     """Flight data of several smoothed segments of one preprocessed flight, pooled:
     each segment is matched to the preprocessed rows of its own time span."""
     t = preprocessed["t_s"].to_numpy()
-    parts = []
+    parts, lost = [], []
     for sm in smoothed:
         ts = sm["t_s"].to_numpy()
         start = int(np.searchsorted(t, ts[0] - 1e-9))
         rows = preprocessed.iloc[start:start + len(ts)].reset_index(drop=True)
-        parts.append(build_flight_data(sm, rows, vehicle, db, flight, signals))
+        try:
+            parts.append(build_flight_data(sm, rows, vehicle, db, flight, signals))
+        except SegmentUnusable as exc:  # the other segments go on; the run says why this one did not
+            seg = str(sm["segment"].iloc[0]) if len(sm) else "?"
+            lost.append(Finding("unusable", seg, "", float(ts[0]), float(ts[-1]), len(ts), True, str(exc)).as_dict())
+    if not parts:
+        raise ValueError("no segment left for the regression: " + "; ".join(f["detail"] for f in lost))
     frame = pd.concat(parts, ignore_index=True)
-    frame.attrs["findings"] = [f for part in parts for f in part.attrs.get("findings", [])]
+    frame.attrs["findings"] = [f for part in parts for f in part.attrs.get("findings", [])] + lost
     return frame
 
 

@@ -347,11 +347,20 @@ def test_25_mach_outside_the_database_is_refused_naming_the_samples(flight):
     fast = rows.copy()
     late = fast["t_s"] >= 20.0
     fast.loc[late, "V_m_s_clean"] *= 1.8  # M ~ 22 > 20, the database's last Mach
+    # the seed's smoother path refuses the segment, naming the samples
     with pytest.raises(ValueError) as ei:
-        build_flight_data(sm.frame, fast, veh, db)
+        build_flight_data(sm.frame, fast, veh, db, signals="smoother")
     msg = str(ei.value)
     assert "outside the aerodynamic database's Mach 2..20" in msg and "'V_m_s'" in msg
     assert "t = 20.00.." in msg and "seg01" in msg and "--window" in msg
+    # the default (common band) cuts those samples as a database_edge finding and keeps the rest
+    fd = build_flight_data(sm.frame, fast, veh, db)
+    edge = [f for f in fd.attrs["findings"] if f["kind"] == "database_edge"]
+    assert edge and edge[0]["cut"] and 19.0 <= edge[0]["t0_s"] <= 20.5 and edge[0]["t1_s"] >= 23.9
+    assert fd["t_s"].max() < 20.0 and fd["t_s"].min() < 18.0 and (fd["mach"] <= 20.0).all()
+    # nothing in the database's range: refused, with the reason
+    with pytest.raises(ValueError, match="Mach"):
+        build_flight_data(sm.frame, rows.assign(V_m_s_clean=rows["V_m_s_clean"] * 1.8), veh, db)
 
 
 # --------------------------------------------------------------------------- 26-27 dropout segment, divergence

@@ -80,8 +80,9 @@ def dilate(mask: np.ndarray, margin: int) -> np.ndarray:
     m = np.asarray(mask, bool)
     if margin <= 0 or not m.any():
         return m.copy()
-    k = np.ones(2 * margin + 1)
-    return np.convolve(m.astype(float), k, mode="same") > 0
+    c = np.concatenate([[0], np.cumsum(m, dtype=np.int64)])
+    i = np.arange(m.size)
+    return (c[np.minimum(i + margin + 1, m.size)] - c[np.maximum(i - margin, 0)]) > 0
 
 
 def span_findings(kind: str, segment: str, channel: str, t_s: np.ndarray, mask: np.ndarray, min_samples: int,

@@ -92,3 +92,15 @@ def test_pitch_acceleration_slopes_are_unbiased_from_a_noisy_gyro():
     narrow = low_pass_runs(bl.ang_accel_rad_s2[:, 1], 1 / dt, 0.7, runs)
     est_bad = np.linalg.lstsq(X, narrow[ok], rcond=None)[0]
     assert abs(est_bad[1] / Md - 1) > 0.05
+
+
+def test_dilate_and_merge():
+    from aerosid.estimation.findings import dilate, merge_close
+
+    m = np.zeros(10, bool)
+    m[4] = True
+    assert dilate(m, 2).nonzero()[0].tolist() == [2, 3, 4, 5, 6]
+    assert dilate(m, 50).all()  # a margin longer than the record
+    m[8] = True
+    assert merge_close(m, 4).nonzero()[0].tolist() == [4, 5, 6, 7, 8]
+    assert merge_close(m, 3).nonzero()[0].tolist() == [4, 8]
