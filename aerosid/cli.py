@@ -157,7 +157,16 @@ def _quiet_run_tracebacks() -> None:
               help="Model specification TOML (default: the seed's linear models).")
 @click.option("--mach-half-width", type=float, default=0.5, show_default=True,
               help="Regress on samples with |M - M_ref| <= this (M_ref from the vehicle file).")
-def run(telemetry, vehicle, out_dir, flight, windows, model_spec, mach_half_width):
+@click.option("--preprocess", "preprocess_settings", multiple=True, metavar="KEY=VALUE",
+              help="A preprocessing threshold for this run (repeatable), on top of the vehicle file's "
+                   "[preprocess] table: a global key (false_alarm=1e-4, max_interp_gap_s=1.0) or one "
+                   "sensor's (V_m_s.update_interval_s=0.2, d1_rad.frozen_max_still_s=30). "
+                   "Keys: docs/preprocessing.md.")
+@click.option("--min-segment-s", type=float, default=None,
+              help="Shortest piece of the flight that is smoothed [s] (default: the vehicle file's "
+                   "[preprocess] min_segment_s, else 5).")
+def run(telemetry, vehicle, out_dir, flight, windows, model_spec, mach_half_width, preprocess_settings,
+        min_segment_s):
     """Run the whole pipeline on one telemetry file (Prefect flow process_flight).
 
     \b
@@ -170,12 +179,13 @@ def run(telemetry, vehicle, out_dir, flight, windows, model_spec, mach_half_widt
     from aerosid.preprocess import TelemetryError
     from aerosid.vehicle import VehicleError
 
+    params, min_segment_s = _preprocess_options(preprocess_settings, min_segment_s)
     try:
         if vehicle is None:
             from aerosid.io import telemetry_vehicle
 
             vehicle = telemetry_vehicle(telemetry)
-        _preflight(telemetry, vehicle, model_spec)  # bad input fails here, before Prefect starts
+        _preflight(telemetry, vehicle, model_spec, params)  # bad input fails here, before Prefect starts
         from flows.pipeline import process_flight
         from flows.steps import check_flight_id
 
@@ -185,13 +195,19 @@ def run(telemetry, vehicle, out_dir, flight, windows, model_spec, mach_half_widt
         summary = process_flight(str(telemetry), str(out_dir), vehicle=vehicle, flight=flight,
                                  windows=[list(w) for w in windows] or None,
                                  model_spec=str(model_spec) if model_spec else None,
-                                 mach_half_width=mach_half_width)
+                                 mach_half_width=mach_half_width, preprocess_params=params,
+                                 min_segment_s=min_segment_s)
     except (TelemetryError, VehicleError, ValueError) as exc:
         raise click.ClickException(str(exc)) from exc
     except OSError as exc:  # read-only or full output folder, a vanished file
         where = f" ({exc.filename})" if exc.filename else ""
         raise click.ClickException(f"cannot write the run folder {out_dir}: {exc.strerror or exc}{where}; "
                                    "earlier outputs are left as they were") from exc
+    _echo_usable_share(summary.get("usable_share"))
+    if summary.get("error", {}).get("stage") == "plan-segments":
+        raise click.ClickException(f"{telemetry}: {summary['error']['message']}")
+    if summary.get("segments_note"):
+        click.echo(f"note: {summary['segments_note']}")
     click.echo(f"flight {summary['flight']}: {summary['status']}; segments ok "
                f"{[d['segment'] for d in summary['segments_ok']]}, failed {summary['segments_failed']}")
     if "coefficients" in summary:
@@ -207,10 +223,36 @@ def run(telemetry, vehicle, out_dir, flight, windows, model_spec, mach_half_widt
                                    f"see {out_dir}/ledger.jsonl")
 
 
-def _preflight(telemetry: Path, vehicle: str, model_spec: str | None) -> None:
+def _preprocess_options(items, min_segment_s):
+    """--preprocess KEY=VALUE items -> (PreprocessParams keyword arguments, min_segment_s);
+    a bad key or value is a usage error naming it."""
+    from aerosid.preprocess import SettingsError, parse_assignments, parse_settings
+
+    try:
+        params, from_items = parse_settings(parse_assignments(items))
+    except (SettingsError, ValueError) as exc:
+        raise click.BadParameter(str(exc), param_hint="--preprocess") from exc
+    if min_segment_s is not None and not min_segment_s > 0:
+        raise click.BadParameter(f"must be > 0, got {min_segment_s}", param_hint="--min-segment-s")
+    return params, min_segment_s if min_segment_s is not None else from_items
+
+
+def _echo_usable_share(share: dict | None) -> None:
+    """One line: rows used of rows recorded, and the channels below 100 %."""
+    if not share:
+        return
+    low = {c: v["share"] for c, v in share["by_channel"].items() if v["used"] < share["recorded"]}
+    click.echo(f"preprocess: rows used {share['used']} of {share['recorded']} recorded "
+               f"({100.0 * share['share']:.1f} %)"
+               + (("; channels below 100 %: " + ", ".join(f"{c} {100.0 * v:.1f} %" for c, v in low.items()))
+                  if low else ""))
+
+
+def _preflight(telemetry: Path, vehicle: str, model_spec: str | None, preprocess_params: dict | None = None) -> None:
     """Cheap checks of the inputs before any flow starts: the telemetry file is
     readable Parquet that follows RawTelemetry, has rows and no channel without a
-    single value; the vehicle file and the model specification load."""
+    single value; the vehicle file, its preprocessing settings with the run's on top,
+    and the model specification load."""
     import numpy as np
     import pyarrow.parquet as pq
 
@@ -239,6 +281,9 @@ def _preflight(telemetry: Path, vehicle: str, model_spec: str | None) -> None:
                                  "no-data sentinel): the pipeline needs every channel", file=str(telemetry),
                                  column=c, rows=range(len(frame)))
     veh = load_vehicle(vehicle)
+    from aerosid.preprocess import PreprocessParams, merge_settings
+
+    PreprocessParams.from_dict(merge_settings(veh.preprocess, preprocess_params or {}))
     if veh.air_data_source == "vanes":
         for c in (veh.alpha_column, veh.beta_column):
             if c not in frame.columns:

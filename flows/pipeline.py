@@ -24,11 +24,14 @@ from tasks.ledger import LEDGER_NAME
 def process_flight(telemetry: str, out_dir: str, vehicle: str | None = None, flight: str | None = None,
                    windows: list | None = None, model_spec: str | None = None,
                    preprocess_params: dict | None = None, smoothing_options: dict | None = None,
-                   mach_half_width: float | None = 0.5) -> dict:
+                   mach_half_width: float | None = 0.5, min_segment_s: float | None = None) -> dict:
     """One telemetry file -> segments -> every stage -> coefficients (and run.json, ledger).
-    vehicle: a built-in name or a vehicle file; None = the one the file's metadata names, else seed-rlv."""
+    vehicle: a built-in name or a vehicle file; None = the one the file's metadata names, else seed-rlv.
+    preprocess_params: PreprocessParams keyword arguments on top of the vehicle file's [preprocess]
+    table; min_segment_s: shortest segment smoothed [s] (None: the vehicle's, else 5 s)."""
     job = FlightJob(str(telemetry), str(out_dir), check_flight_id(flight or flight_id_from_path(telemetry)),
-                    vehicle or telemetry_vehicle(telemetry), windows, model_spec, preprocess_params or {}, smoothing_options or {}, mach_half_width)
+                    vehicle or telemetry_vehicle(telemetry), windows, model_spec, preprocess_params or {},
+                    smoothing_options or {}, mach_half_width, min_segment_s)
     return run_flights([job])[0]
 
 

@@ -50,8 +50,19 @@ class FlightJob:
     preprocess_params: dict = field(default_factory=dict)
     smoothing_options: dict = field(default_factory=dict)
     mach_half_width: float | None = 0.5
-    min_segment_s: float = 5.0
+    min_segment_s: float | None = None  # None: the vehicle's [preprocess] min_segment_s, else 5 s
     ledger_path: str | None = None
+
+    def preprocess_settings(self) -> tuple[dict, float]:
+        """The preprocessing parameters (the vehicle file's [preprocess] table with this
+        job's own on top) and the minimum segment length [s]."""
+        from aerosid.preprocess import DEFAULT_MIN_SEGMENT_S, merge_settings
+        from aerosid.vehicle import load_vehicle
+
+        veh = load_vehicle(self.vehicle)
+        params = merge_settings(veh.preprocess, self.preprocess_params or {})
+        min_seg = next(v for v in (self.min_segment_s, veh.min_segment_s, DEFAULT_MIN_SEGMENT_S) if v is not None)
+        return params, float(min_seg)
 
     def context(self, segment: str = "") -> StageContext:
         ledger = self.ledger_path or str(Path(self.run_dir) / LEDGER_NAME)
@@ -72,28 +83,37 @@ def run_flights(jobs: list[FlightJob], isolate: bool = False) -> list[dict]:
         raise ValueError(f"two telemetry files map to the same flight id {dup}: rename one (the id names the run folder)")
     for job in jobs:
         Path(job.run_dir).mkdir(parents=True, exist_ok=True)
-    pre_futures = [preprocess_task.submit(j.telemetry, j.run_dir, j.context(), j.preprocess_params) for j in jobs]
+    settings = [j.preprocess_settings() for j in jobs]
+    pre_futures = [preprocess_task.submit(j.telemetry, j.run_dir, j.context(), params)
+                   for j, (params, _) in zip(jobs, settings)]
     plans, seg_futures, pre = [], [], []
-    for job, fut in zip(jobs, pre_futures):
+    for job, fut, (_, min_seg) in zip(jobs, pre_futures, settings):
         fut.wait()
         if not fut.state.is_completed():
-            pre.append(None), plans.append([]), seg_futures.append([])
+            pre.append(None), plans.append(None), seg_futures.append([])
             continue
         p = fut.result()
-        plan = plan_segments_task(p["path"], job.windows, job.min_segment_s)
+        plan = plan_segments_task(p["path"], job.windows, min_seg)
         pre.append(p), plans.append(plan)
         seg_futures.append([smooth_segment_task.submit(p["path"], job.run_dir, job.context(s["segment_id"]), s,
-                                                       job.vehicle, job.smoothing_options) for s in plan])
+                                                       job.vehicle, job.smoothing_options) for s in plan["segments"]])
     summaries = []
     for job, p, plan, futures, pre_future in zip(jobs, pre, plans, seg_futures, pre_futures):
+        segs = plan["segments"] if plan else []
         summary = {"job": asdict(job), "flight": job.flight, "telemetry": job.telemetry, "vehicle": job.vehicle,
-                   "preprocess": p, "segments": [s["segment_id"] for s in plan], "segments_ok": [],
-                   "segments_failed": [], "status": "failed"}
+                   "preprocess": p, "usable_share": (p or {}).get("usable_share"),
+                   "segments": [s["segment_id"] for s in segs], "segments_ok": [], "segments_failed": [],
+                   "segments_dropped": plan["dropped"] if plan else [], "status": "failed"}
+        if plan and plan["note"]:
+            summary["segments_note"] = plan["note"]
         try:
             if p is None:
                 summary["error"] = {"stage": "preprocess", "message": pre_future.state.message or "failed"}
                 pre_future.result()  # raises the stage's own error
-            _finish_flight(job, p, plan, futures, summary, logger)
+            if not segs:
+                summary["error"] = {"stage": "plan-segments", "message": plan["refusal"]}
+                logger.error("flight %s: %s", job.flight, plan["refusal"])
+            _finish_flight(job, p, segs, futures, summary, logger)
         except Exception as exc:
             summary["status"] = "failed"
             summary.setdefault("error", {"stage": "flight", "message": f"{type(exc).__name__}: {exc}"})

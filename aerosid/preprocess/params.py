@@ -51,7 +51,7 @@ class SettingsError(ValueError):
     """A preprocessing setting with an unknown key or a bad value; ``key`` names it."""
 
     def __init__(self, key: str, message: str):
-        self.key = key
+        self.key, self.reason = key, message
         super().__init__(f"{key}: {message}")
 
 
