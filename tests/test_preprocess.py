@@ -775,8 +775,9 @@ def test_random_damage_gives_result_or_telemetry_error(raw):
 
 def test_acceptance_on_the_simulated_reference_flight(reference_flight):
     """aerosid.simulation's fault masks (truth columns fault_*): every dropout sample
-    flagged, >= 99 % of the outliers (6..40 sigma) flagged, <= 0.5 % false outliers
-    on clean samples overall and within 1 s of the sharpest pitch manoeuvre (max |q_dot|)."""
+    flagged, >= 99 % of the outliers (6..40 sigma) flagged (50 of 50), at most 2 false
+    outliers among the 100 000 clean samples (1; the old fixed 3.3-sigma test: 150) and
+    none within 1 s of the sharpest pitch manoeuvre (max |q_dot|)."""
     fl = reference_flight
     res = preprocess(fl.telemetry, source="seed-rlv/0")
     assert_invariants(fl.telemetry, res)
@@ -803,6 +804,6 @@ def test_acceptance_on_the_simulated_reference_flight(reference_flight):
         fp_sharp += int((flagged & clean & sharp).sum())
     assert n_out > 10
     assert n_out_flagged / n_out >= 0.99
-    assert fp / n_clean <= 0.005
-    assert fp_sharp / n_clean_sharp <= 0.005
+    assert fp <= 2 and n_clean > 100_000
+    assert fp_sharp == 0 and n_clean_sharp > 2000
     assert len(res.long_gaps) >= 1 and res.longest_gap_s >= 1.9   # the 2 s sync gap

@@ -43,6 +43,9 @@ LATTICE_MAX_STEPS = 10_000
 MIN_RUNS = 20
 #: Share of the interior runs whose length must be a multiple of the update interval.
 HOLD_SHARE = 0.9
+#: The repeat share is a median over at least this many windows of at least MIN_BLOCK samples.
+MIN_BLOCKS = 10
+MIN_BLOCK = 50
 
 
 @dataclass(frozen=True)
@@ -134,18 +137,21 @@ def resolution(x: np.ndarray) -> float:
     The step is the smallest candidate ``q`` (the smallest non-zero difference between
     consecutive samples, or its 1st or 5th percentile, which skips float-rounding
     crumbs) such that at least ``LATTICE_SHARE`` of the non-zero differences are
-    integer multiples of ``q`` (within ``LATTICE_TOLERANCE`` of a step) and the median
-    difference is at most ``LATTICE_MAX_STEPS`` steps.
+    integer multiples of ``q`` (within ``LATTICE_TOLERANCE`` of a step; all of them
+    when there are fewer than ``MIN_RUNS``, at least 3) and the median difference is
+    at most ``LATTICE_MAX_STEPS`` steps.
     """
     d = np.abs(np.diff(np.asarray(x, dtype=np.float64)))
     d = d[np.isfinite(d) & (d > 0)]
-    if d.size < MIN_RUNS:
+    if d.size < 3:
         return 0.0
+    # with few changes (a surface that moves a few times) every one must be on the lattice
+    share = LATTICE_SHARE if d.size >= MIN_RUNS else 1.0
     for q in sorted({float(d.min()), float(np.percentile(d, 1)), float(np.percentile(d, 5))}):
         if q <= 0 or np.median(d) / q > LATTICE_MAX_STEPS:
             continue
         r = d / q
-        if np.mean(np.abs(r - np.round(r)) <= LATTICE_TOLERANCE) >= LATTICE_SHARE:
+        if np.mean(np.abs(r - np.round(r)) <= LATTICE_TOLERANCE) >= share:
             return q
     return 0.0
 
@@ -191,22 +197,24 @@ def run_updates(lengths: np.ndarray, u: float) -> np.ndarray:
 def repeat_share(x: np.ndarray, u: float, window: int) -> float:
     """Share of updates repeating the previous update's value, median over windows.
 
-    Per window of ``window`` samples, ``s`` = share of consecutive finite pairs with
+    Per window of ``window`` samples (shorter when the record holds fewer than
+    ``MIN_BLOCKS`` windows, but at least ``MIN_BLOCK`` samples), ``s`` = share of consecutive finite pairs with
     identical values; a held channel repeats ``1 - 1/u`` of its samples by holding, so
     the update-level share is ``(s - (1 - 1/u)) u`` (clipped to [0, 1]).  The median
     over the windows (with at least half a window of pairs) is robust to a stuck
-    sensor covering less than half of the record."""
+    sensor covering less than half of the windows."""
     x = np.asarray(x, dtype=np.float64)
     if x.size < 2:
         return 0.0
     pair = np.isfinite(x[1:]) & np.isfinite(x[:-1])
     same = (x[1:] == x[:-1]) & pair
-    window = max(2, int(window))
-    nb = max(1, pair.size // window)
+    # blocks of the noise window, but at least MIN_BLOCKS of them (of >= MIN_BLOCK samples)
+    block = max(MIN_BLOCK, min(int(window), pair.size // MIN_BLOCKS))
+    nb = max(1, pair.size // block)
     shares = []
     for sl in np.array_split(np.arange(pair.size), nb):
         npair = int(pair[sl].sum())
-        if npair >= max(2, min(window, pair.size) // 2):
+        if npair >= max(2, len(sl) // 2):
             s = same[sl].sum() / npair
             shares.append(min(1.0, max(0.0, (s - (1.0 - 1.0 / u)) * u)))
     return float(np.median(shares)) if shares else 0.0
