@@ -185,7 +185,8 @@ def run(telemetry, vehicle, out_dir, flight, windows, model_spec, mach_half_widt
             from aerosid.io import telemetry_vehicle
 
             vehicle = telemetry_vehicle(telemetry)
-        _preflight(telemetry, vehicle, model_spec, params)  # bad input fails here, before Prefect starts
+        # bad input fails here, before Prefect starts
+        _preflight(telemetry, vehicle, model_spec, params, windows, min_segment_s)
         from flows.pipeline import process_flight
         from flows.steps import check_flight_id
 
@@ -248,11 +249,13 @@ def _echo_usable_share(share: dict | None) -> None:
                   if low else ""))
 
 
-def _preflight(telemetry: Path, vehicle: str, model_spec: str | None, preprocess_params: dict | None = None) -> None:
+def _preflight(telemetry: Path, vehicle: str, model_spec: str | None, preprocess_params: dict | None = None,
+               windows=(), min_segment_s: float | None = None) -> None:
     """Cheap checks of the inputs before any flow starts: the telemetry file is
     readable Parquet that follows RawTelemetry, has rows and no channel without a
     single value; the vehicle file, its preprocessing settings with the run's on top,
-    and the model specification load."""
+    and the model specification load; the time windows leave a segment of at least
+    the minimum segment length."""
     import numpy as np
     import pyarrow.parquet as pq
 
@@ -292,6 +295,14 @@ def _preflight(telemetry: Path, vehicle: str, model_spec: str | None, preprocess
                                      file=str(telemetry), column=c)
     if model_spec:
         load_models(model_spec, base=default_models(veh))
+    if windows:  # windows too short to smooth are refused now, naming the limit (gaps are seen later)
+        from aerosid.preprocess import DEFAULT_MIN_SEGMENT_S
+        from aerosid.segments import plan_segments
+
+        min_seg = next(v for v in (min_segment_s, veh.min_segment_s, DEFAULT_MIN_SEGMENT_S) if v is not None)
+        plan = plan_segments(frame["t_s"].to_numpy(), [], [tuple(w) for w in windows], float(min_seg))
+        if not plan.segments:
+            raise ValueError(f"{telemetry}: {plan.refusal()}")
 
 
 @main.command()
