@@ -103,7 +103,7 @@ class SensorProfile:
                          f"({rate_hz / self.update_interval:.3g} Hz), interpolated between updates")
         if self.at_rest:
             still = (f"still runs > {self.frozen_max_still_s:g} s are frozen" if self.frozen_max_still_s
-                     else "frozen test off (set frozen_max_still_s for this sensor to test it)")
+                     else "not tested for frozen runs (no frozen_max_still_s for it)")
             parts.append(f"rests at its resolution ({100 * self.repeat_share:.0f} % of updates repeat): {still}")
         elif self.frozen_min_updates == 0:
             parts.append("frozen test off")
