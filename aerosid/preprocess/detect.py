@@ -72,24 +72,6 @@ def mark_runs(n: int, starts: np.ndarray, ends: np.ndarray) -> np.ndarray:
     return np.cumsum(d[:-1]) > 0
 
 
-def frozen_mask(x: np.ndarray, min_run: int) -> np.ndarray:
-    """True at the repeats of a stuck value.
-
-    A run of at least ``min_run`` consecutive grid samples with bit-identical finite
-    values is a frozen (stuck) sensor; the run's first sample (the last genuine
-    update) stays unflagged, the repeats are flagged.  NaN breaks a run.
-    """
-    x = np.asarray(x, dtype=np.float64)
-    n = x.size
-    if n < 2 or min_run < 2:
-        return np.zeros(n, dtype=bool)
-    same = np.zeros(n, dtype=bool)  # same[k]: x[k] repeats x[k-1]
-    same[1:] = (x[1:] == x[:-1]) & np.isfinite(x[1:])
-    starts, ends = runs(same)
-    keep = (ends - starts + 1) >= min_run  # identical samples = repeats + the first one
-    return mark_runs(n, starts[keep], ends[keep])
-
-
 def quantum(x: np.ndarray) -> float:
     """Smallest non-zero step between consecutive finite samples (0 if none).
 
