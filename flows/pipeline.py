@@ -24,12 +24,15 @@ from tasks.ledger import LEDGER_NAME
 def process_flight(telemetry: str, out_dir: str, vehicle: str | None = None, flight: str | None = None,
                    windows: list | None = None, model_spec: str | None = None,
                    preprocess_params: dict | None = None, smoothing_options: dict | None = None,
-                   mach_half_width: float | None = 0.5) -> dict:
+                   mach_half_width: float | None = 0.5, min_segment_s: float | None = None) -> dict:
     """One telemetry file -> segments -> every stage -> coefficients (and run.json, ledger).
     vehicle: a built-in name or a vehicle file; None = the one the file's metadata names
-    (aerosid.io.telemetry_vehicle: an error when it names none)."""
+    (aerosid.io.telemetry_vehicle: an error when it names none).
+    preprocess_params: PreprocessParams keyword arguments on top of the vehicle file's [preprocess]
+    table; min_segment_s: shortest segment smoothed [s] (None: the vehicle's, else 5 s)."""
     job = FlightJob(str(telemetry), str(out_dir), check_flight_id(flight or flight_id_from_path(telemetry)),
-                    vehicle or telemetry_vehicle(telemetry), windows, model_spec, preprocess_params or {}, smoothing_options or {}, mach_half_width)
+                    vehicle or telemetry_vehicle(telemetry), windows, model_spec, preprocess_params or {},
+                    smoothing_options or {}, mach_half_width, min_segment_s)
     return run_flights([job])[0]
 
 
@@ -55,7 +58,7 @@ def pooled_vehicle(telemetry_files: list[str], vehicle: str | None = None) -> st
 def process_manoeuvres(telemetry_files: list[str], out_dir: str, vehicle: str | None = None, name: str | None = None,
                        windows: list | None = None, model_spec: str | None = None,
                        preprocess_params: dict | None = None, smoothing_options: dict | None = None,
-                       mach_half_width: float | None = 0.5) -> dict:
+                       mach_half_width: float | None = 0.5, min_segment_s: float | None = None) -> dict:
     """Several manoeuvres of one aircraft -> one identification: each file preprocessed
     and smoothed on its own (its own flight id and segments, under OUT/flights/<id>/),
     their flight data pooled into OUT/flight_data.parquet, one regression.  vehicle: as
@@ -64,7 +67,7 @@ def process_manoeuvres(telemetry_files: list[str], out_dir: str, vehicle: str | 
     pool = PoolJob([str(t) for t in telemetry_files], str(out_dir),
                    check_flight_id(name or flight_id_from_path(out_dir)),
                    pooled_vehicle([str(t) for t in telemetry_files], vehicle), windows, model_spec,
-                   preprocess_params or {}, smoothing_options or {}, mach_half_width)
+                   preprocess_params or {}, smoothing_options or {}, mach_half_width, min_segment_s)
     return run_pooled(pool)
 
 

@@ -51,8 +51,19 @@ class FlightJob:
     preprocess_params: dict = field(default_factory=dict)
     smoothing_options: dict = field(default_factory=dict)
     mach_half_width: float | None = 0.5
-    min_segment_s: float = 5.0
+    min_segment_s: float | None = None  # None: the vehicle's [preprocess] min_segment_s, else 5 s
     ledger_path: str | None = None
+
+    def preprocess_settings(self) -> tuple[dict, float]:
+        """The preprocessing parameters (the vehicle file's [preprocess] table with this
+        job's own on top) and the minimum segment length [s]."""
+        from aerosid.preprocess import DEFAULT_MIN_SEGMENT_S, merge_settings
+        from aerosid.vehicle import load_vehicle
+
+        veh = load_vehicle(self.vehicle)
+        params = merge_settings(veh.preprocess, self.preprocess_params or {})
+        min_seg = next(v for v in (self.min_segment_s, veh.min_segment_s, DEFAULT_MIN_SEGMENT_S) if v is not None)
+        return params, float(min_seg)
 
     def context(self, segment: str = "") -> StageContext:
         ledger = self.ledger_path or str(Path(self.run_dir) / LEDGER_NAME)
@@ -71,31 +82,38 @@ def _start(jobs: list[FlightJob]):
     preprocessing futures, their results (None where it failed), plans and smoothing futures."""
     for job in jobs:
         Path(job.run_dir).mkdir(parents=True, exist_ok=True)
-    pre_futures = [preprocess_task.submit(j.telemetry, j.run_dir, j.context(), j.preprocess_params) for j in jobs]
+    settings = [j.preprocess_settings() for j in jobs]
+    pre_futures = [preprocess_task.submit(j.telemetry, j.run_dir, j.context(), params)
+                   for j, (params, _) in zip(jobs, settings)]
     plans, seg_futures, pre = [], [], []
-    for job, fut in zip(jobs, pre_futures):
+    for job, fut, (_, min_seg) in zip(jobs, pre_futures, settings):
         fut.wait()
         if not fut.state.is_completed():
-            pre.append(None), plans.append([]), seg_futures.append([])
+            pre.append(None), plans.append(None), seg_futures.append([])
             continue
         p = fut.result()
-        plan = plan_segments_task(p["path"], job.windows, job.min_segment_s)
+        plan = plan_segments_task(p["path"], job.windows, min_seg)
         pre.append(p), plans.append(plan)
         seg_futures.append([smooth_segment_task.submit(p["path"], job.run_dir, job.context(s["segment_id"]), s,
-                                                       job.vehicle, job.smoothing_options) for s in plan])
+                                                       job.vehicle, job.smoothing_options) for s in plan["segments"]])
     return pre_futures, pre, plans, seg_futures
 
 
-def _flight_summary(job: FlightJob, p: dict | None, plan: list) -> dict:
-    return {"job": asdict(job), "flight": job.flight, "telemetry": job.telemetry, "vehicle": job.vehicle,
-            "preprocess": p, "segments": [s["segment_id"] for s in plan], "segments_ok": [],
-            "segments_failed": [], "status": "failed"}
+def _flight_summary(job: FlightJob, p: dict | None, plan: dict | None) -> dict:
+    segs = plan["segments"] if plan else []
+    summary = {"job": asdict(job), "flight": job.flight, "telemetry": job.telemetry, "vehicle": job.vehicle,
+               "preprocess": p, "usable_share": (p or {}).get("usable_share"),
+               "segments": [s["segment_id"] for s in segs], "segments_ok": [], "segments_failed": [],
+               "segments_dropped": plan["dropped"] if plan else [], "status": "failed"}
+    if plan and plan["note"]:
+        summary["segments_note"] = plan["note"]
+    return summary
 
 
-def _collect_segments(job: FlightJob, plan: list, futures: list, summary: dict, logger) -> list[dict]:
+def _collect_segments(job: FlightJob, plan: dict, futures: list, summary: dict, logger) -> list[dict]:
     """Wait for a flight's segments; record which were smoothed and which failed."""
     done, failed = summary["segments_ok"], summary["segments_failed"]
-    for seg, fut in zip(plan, futures):
+    for seg, fut in zip(plan["segments"], futures):
         fut.wait()
         if fut.state.is_completed():
             done.append(fut.result())
@@ -131,6 +149,9 @@ def run_flights(jobs: list[FlightJob], isolate: bool = False) -> list[dict]:
             if p is None:
                 summary["error"] = {"stage": "preprocess", "message": pre_future.state.message or "failed"}
                 pre_future.result()  # raises the stage's own error
+            if not plan["segments"]:
+                summary["error"] = {"stage": "plan-segments", "message": plan["refusal"]}
+                logger.error("flight %s: %s", job.flight, plan["refusal"])
             _finish_flight(job, p, plan, futures, summary, logger)
         except Exception as exc:
             summary["status"] = "failed"
@@ -143,7 +164,7 @@ def run_flights(jobs: list[FlightJob], isolate: bool = False) -> list[dict]:
     return summaries
 
 
-def _finish_flight(job: FlightJob, p: dict, plan: list, futures: list, summary: dict, logger) -> None:
+def _finish_flight(job: FlightJob, p: dict, plan: dict, futures: list, summary: dict, logger) -> None:
     done = _collect_segments(job, plan, futures, summary, logger)
     if done:
         fd = flight_data_task(p["path"], [d["path"] for d in done], job.run_dir, job.context(), job.vehicle)
@@ -192,7 +213,7 @@ class PoolJob:
     preprocess_params: dict = field(default_factory=dict)
     smoothing_options: dict = field(default_factory=dict)
     mach_half_width: float | None = 0.5
-    min_segment_s: float = 5.0
+    min_segment_s: float | None = None
     ledger_path: str | None = None
 
     @property
