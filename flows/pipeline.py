@@ -102,10 +102,12 @@ def _processed_shas(records: list[dict]) -> dict[str, str]:
 
 
 def _owners(records: list[dict]) -> dict[str, str]:
-    """flight id -> the inbox file that first wrote into its run folder (its 'started' record)."""
+    """flight id -> the inbox file that first had it (its first started, done, failed or
+    unchanged record; a skipped file never owns an id)."""
     owners: dict[str, str] = {}
     for rec in records:
-        if rec.get("stage") == "inbox" and rec.get("status") == "started" and rec.get("source"):
+        if rec.get("stage") == "inbox" and rec.get("source") and rec.get("flight") and \
+                rec.get("status") in ("started", "done", "failed", "unchanged"):
             owners.setdefault(rec["flight"], rec["source"])
     return owners
 

@@ -261,10 +261,8 @@ def recorded_output(ledger: str | Path, cache_key: str, sha256: str) -> Recorded
             if found is not None:
                 return Recorded(found, others, tuple(unverified))
             pending = None
-        if "sha256" in rec or "prev_sha256" in rec:
-            own = None if rec.get("sha256") == record_hash(rec) else f"line {n}: {_EDITED}"
-        else:
-            own = f"line {n}: {_UNHASHED}" if after is not None and "prev_sha256" in after[1] else None
+        chained = "sha256" in rec or "prev_sha256" in rec  # an old record is checked by the link to it only
+        own = None if not chained or rec.get("sha256") == record_hash(rec) else f"line {n}: {_EDITED}"
         problem = own or link_problem or problem
         suffix_ok = suffix_ok and own is None and link_ok
         if needle in lines[i] and rec.get("cache_key") == cache_key and rec.get("status") in ("ok", "reused"):

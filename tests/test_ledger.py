@@ -224,3 +224,13 @@ def test_a_torn_line_and_failed_records_do_not_disturb_the_reuse_lookup(tmp_path
     assert ledger.recorded_output(path, "k0", f"{0:064x}").line == 1
     assert ledger.recorded_output(path, "k9", "9" * 64).line == 5
     assert ledger.verify(path).ok
+
+
+def test_records_chained_after_old_ones_are_trusted_for_reuse(tmp_path):
+    path = tmp_path / "ledger.jsonl"
+    path.write_text('{"stage": "s", "status": "ok", "cache_key": "k0", "outputs": [{"sha256": "a"}]}\n')
+    _keyed(path, 2)  # k0, k1 chained after the old record
+    assert ledger.recorded_output(path, "k0", f"{0:064x}").line == 2
+    old = ledger.recorded_output(path, "k0", "a")
+    assert old.line is None and "older aerosid" in old.unverified[0]
+    assert ledger.recorded_output(path, "k1", f"{1:064x}").line == 3
