@@ -150,6 +150,8 @@ class ChainCheck:
                        "disk); left outside the chain")
         if self.problems:
             out += [f"  line {n}: {m}" for n, m in self.problems]
+        elif len(self.legacy_lines) == self.n_records:
+            out.append("  no record is chained yet (the next aerosid run starts the chain)")
         else:
             out.append("  hash chain intact" + (" from the first chained record" if self.legacy_lines else ""))
         return "\n".join(out)
