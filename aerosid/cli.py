@@ -339,31 +339,23 @@ def _preflight(telemetry: Path, vehicle: str | None, model_spec: str | None, pre
 @main.command()
 @click.argument("file", type=click.Path(exists=True, dir_okay=False, path_type=Path))
 def audit(file):
-    """Trace FILE back to its raw telemetry and parameters through the ledger.
+    """Trace FILE back to its raw telemetry and parameters through the ledger, and check it.
 
     Looks for ledger.jsonl in FILE's folder and its parents, finds the stage
     execution that wrote FILE's exact content (SHA-256), then follows its inputs.
+    Every file in that lineage is hashed again and compared with what the ledger
+    recorded, and the ledger's hash chain is checked: the audit fails naming the
+    first file that changed, or the ledger line that was edited.
     """
-    import json as _json
+    from tasks.audit import audit as run_audit
 
-    from aerosid.provenance import sha256_file
-    from tasks import ledger
-
-    sha = sha256_file(file)
-    for led in ledger.find_ledgers(file.parent):
-        chain = ledger.trace(ledger.read(led), sha)
-        if chain:
-            click.echo(f"{file} (sha256 {sha[:16]}…), ledger {led}")
-            for depth, rec in chain:
-                pad = "  " * depth
-                click.echo(f"{pad}<- stage {rec['stage']} [{rec['status']}] flight {rec['flight']} "
-                           f"{rec.get('segment') or ''} run {rec['run_id']} at {rec['time_utc']} code {rec['code_version']}")
-                click.echo(f"{pad}   params {_json.dumps(rec.get('params'), sort_keys=True, default=str)}")
-                for inp in rec.get("inputs", []):
-                    click.echo(f"{pad}   input {inp['path']} sha256 {inp['sha256'][:16]}…")
-            return
-    raise click.ClickException(f"{file}: no ledger record produced this content (sha256 {sha[:16]}…); "
-                               "was it written by aerosid, or modified since?")
+    try:
+        result = run_audit(file)
+    except OSError as exc:
+        raise click.ClickException(f"cannot read {exc.filename or file}: {exc.strerror or exc}") from exc
+    click.echo(result.summary())
+    if not result.ok:
+        raise click.ClickException(f"{file}: audit failed:\n  " + "\n  ".join(result.problems))
 
 
 from aerosid.cli_modelling import diagnose, fit, history  # noqa: E402  (the modelling-loop commands)

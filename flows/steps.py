@@ -2,6 +2,7 @@
 flow's task runner (threads by default, Dask in a campaign).  No numerics."""
 from __future__ import annotations
 
+import hashlib
 import json
 import re
 from dataclasses import asdict, dataclass, field
@@ -31,11 +32,52 @@ def check_flight_id(flight: str) -> str:
 
 
 def flight_id_from_path(path: str | Path) -> str:
-    """A safe flight id from a telemetry file name (telemetry.parquet -> its folder's name)."""
+    """A safe flight id from a telemetry file name (telemetry.parquet -> its folder's name).
+
+    A name that is already a valid id is kept as it is; any other name (spaces,
+    non-ASCII letters, '..', more than 100 characters) is sanitised and given the first
+    8 hex digits of the SHA-256 of the original name, so two different names never
+    share an id (``a b`` -> ``a_b-c8687a08``, ``a_b`` -> ``a_b``, ``航班`` -> ``flight-32875d4f``),
+    and the same name keeps its id when its content changes."""
     p = Path(path)
     stem = p.parent.name if p.stem == "telemetry" and p.parent.name else p.stem
-    safe = re.sub(r"[^A-Za-z0-9_.-]+", "_", stem).strip("._-") or "flight"
-    return check_flight_id(safe.replace("..", "_"))
+    if FLIGHT_ID.match(stem) and ".." not in stem:
+        return stem
+    safe = re.sub(r"[^A-Za-z0-9_.-]+", "_", stem).replace("..", "_").strip("._-")[:80].strip("._-") or "flight"
+    digest = hashlib.sha256(stem.encode("utf-8", "surrogateescape")).hexdigest()[:8]
+    return check_flight_id(f"{safe}-{digest}")
+
+
+def inbox_flight_ids(paths: list[Path], inbox: Path, owners: dict[str, str]) -> tuple[dict[Path, str], dict[Path, str]]:
+    """The flight id of each inbox file, and the files refused because they would share a
+    run folder with another (the reason names both).  `owners`: flight id -> the inbox
+    file (relative name) an earlier scan processed under that id; it keeps it."""
+    groups: dict[str, list[Path]] = {}
+    for p in paths:
+        groups.setdefault(flight_id_from_path(p), []).append(p)
+    ids, refused = {}, {}
+    for fid, group in groups.items():
+        names = {p: inbox_name(p, inbox) for p in group}
+        owner = owners.get(fid)
+        for p in group:
+            others = [names[q] for q in group if q != p]
+            if owner is not None and names[p] != owner:
+                refused[p] = (f"{names[p]!r} maps to flight id {fid!r}, which belongs to {owner!r} (processed "
+                              f"earlier into {fid}/): rename {names[p]!r}")
+            elif owner is None and others:
+                refused[p] = (f"{names[p]!r} and {', '.join(map(repr, others))} map to the same flight id {fid!r} "
+                              "(it names the run folder): rename one")
+            else:
+                ids[p] = fid
+    return ids, refused
+
+
+def inbox_name(path: Path, inbox: Path) -> str:
+    """A file's name relative to the inbox (what the ledger's inbox records call `source`)."""
+    try:
+        return Path(path).relative_to(inbox).as_posix()
+    except ValueError:
+        return Path(path).name
 
 
 @dataclass
@@ -71,10 +113,7 @@ class FlightJob:
 
 
 def _check_ids(jobs: list[FlightJob]) -> None:
-    ids = [check_flight_id(job.flight) for job in jobs]
-    if len(set(ids)) < len(ids):
-        dup = sorted({i for i in ids if ids.count(i) > 1})
-        raise ValueError(f"two telemetry files map to the same flight id {dup}: rename one (the id names the run folder)")
+    check_unique_flights(jobs)
 
 
 def _start(jobs: list[FlightJob]):
@@ -140,7 +179,7 @@ def run_flights(jobs: list[FlightJob], isolate: bool = False) -> list[dict]:
     in its run.json and the other flights go on; otherwise the error is raised after
     run.json says so."""
     logger = get_run_logger()
-    _check_ids(jobs)
+    check_unique_flights(jobs)
     pre_futures, pre, plans, seg_futures = _start(jobs)
     summaries = []
     for job, p, plan, futures, pre_future in zip(jobs, pre, plans, seg_futures, pre_futures):
@@ -162,6 +201,17 @@ def run_flights(jobs: list[FlightJob], isolate: bool = False) -> list[dict]:
             logger.error("flight %s failed: %s", job.flight, summary["error"]["message"])
         summaries.append(summary)
     return summaries
+
+
+def check_unique_flights(jobs: list[FlightJob]) -> None:
+    """Two jobs never share a flight id (it names the run folder): an error naming both files."""
+    seen: dict[str, str] = {}
+    for job in jobs:
+        check_flight_id(job.flight)
+        if job.flight in seen:
+            raise ValueError(f"telemetry files {seen[job.flight]} and {job.telemetry} map to the same flight id "
+                             f"{job.flight!r} (it names the run folder): rename one")
+        seen[job.flight] = job.telemetry
 
 
 def _finish_flight(job: FlightJob, p: dict, plan: dict, futures: list, summary: dict, logger) -> None:
