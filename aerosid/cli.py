@@ -158,7 +158,16 @@ def _quiet_run_tracebacks() -> None:
               help="Model specification TOML (default: the seed's linear models).")
 @click.option("--mach-half-width", type=float, default=0.5, show_default=True,
               help="Regress on samples with |M - M_ref| <= this (M_ref from the vehicle file).")
-def run(telemetry, vehicle, out_dir, flight, windows, model_spec, mach_half_width):
+@click.option("--preprocess", "preprocess_settings", multiple=True, metavar="KEY=VALUE",
+              help="A preprocessing threshold for this run (repeatable), on top of the vehicle file's "
+                   "[preprocess] table: a global key (false_alarm=1e-4, max_interp_gap_s=1.0) or one "
+                   "sensor's (V_m_s.update_interval_s=0.2, d1_rad.frozen_max_still_s=30). "
+                   "Keys: docs/preprocessing.md.")
+@click.option("--min-segment-s", type=float, default=None,
+              help="Shortest piece of the flight that is smoothed [s] (default: the vehicle file's "
+                   "[preprocess] min_segment_s, else 5).")
+def run(telemetry, vehicle, out_dir, flight, windows, model_spec, mach_half_width, preprocess_settings,
+        min_segment_s):
     """Run the whole pipeline on one telemetry file (Prefect flow process_flight), or
     identify one model from several manoeuvres of one aircraft (process_manoeuvres).
 
@@ -176,13 +185,14 @@ def run(telemetry, vehicle, out_dir, flight, windows, model_spec, mach_half_widt
     from aerosid.preprocess import TelemetryError
     from aerosid.vehicle import VehicleError
 
+    params, min_segment_s = _preprocess_options(preprocess_settings, min_segment_s)
     pooled = len(telemetry) > 1
     try:
         if pooled and windows:
             raise click.UsageError("--window applies to one telemetry file; cut each manoeuvre's file to its "
                                    "window before pooling them")
         # bad input fails here, before Prefect starts
-        named = [_preflight(t, vehicle, model_spec) for t in telemetry]
+        named = [_preflight(t, vehicle, model_spec, params, windows, min_segment_s) for t in telemetry]
         from flows.pipeline import pooled_vehicle, process_flight, process_manoeuvres
         from flows.steps import check_flight_id
 
@@ -193,12 +203,14 @@ def run(telemetry, vehicle, out_dir, flight, windows, model_spec, mach_half_widt
         if pooled:
             summary = process_manoeuvres([str(t) for t in telemetry], str(out_dir), vehicle=vehicle, name=flight,
                                          model_spec=str(model_spec) if model_spec else None,
-                                         mach_half_width=mach_half_width)
+                                         mach_half_width=mach_half_width, preprocess_params=params,
+                                         min_segment_s=min_segment_s)
         else:
             summary = process_flight(str(telemetry[0]), str(out_dir), vehicle=vehicle, flight=flight,
                                      windows=[list(w) for w in windows] or None,
                                      model_spec=str(model_spec) if model_spec else None,
-                                     mach_half_width=mach_half_width)
+                                     mach_half_width=mach_half_width, preprocess_params=params,
+                                     min_segment_s=min_segment_s)
     except (TelemetryError, VehicleError, ValueError) as exc:
         raise click.ClickException(str(exc)) from exc
     except OSError as exc:  # read-only or full output folder, a vanished file
@@ -206,6 +218,11 @@ def run(telemetry, vehicle, out_dir, flight, windows, model_spec, mach_half_widt
         raise click.ClickException(f"cannot write the run folder {out_dir}: {exc.strerror or exc}{where}; "
                                    "earlier outputs are left as they were") from exc
     for fs in summary.get("flights", [summary]):
+        _echo_usable_share(fs.get("usable_share"))
+        if fs.get("error", {}).get("stage") == "plan-segments":
+            raise click.ClickException(f"{fs.get('telemetry', telemetry[0])}: {fs['error']['message']}")
+        if fs.get("segments_note"):
+            click.echo(f"note: {fs['segments_note']}")
         click.echo(f"flight {fs['flight']}: {fs['status']}; segments ok "
                    f"{[d['segment'] for d in fs['segments_ok']]}, failed {fs['segments_failed']}")
     for fid, src in (summary.get("air_data") or {}).items():
@@ -234,11 +251,39 @@ def run(telemetry, vehicle, out_dir, flight, windows, model_spec, mach_half_widt
                                    f"see {out_dir}/ledger.jsonl")
 
 
-def _preflight(telemetry: Path, vehicle: str | None, model_spec: str | None) -> str:
+def _preprocess_options(items, min_segment_s):
+    """--preprocess KEY=VALUE items -> (PreprocessParams keyword arguments, min_segment_s);
+    a bad key or value is a usage error naming it."""
+    from aerosid.preprocess import SettingsError, parse_assignments, parse_settings
+
+    try:
+        params, from_items = parse_settings(parse_assignments(items))
+    except (SettingsError, ValueError) as exc:
+        raise click.BadParameter(str(exc), param_hint="--preprocess") from exc
+    if min_segment_s is not None and not min_segment_s > 0:
+        raise click.BadParameter(f"must be > 0, got {min_segment_s}", param_hint="--min-segment-s")
+    return params, min_segment_s if min_segment_s is not None else from_items
+
+
+def _echo_usable_share(share: dict | None) -> None:
+    """One line: rows used of rows recorded, and the channels below 100 %."""
+    if not share:
+        return
+    low = {c: v["share"] for c, v in share["by_channel"].items() if v["used"] < share["recorded"]}
+    click.echo(f"preprocess: rows used {share['used']} of {share['recorded']} recorded "
+               f"({100.0 * share['share']:.1f} %)"
+               + (("; channels below 100 %: " + ", ".join(f"{c} {100.0 * v:.1f} %" for c, v in low.items()))
+                  if low else ""))
+
+
+def _preflight(telemetry: Path, vehicle: str | None, model_spec: str | None, preprocess_params: dict | None = None,
+               windows=(), min_segment_s: float | None = None) -> str:
     """Cheap checks of the inputs before any flow starts: the telemetry file is
     readable Parquet that follows RawTelemetry, has rows and no channel without a
     single value; the vehicle (given, else the one the file names: there is no
-    default) and the model specification load.  Returns the vehicle."""
+    default), its preprocessing settings with the run's on top, and the model
+    specification load; the time windows leave a segment of at least the minimum
+    segment length.  Returns the vehicle."""
     import numpy as np
     import pyarrow.parquet as pq
 
@@ -276,6 +321,9 @@ def _preflight(telemetry: Path, vehicle: str | None, model_spec: str | None) -> 
     if vehicle is None:
         vehicle = telemetry_vehicle(telemetry)  # the file was read: names its vehicle or raises
     veh = load_vehicle(vehicle)
+    from aerosid.preprocess import PreprocessParams, merge_settings
+
+    PreprocessParams.from_dict(merge_settings(veh.preprocess, preprocess_params or {}))
     if veh.air_data_source == "vanes":
         for c in (veh.alpha_column, veh.beta_column):
             if c not in frame.columns:
@@ -284,37 +332,37 @@ def _preflight(telemetry: Path, vehicle: str | None, model_spec: str | None) -> 
                                      file=str(telemetry), column=c)
     if model_spec:
         load_models(model_spec, base=default_models(veh))
+    if windows:  # windows too short to smooth are refused now, naming the limit (gaps are seen later)
+        from aerosid.preprocess import DEFAULT_MIN_SEGMENT_S
+        from aerosid.segments import plan_segments
+
+        min_seg = next(v for v in (min_segment_s, veh.min_segment_s, DEFAULT_MIN_SEGMENT_S) if v is not None)
+        plan = plan_segments(frame["t_s"].to_numpy(), [], [tuple(w) for w in windows], float(min_seg))
+        if not plan.segments:
+            raise ValueError(f"{telemetry}: {plan.refusal()}")
     return vehicle
 
 
 @main.command()
 @click.argument("file", type=click.Path(exists=True, dir_okay=False, path_type=Path))
 def audit(file):
-    """Trace FILE back to its raw telemetry and parameters through the ledger.
+    """Trace FILE back to its raw telemetry and parameters through the ledger, and check it.
 
     Looks for ledger.jsonl in FILE's folder and its parents, finds the stage
     execution that wrote FILE's exact content (SHA-256), then follows its inputs.
+    Every file in that lineage is hashed again and compared with what the ledger
+    recorded, and the ledger's hash chain is checked: the audit fails naming the
+    first file that changed, or the ledger line that was edited.
     """
-    import json as _json
+    from tasks.audit import audit as run_audit
 
-    from aerosid.provenance import sha256_file
-    from tasks import ledger
-
-    sha = sha256_file(file)
-    for led in ledger.find_ledgers(file.parent):
-        chain = ledger.trace(ledger.read(led), sha)
-        if chain:
-            click.echo(f"{file} (sha256 {sha[:16]}…), ledger {led}")
-            for depth, rec in chain:
-                pad = "  " * depth
-                click.echo(f"{pad}<- stage {rec['stage']} [{rec['status']}] flight {rec['flight']} "
-                           f"{rec.get('segment') or ''} run {rec['run_id']} at {rec['time_utc']} code {rec['code_version']}")
-                click.echo(f"{pad}   params {_json.dumps(rec.get('params'), sort_keys=True, default=str)}")
-                for inp in rec.get("inputs", []):
-                    click.echo(f"{pad}   input {inp['path']} sha256 {inp['sha256'][:16]}…")
-            return
-    raise click.ClickException(f"{file}: no ledger record produced this content (sha256 {sha[:16]}…); "
-                               "was it written by aerosid, or modified since?")
+    try:
+        result = run_audit(file)
+    except OSError as exc:
+        raise click.ClickException(f"cannot read {exc.filename or file}: {exc.strerror or exc}") from exc
+    click.echo(result.summary())
+    if not result.ok:
+        raise click.ClickException(f"{file}: audit failed:\n  " + "\n  ".join(result.problems))
 
 
 from aerosid.cli_modelling import diagnose, fit, history  # noqa: E402  (the modelling-loop commands)

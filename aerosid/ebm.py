@@ -14,8 +14,9 @@ from aerosid.estimation.findings import Finding
 from aerosid.flight_data import build_flight_data_segments, build_pooled_flight_data, load_database
 from aerosid.identify import Identification, identify
 from aerosid.models import ChannelModel
-from aerosid.preprocess import PreprocessParams, PreprocessResult, preprocess
-from aerosid.segments import split_segments
+from aerosid.preprocess import (DEFAULT_MIN_SEGMENT_S, PreprocessParams, PreprocessResult, merge_settings,
+                                preprocess)
+from aerosid.segments import plan_segments
 from aerosid.smoothing import SmoothedSegmentResult, smooth_segment_frame
 from aerosid.vehicle import Vehicle
 
@@ -56,16 +57,33 @@ class EBMFlightData:
         return "\n\n".join([self.preprocessed.summary(), *(s.result.summary() for s in self.smoothed), *failed])
 
 
+def preprocess_and_plan(raw: pd.DataFrame, vehicle: Vehicle, *, windows=None, preprocess_params: dict | None = None,
+                        min_segment_s: float | None = None, source: str = "<memory>"):
+    """Preprocessing with the vehicle file's [preprocess] table under the caller's
+    settings, and the segment plan (min_segment_s None: the vehicle's, else 5 s, as the
+    flow does).  Returns (PreprocessResult, segments); a plan with no segment is a
+    ValueError naming the limit that refused the data."""
+    params = merge_settings(vehicle.preprocess, preprocess_params or {})
+    if min_segment_s is None:
+        min_segment_s = vehicle.min_segment_s if vehicle.min_segment_s is not None else DEFAULT_MIN_SEGMENT_S
+    pre = preprocess(raw, PreprocessParams.from_dict(params), source=source)
+    plan = plan_segments(pre.frame["t_s"].to_numpy(), list(pre.long_gaps), windows, min_segment_s,
+                         pre.params.max_interp_gap_s)
+    if not plan.segments:
+        raise ValueError(plan.refusal())
+    return pre, plan.segments
+
+
 def estimate_flight_data(raw: pd.DataFrame, vehicle: Vehicle, *, flight: str = "flight", windows=None,
                          preprocess_params: dict | None = None, smoothing_options: dict | None = None,
-                         min_segment_s: float = 5.0, source: str = "<memory>",
+                         min_segment_s: float | None = None, source: str = "<memory>",
                          skip_failed: bool = False) -> EBMFlightData:
     """Raw telemetry -> flight data (preprocess, segments, EKF + MBF smoother, air data,
     coefficients, alpha/beta).  A segment that loses more than half its samples to
     findings is left out and recorded, as the flow does; with skip_failed, so is one whose
     smoothing fails; if none is left, ValueError."""
-    pre = preprocess(raw, PreprocessParams(**(preprocess_params or {})), source=source)
-    segments = split_segments(pre.frame["t_s"].to_numpy(), list(pre.long_gaps), windows, min_segment_s)
+    pre, segments = preprocess_and_plan(raw, vehicle, windows=windows, preprocess_params=preprocess_params,
+                                        min_segment_s=min_segment_s, source=source)
     db = load_database(vehicle)
     smoothed, failed = [], []
     for seg in segments:
@@ -83,9 +101,7 @@ def estimate_flight_data(raw: pd.DataFrame, vehicle: Vehicle, *, flight: str = "
             continue
         smoothed.append(sm)
     if not smoothed:
-        why = "; ".join(f"{s}: {w}" for s, w in failed) or (
-            f"no segment of at least {min_segment_s:g} s (minimum segment length) in "
-            f"{round(pre.frame['t_s'].iloc[0], 2) + 0.0:.2f}..{pre.frame['t_s'].iloc[-1]:.2f} s")
+        why = "; ".join(f"{s}: {w}" for s, w in failed) or "no segment"
         raise ValueError(f"{source}: no segment could be smoothed ({why})")
     fd = build_flight_data_segments(pre.frame, [s.frame for s in smoothed], vehicle, db, flight)
     return EBMFlightData(pre, tuple(smoothed), fd, tuple(failed))
@@ -94,7 +110,9 @@ def estimate_flight_data(raw: pd.DataFrame, vehicle: Vehicle, *, flight: str = "
 def process_telemetry(raw: pd.DataFrame, vehicle: Vehicle, *, flight: str = "flight", windows=None,
                       models: dict[str, ChannelModel] | None = None, preprocess_params: dict | None = None,
                       smoothing_options: dict | None = None, mach_half_width: float | None = 0.5,
-                      min_segment_s: float = 5.0, source: str = "<memory>") -> EBMRun:
+                      min_segment_s: float | None = None, source: str = "<memory>") -> EBMRun:
+    """preprocess_params go on top of the vehicle file's [preprocess] table; min_segment_s
+    None takes the vehicle's, else 5 s (as the flow does)."""
     est = estimate_flight_data(raw, vehicle, flight=flight, windows=windows, preprocess_params=preprocess_params,
                                smoothing_options=smoothing_options, min_segment_s=min_segment_s, source=source)
     fd = est.flight_data
@@ -121,15 +139,15 @@ class PooledEBMRun:
 def process_manoeuvres(raws: dict[str, pd.DataFrame], vehicle: Vehicle, *, windows=None,
                        models: dict[str, ChannelModel] | None = None, preprocess_params: dict | None = None,
                        smoothing_options: dict | None = None, mach_half_width: float | None = 0.5,
-                       min_segment_s: float = 5.0, sources: dict[str, str] | None = None) -> PooledEBMRun:
+                       min_segment_s: float | None = None, sources: dict[str, str] | None = None) -> PooledEBMRun:
     """``raws``: flight id -> raw telemetry of one manoeuvre.  Each goes through
     preprocessing, segmentation and smoothing alone; the regression fits them together
     (the Prefect flow ``process_manoeuvres`` reproduces this)."""
     db = load_database(vehicle)
     per_flight, pooled = {}, []
     for fid, raw in raws.items():
-        pre = preprocess(raw, PreprocessParams(**(preprocess_params or {})), source=(sources or {}).get(fid, fid))
-        segments = split_segments(pre.frame["t_s"].to_numpy(), list(pre.long_gaps), windows, min_segment_s)
+        pre, segments = preprocess_and_plan(raw, vehicle, windows=windows, preprocess_params=preprocess_params,
+                                            min_segment_s=min_segment_s, source=(sources or {}).get(fid, fid))
         smoothed = tuple(smooth_segment_frame(pre.frame.iloc[seg.start:seg.stop].reset_index(drop=True), vehicle,
                                               smoothing_options, seg.segment_id) for seg in segments)
         smoothed = tuple(s for s in smoothed if not getattr(s, "lost", False))  # as the flow fails them

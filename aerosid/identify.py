@@ -145,6 +145,10 @@ def angle_cutoff_hz(fd: pd.DataFrame, vehicle: Vehicle) -> float | None:
     return vehicle.vane_cutoff_hz
 
 
+#: Fewest flight-data samples (inside the Mach window) a fit accepts.
+MIN_FIT_SAMPLES = 50
+
+
 def mach_window_mask(mach: np.ndarray, reference: float, half_width: float | None) -> np.ndarray:
     if half_width is None:
         return np.ones(len(mach), dtype=bool)
@@ -163,9 +167,13 @@ def identify(flight_data: pd.DataFrame, vehicle: Vehicle, models: dict[str, Chan
     span = (f"the flight data's {len(fd)} samples span Mach {fd['mach'].min():.3g}..{fd['mach'].max():.3g}"
             if len(fd) else "the flight data is empty")
     fd = fd.loc[mask].reset_index(drop=True)
-    if len(fd) < 50:
-        raise ValueError(f"only {len(fd)} samples inside Mach {vehicle.mach_reference} ± {mach_half_width}: "
-                         f"too few to fit the models ({span})")
+    if len(fd) < MIN_FIT_SAMPLES:
+        window = ("the whole flight (no Mach window)" if mach_half_width is None else
+                  f"the Mach window |M - {vehicle.mach_reference:g}| <= mach_half_width = {mach_half_width:g} "
+                  f"(mach_reference from [aero] of {vehicle.source}; widen it with --mach-half-width on aerosid "
+                  "run, fit or diagnose)")
+        raise ValueError(f"only {len(fd)} samples inside {window}: too few to fit the models, at least "
+                         f"{MIN_FIT_SAMPLES} are needed ({span})")
     signals = vehicle_signals(fd, vehicle)
     flights = fd["flight"].astype(str).to_numpy()
     fits: dict[str, LinearFit] = {}

@@ -42,11 +42,12 @@ FLAG_MEANINGS = {
     "MISSING_ROW": "no raw row at this grid time (dropout or sync gap)",
     "NAN": "raw value NaN or infinite",
     "SENTINEL": "raw value is a sentinel (e.g. -9999)",
-    "FROZEN": "value repeated exactly (frozen sensor)",
+    "FROZEN": "value repeated exactly, far beyond the sensor's update interval (stuck sensor)",
     "OUTLIER": "isolated spike (robust two-sided test)",
     "OUT_OF_RANGE": "outside the physical bounds",
     "TIME_JITTER": "timestamp far from its grid point",
-    "INTERPOLATED": "action: linearly interpolated across a short gap",
+    "HELD": "repeats its sensor's last update (sample-and-hold); not a fault",
+    "INTERPOLATED": "action: linearly interpolated across a short gap (or between a held sensor's updates)",
     "LONG_GAP": "action: left empty, gap longer than the interpolation limit",
     "EDGE_GAP": "action: left empty, gap at the start or end of the record",
 }
@@ -412,6 +413,17 @@ def _air_data_text(run: _Run) -> str:
     return " | ".join((f"{', '.join(f)}: " if len(src) > 1 else "") + text for text, f in groups.items())
 
 
+def _used_share_text(share: dict) -> str:
+    """' N of M recorded rows are used (...)' from the usable_share metadata ('' if absent)."""
+    if not share or not share.get("recorded"):
+        return ""
+    low = [f"{c} {100.0 * v['share']:.1f} %" for c, v in share.get("by_channel", {}).items()
+           if v.get("used", 0) < share["recorded"]]
+    return (f" {share['used']} of {share['recorded']} recorded rows are used "
+            f"({100.0 * share['share']:.2f} %: every channel a measurement, or a held value between its "
+            f"sensor's updates)" + (f"; channels below 100 %: {', '.join(low)}" if low else "") + ".")
+
+
 def _s_preprocessing(run: _Run) -> str:
     path = run.dir / "preprocessed.parquet"
     meta = _meta(path) if path.is_file() else {}
@@ -433,7 +445,8 @@ def _s_preprocessing(run: _Run) -> str:
     out.append(_p(f"{counts.get('raw', '?')} raw rows were put on a uniform {_num(rate, '.6g')} Hz grid "
                   f"({'rate inferred from the timestamps' if inferred else 'rate given'}) of {grid} rows; "
                   f"{counts.get('inserted', '?')} rows were inserted where no raw row arrived. "
-                  f"{usable} rows are usable in every channel{share}."))
+                  f"{usable} rows are usable in every channel{share}."
+                  + _used_share_text(_jmeta(meta, p + "usable_share", {}))))
     gap_txt = (f"Longest all-channel gap: {_num(longest, '.3f')} s. Gaps longer than "
                f"{_num(params.get('max_interp_gap_s'), 'g')} s are not interpolated; the flight is split there "
                f"into segments: " + (", ".join(f"{_num(a, '.3f')}–{_num(b, '.3f')} s" for a, b in long_gaps)

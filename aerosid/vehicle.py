@@ -101,6 +101,11 @@ class Vehicle:
     #: the regression's common low-pass edge [Hz] ([estimation] band_hz; None: from each
     #: segment's gyro spectrum, aerosid.identification.band)
     band_hz: float | None = None
+    #: preprocessing thresholds from the [preprocess] table (PreprocessParams keyword
+    #: arguments, per-sensor tables under "sensors"; docs/preprocessing.md)
+    preprocess: dict = field(default_factory=dict)
+    #: shortest segment the pipeline smooths [s] ([preprocess] min_segment_s; None: default)
+    min_segment_s: float | None = None
 
     @property
     def length_pitch_m(self) -> float:
@@ -270,6 +275,7 @@ def load_vehicle(name_or_path: str | Path = "seed-rlv") -> Vehicle:
                     parse_term(str(item), ch, src)
                 except ModelSpecError as exc:
                     raise VehicleError(src, f"models.{ch}", str(exc)) from exc
+    preprocess, min_segment_s = _preprocess_settings(doc.get("preprocess", {}), src)
     return Vehicle(
         name=str(doc.get("name", path.parent.name)),
         description=str(doc.get("description", "")),
@@ -304,4 +310,21 @@ def load_vehicle(name_or_path: str | Path = "seed-rlv") -> Vehicle:
         derivative_half_window_s=float(air.get("derivative_half_window_s", 0.25)),
         surfaces=tuple(str(x) for x in surfaces),
         default_terms={k: list(v) for k, v in terms.items()} if terms is not None else None,
+        preprocess=preprocess,
+        min_segment_s=min_segment_s,
     )
+
+
+def _preprocess_settings(table, src: str) -> tuple[dict, float | None]:
+    """The [preprocess] table checked (aerosid.preprocess.parse_settings); errors name
+    the file and the key."""
+    from aerosid.preprocess.params import SettingsError, parse_settings
+
+    if not isinstance(table, dict):
+        raise VehicleError(src, "preprocess", "must be a table of settings")
+    try:
+        return parse_settings(table)
+    except SettingsError as exc:
+        raise VehicleError(src, f"preprocess.{exc.key}", exc.reason) from None
+    except ValueError as exc:
+        raise VehicleError(src, "preprocess", str(exc)) from None

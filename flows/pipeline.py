@@ -15,7 +15,8 @@ from prefect import flow, get_run_logger
 
 from aerosid.io import telemetry_vehicle
 from aerosid.provenance import sha256_file
-from flows.steps import FlightJob, PoolJob, check_flight_id, flight_id_from_path, run_flights, run_pooled
+from flows.steps import (FlightJob, PoolJob, check_flight_id, flight_id_from_path, inbox_flight_ids, inbox_name,
+                         run_flights, run_pooled)
 from tasks import ledger
 from tasks.ledger import LEDGER_NAME
 
@@ -24,12 +25,15 @@ from tasks.ledger import LEDGER_NAME
 def process_flight(telemetry: str, out_dir: str, vehicle: str | None = None, flight: str | None = None,
                    windows: list | None = None, model_spec: str | None = None,
                    preprocess_params: dict | None = None, smoothing_options: dict | None = None,
-                   mach_half_width: float | None = 0.5) -> dict:
+                   mach_half_width: float | None = 0.5, min_segment_s: float | None = None) -> dict:
     """One telemetry file -> segments -> every stage -> coefficients (and run.json, ledger).
     vehicle: a built-in name or a vehicle file; None = the one the file's metadata names
-    (aerosid.io.telemetry_vehicle: an error when it names none)."""
+    (aerosid.io.telemetry_vehicle: an error when it names none).
+    preprocess_params: PreprocessParams keyword arguments on top of the vehicle file's [preprocess]
+    table; min_segment_s: shortest segment smoothed [s] (None: the vehicle's, else 5 s)."""
     job = FlightJob(str(telemetry), str(out_dir), check_flight_id(flight or flight_id_from_path(telemetry)),
-                    vehicle or telemetry_vehicle(telemetry), windows, model_spec, preprocess_params or {}, smoothing_options or {}, mach_half_width)
+                    vehicle or telemetry_vehicle(telemetry), windows, model_spec, preprocess_params or {},
+                    smoothing_options or {}, mach_half_width, min_segment_s)
     return run_flights([job])[0]
 
 
@@ -55,7 +59,7 @@ def pooled_vehicle(telemetry_files: list[str], vehicle: str | None = None) -> st
 def process_manoeuvres(telemetry_files: list[str], out_dir: str, vehicle: str | None = None, name: str | None = None,
                        windows: list | None = None, model_spec: str | None = None,
                        preprocess_params: dict | None = None, smoothing_options: dict | None = None,
-                       mach_half_width: float | None = 0.5) -> dict:
+                       mach_half_width: float | None = 0.5, min_segment_s: float | None = None) -> dict:
     """Several manoeuvres of one aircraft -> one identification: each file preprocessed
     and smoothed on its own (its own flight id and segments, under OUT/flights/<id>/),
     their flight data pooled into OUT/flight_data.parquet, one regression.  vehicle: as
@@ -64,7 +68,7 @@ def process_manoeuvres(telemetry_files: list[str], out_dir: str, vehicle: str | 
     pool = PoolJob([str(t) for t in telemetry_files], str(out_dir),
                    check_flight_id(name or flight_id_from_path(out_dir)),
                    pooled_vehicle([str(t) for t in telemetry_files], vehicle), windows, model_spec,
-                   preprocess_params or {}, smoothing_options or {}, mach_half_width)
+                   preprocess_params or {}, smoothing_options or {}, mach_half_width, min_segment_s)
     return run_pooled(pool)
 
 
@@ -137,42 +141,95 @@ def _processed_shas(records: list[dict]) -> dict[str, str]:
     return done
 
 
+def _owners(records: list[dict]) -> dict[str, str]:
+    """flight id -> the inbox file that first had it (its first started, done, failed or
+    unchanged record; a skipped file never owns an id)."""
+    owners: dict[str, str] = {}
+    for rec in records:
+        if rec.get("stage") == "inbox" and rec.get("source") and rec.get("flight") and \
+                rec.get("status") in ("started", "done", "failed", "unchanged"):
+            owners.setdefault(rec["flight"], rec["source"])
+    return owners
+
+
 @flow(name="reprocess-inbox", log_prints=True)
 def reprocess_inbox(inbox: str, out_root: str, vehicle: str | None = None, pattern: str = "*.parquet",
                     settle_s: float = 0.5) -> dict:
     """Process every telemetry file in `inbox` that is new or whose content changed
     (by SHA-256, not by name or time); skip the rest.  Files still being written
-    (size or mtime changing over settle_s, or hidden/temporary names) wait for the
-    next scan; a flight another run is processing is skipped (a file lock)."""
+    (size or mtime changing over settle_s) wait for the next scan; hidden names
+    (uploads in progress) and folders are not telemetry; a flight another run is
+    processing is skipped (a file lock); two files whose names map to one flight id
+    are refused (naming both).  Every file the pattern matches gets an inbox record
+    in the ledger saying what became of it."""
     logger = get_run_logger()
-    root = Path(out_root)
+    root, inbox_dir = Path(out_root), Path(inbox)
     led = root / LEDGER_NAME
-    if not Path(inbox).is_dir():
+    if not inbox_dir.is_dir():
         raise FileNotFoundError(f"inbox {inbox} is not an existing folder")
-    files = sorted(p for p in Path(inbox).glob(pattern) if p.is_file() and not p.name.startswith("."))
-    report = {"processed": [], "unchanged": [], "busy": [], "not_ready": [], "failed": [], "errors": {}}
-    if not files:
+    report = {"processed": [], "unchanged": [], "busy": [], "not_ready": [], "failed": [], "errors": {},
+              "skipped": {}}
+
+    def record(path: Path, flight: str, status: str, sha: str | None = None, **extra) -> None:
+        ledger.append(led, {"run_id": "inbox", "flight": flight, "segment": "", "stage": "inbox",
+                            "status": status, "source": inbox_name(path, inbox_dir),
+                            "inputs": [{"path": os.path.abspath(path), "sha256": sha}] if sha else [],
+                            "outputs": [], "error": None, **extra})
+
+    def skip(path: Path, flight: str, reason: str, sha: str | None = None) -> None:
+        record(path, flight, "skipped", sha, reason=reason)
+        report["skipped"][str(path)] = reason
+        logger.info("inbox file %s skipped: %s", path, reason)
+
+    matched = sorted(inbox_dir.glob(pattern))
+    if not matched:
         logger.info("inbox %s: no telemetry files matching %s", inbox, pattern)
-    done = _processed_shas(ledger.read(led))
+    files = []
+    for p in matched:
+        if p.name.startswith("."):
+            skip(p, "", "a hidden name (an upload in progress, or not telemetry): processed once it has its final name")
+        elif not p.is_file():
+            skip(p, "", "not a regular file")
+        else:
+            files.append(p)
+    records = ledger.read(led)
+    done = _processed_shas(records)
+    ids, refused = inbox_flight_ids(files, inbox_dir, _owners(records))
     for path in files:
-        flight = flight_id_from_path(path)
-        if not _stable(path, settle_s):
-            report["not_ready"].append(str(path))
+        if path in refused:
+            skip(path, flight_id_from_path(path), refused[path])
             continue
-        sha = sha256_file(path)
+        flight = ids[path]
+        try:
+            if not _stable(path, settle_s):
+                report["not_ready"].append(str(path))
+                skip(path, flight, f"not ready: still being written (size or modification time changed within "
+                                   f"{settle_s} s, or empty); the next scan looks again")
+                continue
+            sha = sha256_file(path)
+        except OSError as exc:  # vanished or unreadable between the listing and now
+            skip(path, flight, f"cannot be read: {exc.strerror or exc}")
+            continue
         if done.get(flight) == sha:
-            ledger.append(led, {"run_id": "inbox", "flight": flight, "segment": "", "stage": "inbox",
-                                "status": "unchanged", "inputs": [{"path": str(path), "sha256": sha}],
-                                "outputs": [], "error": None})
+            record(path, flight, "unchanged", sha)
             report["unchanged"].append(flight)
             continue
         with _claim(root / ".locks" / f"{flight}.lock") as mine:
             if not mine:
                 report["busy"].append(flight)
+                skip(path, flight, "busy: another run is processing this flight (its lock is held)", sha)
                 continue
-            if _processed_shas(ledger.read(led)).get(flight) == sha:  # done by a concurrent run meanwhile
+            latest = ledger.read(led)
+            if _processed_shas(latest).get(flight) == sha:  # done by a concurrent run meanwhile
+                record(path, flight, "unchanged", sha)
                 report["unchanged"].append(flight)
                 continue
+            owner = _owners(latest).get(flight)
+            if owner is not None and owner != inbox_name(path, inbox_dir):  # claimed by another file meanwhile
+                skip(path, flight, f"flight id {flight!r} belongs to {owner!r}: rename {path.name!r}", sha)
+                continue
+            if owner is None:
+                record(path, flight, "started", sha)
             try:  # a file naming no vehicle fails alone, like a bad file
                 job = FlightJob(str(path), str(root / flight), flight, vehicle or telemetry_vehicle(path),
                                 ledger_path=str(led))
@@ -181,15 +238,16 @@ def reprocess_inbox(inbox: str, out_root: str, vehicle: str | None = None, patte
                 logger.error("inbox file %s failed: %s", path, exc)
                 report["failed"].append(flight)
                 report["errors"][flight] = f"{type(exc).__name__}: {exc}"
+                record(path, flight, "failed", sha, error=report["errors"][flight])
                 continue
-            (report["processed"] if summary["status"] != "failed" else report["failed"]).append(flight)
             if summary["status"] != "failed":
-                ledger.append(led, {"run_id": "inbox", "flight": flight, "segment": "", "stage": "inbox",
-                                    "status": "done", "inputs": [{"path": str(path), "sha256": sha}],
-                                    "outputs": [], "error": None})
-            if summary["status"] == "failed":
+                report["processed"].append(flight)
+                record(path, flight, "done", sha)
+            else:
+                report["failed"].append(flight)
                 report["errors"][flight] = "; ".join(f"{f['segment']}: {f['error']}"
                                                      for f in summary["segments_failed"])
+                record(path, flight, "failed", sha, error=report["errors"][flight])
     logger.info("inbox scan: %s", {k: len(v) for k, v in report.items()})
     return report
 

@@ -2,6 +2,7 @@
 flow's task runner (threads by default, Dask in a campaign).  No numerics."""
 from __future__ import annotations
 
+import hashlib
 import json
 import re
 from dataclasses import asdict, dataclass, field
@@ -31,11 +32,52 @@ def check_flight_id(flight: str) -> str:
 
 
 def flight_id_from_path(path: str | Path) -> str:
-    """A safe flight id from a telemetry file name (telemetry.parquet -> its folder's name)."""
+    """A safe flight id from a telemetry file name (telemetry.parquet -> its folder's name).
+
+    A name that is already a valid id is kept as it is; any other name (spaces,
+    non-ASCII letters, '..', more than 100 characters) is sanitised and given the first
+    8 hex digits of the SHA-256 of the original name, so two different names never
+    share an id (``a b`` -> ``a_b-c8687a08``, ``a_b`` -> ``a_b``, ``航班`` -> ``flight-32875d4f``),
+    and the same name keeps its id when its content changes."""
     p = Path(path)
     stem = p.parent.name if p.stem == "telemetry" and p.parent.name else p.stem
-    safe = re.sub(r"[^A-Za-z0-9_.-]+", "_", stem).strip("._-") or "flight"
-    return check_flight_id(safe.replace("..", "_"))
+    if FLIGHT_ID.match(stem) and ".." not in stem:
+        return stem
+    safe = re.sub(r"[^A-Za-z0-9_.-]+", "_", stem).replace("..", "_").strip("._-")[:80].strip("._-") or "flight"
+    digest = hashlib.sha256(stem.encode("utf-8", "surrogateescape")).hexdigest()[:8]
+    return check_flight_id(f"{safe}-{digest}")
+
+
+def inbox_flight_ids(paths: list[Path], inbox: Path, owners: dict[str, str]) -> tuple[dict[Path, str], dict[Path, str]]:
+    """The flight id of each inbox file, and the files refused because they would share a
+    run folder with another (the reason names both).  `owners`: flight id -> the inbox
+    file (relative name) an earlier scan processed under that id; it keeps it."""
+    groups: dict[str, list[Path]] = {}
+    for p in paths:
+        groups.setdefault(flight_id_from_path(p), []).append(p)
+    ids, refused = {}, {}
+    for fid, group in groups.items():
+        names = {p: inbox_name(p, inbox) for p in group}
+        owner = owners.get(fid)
+        for p in group:
+            others = [names[q] for q in group if q != p]
+            if owner is not None and names[p] != owner:
+                refused[p] = (f"{names[p]!r} maps to flight id {fid!r}, which belongs to {owner!r} (processed "
+                              f"earlier into {fid}/): rename {names[p]!r}")
+            elif owner is None and others:
+                refused[p] = (f"{names[p]!r} and {', '.join(map(repr, others))} map to the same flight id {fid!r} "
+                              "(it names the run folder): rename one")
+            else:
+                ids[p] = fid
+    return ids, refused
+
+
+def inbox_name(path: Path, inbox: Path) -> str:
+    """A file's name relative to the inbox (what the ledger's inbox records call `source`)."""
+    try:
+        return Path(path).relative_to(inbox).as_posix()
+    except ValueError:
+        return Path(path).name
 
 
 @dataclass
@@ -51,8 +93,19 @@ class FlightJob:
     preprocess_params: dict = field(default_factory=dict)
     smoothing_options: dict = field(default_factory=dict)
     mach_half_width: float | None = 0.5
-    min_segment_s: float = 5.0
+    min_segment_s: float | None = None  # None: the vehicle's [preprocess] min_segment_s, else 5 s
     ledger_path: str | None = None
+
+    def preprocess_settings(self) -> tuple[dict, float]:
+        """The preprocessing parameters (the vehicle file's [preprocess] table with this
+        job's own on top) and the minimum segment length [s]."""
+        from aerosid.preprocess import DEFAULT_MIN_SEGMENT_S, merge_settings
+        from aerosid.vehicle import load_vehicle
+
+        veh = load_vehicle(self.vehicle)
+        params = merge_settings(veh.preprocess, self.preprocess_params or {})
+        min_seg = next(v for v in (self.min_segment_s, veh.min_segment_s, DEFAULT_MIN_SEGMENT_S) if v is not None)
+        return params, float(min_seg)
 
     def context(self, segment: str = "") -> StageContext:
         ledger = self.ledger_path or str(Path(self.run_dir) / LEDGER_NAME)
@@ -60,10 +113,7 @@ class FlightJob:
 
 
 def _check_ids(jobs: list[FlightJob]) -> None:
-    ids = [check_flight_id(job.flight) for job in jobs]
-    if len(set(ids)) < len(ids):
-        dup = sorted({i for i in ids if ids.count(i) > 1})
-        raise ValueError(f"two telemetry files map to the same flight id {dup}: rename one (the id names the run folder)")
+    check_unique_flights(jobs)
 
 
 def _start(jobs: list[FlightJob]):
@@ -71,31 +121,38 @@ def _start(jobs: list[FlightJob]):
     preprocessing futures, their results (None where it failed), plans and smoothing futures."""
     for job in jobs:
         Path(job.run_dir).mkdir(parents=True, exist_ok=True)
-    pre_futures = [preprocess_task.submit(j.telemetry, j.run_dir, j.context(), j.preprocess_params) for j in jobs]
+    settings = [j.preprocess_settings() for j in jobs]
+    pre_futures = [preprocess_task.submit(j.telemetry, j.run_dir, j.context(), params)
+                   for j, (params, _) in zip(jobs, settings)]
     plans, seg_futures, pre = [], [], []
-    for job, fut in zip(jobs, pre_futures):
+    for job, fut, (_, min_seg) in zip(jobs, pre_futures, settings):
         fut.wait()
         if not fut.state.is_completed():
-            pre.append(None), plans.append([]), seg_futures.append([])
+            pre.append(None), plans.append(None), seg_futures.append([])
             continue
         p = fut.result()
-        plan = plan_segments_task(p["path"], job.windows, job.min_segment_s)
+        plan = plan_segments_task(p["path"], job.windows, min_seg)
         pre.append(p), plans.append(plan)
         seg_futures.append([smooth_segment_task.submit(p["path"], job.run_dir, job.context(s["segment_id"]), s,
-                                                       job.vehicle, job.smoothing_options) for s in plan])
+                                                       job.vehicle, job.smoothing_options) for s in plan["segments"]])
     return pre_futures, pre, plans, seg_futures
 
 
-def _flight_summary(job: FlightJob, p: dict | None, plan: list) -> dict:
-    return {"job": asdict(job), "flight": job.flight, "telemetry": job.telemetry, "vehicle": job.vehicle,
-            "preprocess": p, "segments": [s["segment_id"] for s in plan], "segments_ok": [],
-            "segments_failed": [], "status": "failed"}
+def _flight_summary(job: FlightJob, p: dict | None, plan: dict | None) -> dict:
+    segs = plan["segments"] if plan else []
+    summary = {"job": asdict(job), "flight": job.flight, "telemetry": job.telemetry, "vehicle": job.vehicle,
+               "preprocess": p, "usable_share": (p or {}).get("usable_share"),
+               "segments": [s["segment_id"] for s in segs], "segments_ok": [], "segments_failed": [],
+               "segments_dropped": plan["dropped"] if plan else [], "status": "failed"}
+    if plan and plan["note"]:
+        summary["segments_note"] = plan["note"]
+    return summary
 
 
-def _collect_segments(job: FlightJob, plan: list, futures: list, summary: dict, logger) -> list[dict]:
+def _collect_segments(job: FlightJob, plan: dict, futures: list, summary: dict, logger) -> list[dict]:
     """Wait for a flight's segments; record which were smoothed and which failed."""
     done, failed = summary["segments_ok"], summary["segments_failed"]
-    for seg, fut in zip(plan, futures):
+    for seg, fut in zip(plan["segments"], futures):
         fut.wait()
         if fut.state.is_completed():
             done.append(fut.result())
@@ -122,7 +179,7 @@ def run_flights(jobs: list[FlightJob], isolate: bool = False) -> list[dict]:
     in its run.json and the other flights go on; otherwise the error is raised after
     run.json says so."""
     logger = get_run_logger()
-    _check_ids(jobs)
+    check_unique_flights(jobs)
     pre_futures, pre, plans, seg_futures = _start(jobs)
     summaries = []
     for job, p, plan, futures, pre_future in zip(jobs, pre, plans, seg_futures, pre_futures):
@@ -131,6 +188,9 @@ def run_flights(jobs: list[FlightJob], isolate: bool = False) -> list[dict]:
             if p is None:
                 summary["error"] = {"stage": "preprocess", "message": pre_future.state.message or "failed"}
                 pre_future.result()  # raises the stage's own error
+            if not plan["segments"]:
+                summary["error"] = {"stage": "plan-segments", "message": plan["refusal"]}
+                logger.error("flight %s: %s", job.flight, plan["refusal"])
             _finish_flight(job, p, plan, futures, summary, logger)
         except Exception as exc:
             summary["status"] = "failed"
@@ -143,7 +203,18 @@ def run_flights(jobs: list[FlightJob], isolate: bool = False) -> list[dict]:
     return summaries
 
 
-def _finish_flight(job: FlightJob, p: dict, plan: list, futures: list, summary: dict, logger) -> None:
+def check_unique_flights(jobs: list[FlightJob]) -> None:
+    """Two jobs never share a flight id (it names the run folder): an error naming both files."""
+    seen: dict[str, str] = {}
+    for job in jobs:
+        check_flight_id(job.flight)
+        if job.flight in seen:
+            raise ValueError(f"telemetry files {seen[job.flight]} and {job.telemetry} map to the same flight id "
+                             f"{job.flight!r} (it names the run folder): rename one")
+        seen[job.flight] = job.telemetry
+
+
+def _finish_flight(job: FlightJob, p: dict, plan: dict, futures: list, summary: dict, logger) -> None:
     done = _collect_segments(job, plan, futures, summary, logger)
     if done:
         fd = flight_data_task(p["path"], [d["path"] for d in done], job.run_dir, job.context(), job.vehicle)
@@ -196,7 +267,7 @@ class PoolJob:
     preprocess_params: dict = field(default_factory=dict)
     smoothing_options: dict = field(default_factory=dict)
     mach_half_width: float | None = 0.5
-    min_segment_s: float = 5.0
+    min_segment_s: float | None = None
     ledger_path: str | None = None
 
     @property

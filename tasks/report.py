@@ -1,6 +1,7 @@
 """The last stage: diagnosis.json and report.html for a flight's run folder."""
 from __future__ import annotations
 
+import os
 import time
 from pathlib import Path
 
@@ -29,7 +30,7 @@ def report_task(run_dir: str, ctx: StageContext, inputs: list[str], model_spec: 
         ledger.append(ctx.ledger_path, {**base, "status": "failed", "outputs": [], "error": f"{type(exc).__name__}: {exc}",
                                         "duration_s": time.perf_counter() - started})
         raise
-    outputs = [{"path": str(p), "sha256": sha256_file(p)} for p in paths.values()]
+    outputs = [{"path": os.path.abspath(p), "sha256": sha256_file(p)} for p in paths.values()]
     ledger.append(ctx.ledger_path, {**base, "status": "ok", "outputs": outputs, "error": None,
                                     "duration_s": time.perf_counter() - started})
     return {k: str(v) for k, v in paths.items()}

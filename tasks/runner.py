@@ -1,5 +1,10 @@
-"""The common shape of a stage execution: hash the inputs, reuse a valid cached
+"""The common shape of a stage execution: hash the inputs, reuse a verified cached
 output, or compute, validate and write atomically; record it in the ledger.
+
+An output is reused only when its metadata carries this execution's cache key *and*
+its content hash is one the ledger recorded for that key in a record that verifies
+in the hash chain; otherwise it is computed again and the ``ok`` record's
+``reason`` says why (``recomputed: content of X changed since it was recorded``).
 
 No numerics here: ``produce`` is a closure that calls the core.
 """
@@ -81,7 +86,7 @@ def base_record(stage: str, ctx: StageContext, inputs: list[str | Path], input_h
                 params: dict) -> dict:
     """The ledger fields every stage execution shares (status, outputs and timing come later)."""
     return {"run_id": ctx.run_id, "flight": ctx.flight, "segment": ctx.segment, "stage": stage,
-            "inputs": [{"path": str(p), "sha256": h} for p, h in zip(inputs, input_hashes)],
+            "inputs": [{"path": os.path.abspath(p), "sha256": h} for p, h in zip(inputs, input_hashes)],
             "params": params, "params_sha256": params_hash(params), "code_version": code_version()}
 
 
@@ -97,20 +102,26 @@ def execute(stage: str, ctx: StageContext, inputs: list[str | Path], output: str
     key = cache_key(stage, in_hashes, params)
     base = {**base_record(stage, ctx, inputs, in_hashes, params), "cache_key": key}
     started = time.perf_counter()
+    reason = None
     if output.is_file():
         try:
             cached = read_parquet_metadata(output).get("aerosid.cache_key") == key
         except (OSError, ArrowException):
             cached = False
         if cached:
-            meta = read_parquet_metadata(output)
-            out = {"path": str(output), "sha256": sha256_file(output)}
-            ledger.append(ctx.ledger_path, {**base, "status": "reused", "outputs": [out],
-                                            "rows_in": int(meta.get("aerosid.rows_in", -1)),
-                                            "rows_out": int(meta.get("aerosid.rows_out", -1)),
-                                            "flagged_rows": int(meta.get("aerosid.flagged_rows", 0)),
-                                            "error": None, "duration_s": time.perf_counter() - started})
-            return {**out, "status": "reused", "stage": stage, "segment": ctx.segment}
+            sha = sha256_file(output)
+            reason = _refusal(output, sha, ledger.recorded_output(ctx.ledger_path, key, sha))
+            if reason is None:
+                meta = read_parquet_metadata(output)
+                out = {"path": os.path.abspath(output), "sha256": sha}
+                ledger.append(ctx.ledger_path, {**base, "status": "reused", "outputs": [out],
+                                                "rows_in": int(meta.get("aerosid.rows_in", -1)),
+                                                "rows_out": int(meta.get("aerosid.rows_out", -1)),
+                                                "flagged_rows": int(meta.get("aerosid.flagged_rows", 0)),
+                                                "error": None, "duration_s": time.perf_counter() - started})
+                return {**out, "status": "reused", "stage": stage, "segment": ctx.segment}
+    if reason is not None:
+        base["reason"] = reason
     try:
         produced = produce()
         metadata = {**{k: (v if isinstance(v, str) else json.dumps(v)) for k, v in produced.metadata.items()},
@@ -126,9 +137,26 @@ def execute(stage: str, ctx: StageContext, inputs: list[str | Path], output: str
                                         "flagged_rows": None, "error": f"{type(exc).__name__}: {exc}",
                                         "duration_s": time.perf_counter() - started})
         raise
-    out = {"path": str(output), "sha256": sha256_file(output)}
+    out = {"path": os.path.abspath(output), "sha256": sha256_file(output)}
     ledger.append(ctx.ledger_path, {**base, "status": "ok", "outputs": [out], "rows_in": produced.rows_in,
                                     "rows_out": len(produced.frame), "flagged_rows": produced.flagged_rows,
                                     "error": None, "note": produced.note,
                                     "duration_s": time.perf_counter() - started})
-    return {**out, "status": "ok", "stage": stage, "segment": ctx.segment, "note": produced.note}
+    return {**out, "status": "ok", "stage": stage, "segment": ctx.segment, "note": produced.note,
+            **({"reason": reason} if reason else {})}
+
+
+def _refusal(output: Path, sha: str, recorded: ledger.Recorded) -> str | None:
+    """None when the output's content is what the ledger recorded for its cache key (in a
+    record that verifies), else why it is computed again."""
+    output = os.path.abspath(output)
+    if recorded.line is not None:
+        return None
+    if recorded.others:
+        known, line = max(recorded.others.items(), key=lambda kv: kv[1])
+        return (f"recomputed: content of {output} changed since it was recorded (sha256 {sha[:16]}… on disk, "
+                f"{known[:16]}… recorded at ledger line {line})")
+    if recorded.unverified:
+        return f"recomputed: the ledger's record of {output} cannot be trusted: " + "; ".join(recorded.unverified)
+    return (f"recomputed: the ledger has no record of {output} for this cache key (the file was written "
+            "elsewhere, or the ledger was replaced)")

@@ -18,7 +18,7 @@ from aerosid.flight_data import (build_flight_data_segments, build_pooled_flight
 from aerosid.identify import identify
 from aerosid.models import default_models, load_models
 from aerosid.preprocess import PreprocessParams, preprocess
-from aerosid.segments import split_segments
+from aerosid.segments import plan_segments
 from aerosid.smoothing import smooth_segment_frame
 from aerosid.vehicle import load_vehicle
 from schemas.coefficients import Coefficients
@@ -54,25 +54,32 @@ def preprocess_task(raw_path: str, run_dir: str, ctx: StageContext, params: dict
 
     def produce() -> Produced:
         raw = read_validated(raw_path, RawTelemetry)
-        result = preprocess(raw, PreprocessParams(**params), source=raw_path)
-        counts = result.summary_counts
+        result = preprocess(raw, PreprocessParams.from_dict(params), source=raw_path)
         flagged = int((result.frame["flags"] != 0).sum())
         return Produced(result.frame, result.metadata(), rows_in=len(raw), flagged_rows=flagged,
                         note=result.summary())
 
-    return execute("preprocess", ctx, [raw_path], out, params, PreprocessedTelemetry, produce)
+    done = execute("preprocess", ctx, [raw_path], out, params, PreprocessedTelemetry, produce)
+    from aerosid.io import read_parquet_metadata
+
+    share = read_parquet_metadata(out).get("aerosid.preprocess.usable_share")  # also when reused
+    return {**done, "usable_share": json.loads(share)} if share else done
 
 
 @task(name="plan-segments", **IO_RETRIES)
-def plan_segments_task(pre_path: str, windows: list | None, min_duration_s: float) -> list[dict]:
-    """Segments of the flight (at long gaps and user windows), as plain dicts."""
+def plan_segments_task(pre_path: str, windows: list | None, min_duration_s: float) -> dict:
+    """Segments of the flight (at long gaps and user windows) as plain dicts, and the
+    pieces left out with the limit that left them out (``dropped``, ``note``,
+    ``refusal``: messages naming min_segment_s and max_interp_gap_s)."""
     from aerosid.io import read_parquet_metadata
 
     meta = read_parquet_metadata(pre_path)
-    gaps = json.loads(next((v for k, v in meta.items() if k.endswith("long_gaps")), "[]"))
+    gaps = json.loads(meta.get("aerosid.preprocess.long_gaps", "[]"))
+    limit = json.loads(meta.get("aerosid.preprocess.params", "{}")).get("max_interp_gap_s")
     t = pd.read_parquet(pre_path, columns=["t_s"])["t_s"].to_numpy()
-    segs = split_segments(t, [tuple(g) for g in gaps], windows, min_duration_s)
-    return [s.__dict__ for s in segs]
+    plan = plan_segments(t, [tuple(g) for g in gaps], windows, min_duration_s, limit)
+    return {"segments": [s.__dict__ for s in plan.segments], "dropped": [d.__dict__ for d in plan.dropped],
+            "note": plan.dropped_note(), "refusal": plan.refusal() if not plan.segments else None}
 
 
 @task(name="smooth-segment", **IO_RETRIES)

@@ -22,7 +22,7 @@ def prefect_harness(tmp_path_factory):
     os.environ["PREFECT_SERVER_EPHEMERAL_STARTUP_TIMEOUT_SECONDS"] = "180"  # a loaded 2-core CI box
     from prefect.testing.utilities import prefect_test_harness
 
-    with prefect_test_harness():
+    with prefect_test_harness(server_startup_timeout=180):  # its own default (30 s) ignores the variable above
         yield home
 
 

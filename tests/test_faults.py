@@ -58,7 +58,8 @@ def run_chain(raw: str, run_dir: str) -> None:
 
     pre = preprocess_task.fn(raw, run_dir, ctx(), {})
     plan = plan_segments_task.fn(pre["path"], None, 5.0)
-    done = [smooth_segment_task.fn(pre["path"], run_dir, ctx(s["segment_id"]), s, "seed-rlv", {}) for s in plan]
+    done = [smooth_segment_task.fn(pre["path"], run_dir, ctx(s["segment_id"]), s, "seed-rlv", {})
+            for s in plan["segments"]]
     fd = flight_data_task.fn(pre["path"], [d["path"] for d in done], run_dir, ctx(), "seed-rlv")
     regression_task.fn([fd["path"]], run_dir, ctx(), "seed-rlv", None, 0.5)
 

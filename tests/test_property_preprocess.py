@@ -84,7 +84,8 @@ def damaged_columns(draw):
         elif kind == "float32":
             raw[col] = raw[col].astype("float32")
         elif kind == "int":
-            raw[col] = raw[col].fillna(0).round().astype("int64")
+            # (an earlier "inf" damage on the column cannot be cast: it becomes 0 too)
+            raw[col] = raw[col].replace([np.inf, -np.inf], np.nan).fillna(0).round().astype("int64")
         elif kind == "str":
             raw[col] = raw[col].astype(str)
         elif kind == "nan":

@@ -11,20 +11,26 @@ Public API::
 here that touch files, and they enforce the schemas on write (and read).
 """
 from .errors import TelemetryError
-from .flags import ACTION, DETECTION, DROPOUT, UNFILLED, UNUSABLE, QualityFlag, flag_names, usable_mask
-from .core import (
+from .flags import ACTION, DETECTION, DROPOUT, FAULT, UNFILLED, UNUSABLE, QualityFlag, flag_names, usable_mask
+from .params import (
     DEFAULT_MIN_NOISE_SCALE,
-    PREPROCESS_VERSION,
+    DEFAULT_MIN_SEGMENT_S,
+    SENSOR_KEYS,
     PreprocessParams,
-    PreprocessResult,
-    preprocess,
+    SettingsError,
+    merge_settings,
+    parse_assignments,
+    parse_settings,
 )
+from .core import PREPROCESS_VERSION, PreprocessResult, preprocess
+from .sensors import SensorProfile
 from .io import read_preprocessed_parquet, read_raw_parquet, write_preprocessed_parquet, write_raw_parquet
 
 __all__ = [
-    "ACTION", "DETECTION", "DROPOUT", "UNFILLED", "UNUSABLE",
-    "DEFAULT_MIN_NOISE_SCALE", "PREPROCESS_VERSION",
-    "PreprocessParams", "PreprocessResult", "QualityFlag", "TelemetryError",
+    "ACTION", "DETECTION", "DROPOUT", "FAULT", "UNFILLED", "UNUSABLE",
+    "DEFAULT_MIN_NOISE_SCALE", "DEFAULT_MIN_SEGMENT_S", "PREPROCESS_VERSION", "SENSOR_KEYS",
+    "PreprocessParams", "PreprocessResult", "QualityFlag", "SensorProfile", "SettingsError", "TelemetryError",
+    "merge_settings", "parse_assignments", "parse_settings",
     "flag_names", "preprocess", "usable_mask",
     "read_preprocessed_parquet", "read_raw_parquet", "write_preprocessed_parquet", "write_raw_parquet",
 ]

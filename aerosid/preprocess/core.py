@@ -12,14 +12,19 @@ Pipeline (method.md §1), all vectorised:
    further than ``snap_tolerance`` steps away are flagged ``TIME_JITTER``; two rows
    on one grid point raise ``TelemetryError``.  Grid points without a raw row are
    inserted (``MISSING_ROW``; raw columns and ``t_raw_s`` NaN).
-3. **Per channel detection** on the grid: ``NAN``, ``SENTINEL``, ``OUT_OF_RANGE``,
-   ``FROZEN`` (stuck runs), then ``OUTLIER`` (two-sided spike test on what is left,
-   see ``detect.spike_mask``).
+3. **Per channel detection** on the grid: ``NAN``, ``SENTINEL``, ``OUT_OF_RANGE``;
+   then the sensor's profile (``sensors.profile``: resolution, update interval,
+   whether it rests at its resolution), ``FROZEN`` (stuck runs, counted in updates),
+   ``HELD`` (the repeats of a sample-and-hold channel between its updates), then
+   ``OUTLIER`` (two-sided spike test on the update instants, threshold from the
+   record length and ``false_alarm``; see ``detect.spike_mask``).
 4. **Gap policy** per channel: each maximal run of samples with a detection bit is
-   ``INTERPOLATED`` linearly between its good neighbours when it is no longer than
-   ``max_interp_gap_s`` and has good samples on both sides; otherwise it is left NaN
-   in ``<channel>_clean`` (``LONG_GAP`` and/or ``EDGE_GAP``).
-5. **Row-level gaps**: runs of grid rows where *every* channel has a detection bit.
+   ``INTERPOLATED`` linearly between its good neighbours when it holds no fault
+   (held samples between two updates) or is no longer than ``max_interp_gap_s``
+   (for a held channel: two update intervals at least), and has good samples on
+   both sides; otherwise it is left NaN in ``<channel>_clean`` (``LONG_GAP`` and/or
+   ``EDGE_GAP``).
+5. **Row-level gaps**: runs of grid rows where *every* channel has a fault bit.
    Those longer than ``max_interp_gap_s`` are ``long_gaps`` (the pipeline splits
    segments there; the sync gap is one); the longest is ``longest_gap_s``.
 6. The output is enforced against ``PreprocessedTelemetry``.
@@ -28,7 +33,6 @@ Durations: a run of n grid samples lasts n * dt (the time not covered by data).
 """
 from __future__ import annotations
 
-import dataclasses
 import json
 import math
 from dataclasses import dataclass, field
@@ -39,131 +43,25 @@ import pandas as pd
 from schemas.telemetry import (
     AIR_DATA_CHANNELS,
     CHANNELS,
-    DEFAULT_SENTINELS,
     PHYSICAL_BOUNDS,
     RAW_COLUMNS,
+    UNITS,
     PreprocessedTelemetry,
     RawTelemetry,
     sentinel_mask,
     validate,
 )
 
-from . import detect
+from . import detect, sensors
 from .errors import TelemetryError
-from .flags import DETECTION, FLAGS_DTYPE, UNUSABLE, QualityFlag
+from .flags import DETECTION, FAULT, FLAGS_DTYPE, UNUSABLE, QualityFlag
+from .params import DEFAULT_MIN_NOISE_SCALE, PreprocessParams  # noqa: F401  (re-exported)
 
 #: Version of the output layout / algorithm, recorded in the metadata.
-PREPROCESS_VERSION = "1"
-
-#: Default floor of the noise scale per channel, in the channel's unit (sigma of the
-#: outlier test never goes below it: protects noise-free or constant channels).
-DEFAULT_MIN_NOISE_SCALE: tuple[tuple[str, float], ...] = (
-    ("ax_m_s2", 1e-3), ("ay_m_s2", 1e-3), ("az_m_s2", 1e-3),
-    ("p_rad_s", 1e-4), ("q_rad_s", 1e-4), ("r_rad_s", 1e-4),
-    ("d1_rad", 1e-5), ("d2_rad", 1e-5), ("d3_rad", 1e-5), ("d4_rad", 1e-5),
-    ("V_m_s", 1e-3), ("h_m", 1e-2), ("alpha_vane_rad", 1e-5), ("beta_vane_rad", 1e-5),
-    # measured air data: without a floor a constant column (SIDPAC logs one density per
-    # manoeuvre) has noise scale 0 and every sample would be an "outlier"
-    ("rho_kg_m3", 1e-6), ("qbar_pa", 1e-2), ("p_static_pa", 1e-2), ("T_total_K", 1e-4),
-)
+PREPROCESS_VERSION = "2"
 
 #: Hard cap on the grid size (a clock jump would otherwise allocate without bound).
 MAX_GRID_ROWS = 50_000_000
-
-
-@dataclass(frozen=True)
-class PreprocessParams:
-    """Thresholds of the preprocessing stage (all recorded in the output metadata).
-
-    nominal_rate_hz:
-        Sample rate of the grid [Hz]; ``None`` infers it as 1 / median interval.
-    snap_tolerance:
-        A raw timestamp further than this many grid steps (fraction of dt) from its
-        nearest grid point is flagged ``TIME_JITTER`` (still placed there).
-    max_interp_gap_s:
-        Longest run of bad samples [s] (n samples last n*dt) that is linearly
-        interpolated in ``<channel>_clean``; longer runs are left NaN (``LONG_GAP``)
-        and all-channel ones are reported in ``long_gaps``.
-    outlier_window_s:
-        Length [s] of each one-sided median window of the spike test (h samples, at
-        least ``outlier_min_window``).  A genuine pulse must last longer than about
-        half of it not to be taken for a burst of spikes.
-    outlier_min_window:
-        Minimum h [samples] at low sample rates.
-    outlier_threshold_sigma:
-        A spike must lie beyond both neighbourhoods by more than this many local
-        noise standard deviations.
-    noise_window_s:
-        Window [s] of the rolling robust noise-scale estimate.
-    min_noise_scale:
-        ``(channel, floor)`` pairs: floor of the noise scale in the channel's unit.
-        The floor is also at least the channel's quantisation step.
-    frozen_min_run:
-        A run of at least this many bit-identical consecutive samples [samples] is a
-        stuck sensor (``FROZEN``; the first sample of the run is kept).
-    frozen_channels:
-        Channels checked for frozen values (default all; drop genuinely constant or
-        coarsely quantised channels).
-    sentinel_values:
-        Values meaning "no data" (matched exactly or after a float32 round trip).
-    max_time_gap_s:
-        A time gap longer than this [s] is taken for a clock error (TelemetryError)
-        rather than a dropout.
-    rate_bounds_hz:
-        Plausible grid rates [Hz]; an inferred or given rate outside raises
-        TelemetryError (e.g. t in milliseconds).
-    """
-
-    nominal_rate_hz: float | None = None
-    snap_tolerance: float = 0.25
-    max_interp_gap_s: float = 0.5
-    outlier_window_s: float = 0.05
-    outlier_min_window: int = 5
-    outlier_threshold_sigma: float = 3.3
-    noise_window_s: float = 5.0
-    min_noise_scale: tuple[tuple[str, float], ...] = DEFAULT_MIN_NOISE_SCALE
-    frozen_min_run: int = 10
-    frozen_channels: tuple[str, ...] = CHANNELS
-    sentinel_values: tuple[float, ...] = DEFAULT_SENTINELS
-    max_time_gap_s: float = 600.0
-    rate_bounds_hz: tuple[float, float] = (1.0, 100_000.0)
-
-    def __post_init__(self) -> None:
-        def positive(name: str) -> None:
-            v = getattr(self, name)
-            if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
-                raise ValueError(f"PreprocessParams.{name} must be a finite number > 0, got {v!r}")
-
-        if self.nominal_rate_hz is not None:
-            positive("nominal_rate_hz")
-        for name in ("max_interp_gap_s", "outlier_window_s", "outlier_threshold_sigma", "noise_window_s",
-                     "max_time_gap_s"):
-            positive(name)
-        if not (0 < self.snap_tolerance < 0.5):
-            raise ValueError(f"PreprocessParams.snap_tolerance must be in (0, 0.5) grid steps, "
-                             f"got {self.snap_tolerance!r}")
-        if int(self.outlier_min_window) < 1 or int(self.frozen_min_run) < 2:
-            raise ValueError("PreprocessParams.outlier_min_window must be >= 1 and frozen_min_run >= 2")
-        known = (*CHANNELS, *AIR_DATA_CHANNELS)
-        unknown = [c for c in self.frozen_channels if c not in known]
-        unknown += [c for c, _ in self.min_noise_scale if c not in known]
-        if unknown:
-            raise ValueError(f"PreprocessParams: unknown channel(s) {unknown}; channels are {list(known)}")
-        lo, hi = self.rate_bounds_hz
-        if not (0 < lo < hi):
-            raise ValueError(f"PreprocessParams.rate_bounds_hz must be 0 < low < high, got {self.rate_bounds_hz}")
-
-    def min_noise_scale_of(self, channel: str) -> float:
-        return float(dict(self.min_noise_scale).get(channel, 0.0))
-
-    def to_dict(self) -> dict:
-        """JSON-friendly dict of the parameters."""
-        d = dataclasses.asdict(self)
-        d["min_noise_scale"] = dict(self.min_noise_scale)
-        d["frozen_channels"] = list(self.frozen_channels)
-        d["sentinel_values"] = list(self.sentinel_values)
-        d["rate_bounds_hz"] = list(self.rate_bounds_hz)
-        return d
 
 
 @dataclass(frozen=True, eq=False)
@@ -185,9 +83,20 @@ class PreprocessResult:
     flag_counts_by_channel:
         Channel -> (bit name -> number of samples with that bit).
     n_usable_rows:
-        Grid rows where every channel is usable (flags == 0).
+        Grid rows where every channel is usable (flags == 0: a new measurement, used
+        by the Kalman filter as it is).
     n_usable_by_channel:
         Channel -> number of usable samples.
+    n_used_rows:
+        Recorded rows where every contract channel holds no fault: a measurement, or a
+        held value between its sensor's updates (``HELD``).  The usable share of the
+        record is ``n_used_rows / n_raw_rows``.
+    n_used_by_channel:
+        Channel -> recorded samples without a fault.
+    sensors:
+        Channel -> :class:`~aerosid.preprocess.sensors.SensorProfile` as a dict
+        (resolution, update interval, at rest, frozen run length) plus the outlier
+        ``threshold_sigma`` used.
     longest_gap_s:
         Longest run of rows where every channel is bad [s] (0 if none).
     longest_gap_s_by_channel:
@@ -220,6 +129,16 @@ class PreprocessResult:
     long_gaps: tuple = ()
     noise_sigma: dict = field(default_factory=dict)
     ignored_columns: tuple = ()
+    n_used_rows: int = 0
+    n_used_by_channel: dict = field(default_factory=dict)
+    sensors: dict = field(default_factory=dict)
+
+    @property
+    def usable_share(self) -> dict:
+        """Rows used of rows recorded, overall (every contract channel) and per channel."""
+        rec = max(self.n_raw_rows, 1)
+        return {"recorded": self.n_raw_rows, "used": self.n_used_rows, "share": self.n_used_rows / rec,
+                "by_channel": {c: {"used": u, "share": u / rec} for c, u in self.n_used_by_channel.items()}}
 
     @property
     def summary_counts(self) -> dict:
@@ -250,27 +169,39 @@ class PreprocessResult:
             p + "ignored_columns": json.dumps(list(self.ignored_columns)),
             p + "flag_bits": json.dumps({f.name: int(f) for f in QualityFlag}),
             p + "physical_bounds": json.dumps(PHYSICAL_BOUNDS, sort_keys=True),
+            p + "usable_share": json.dumps(self.usable_share, sort_keys=True),
+            p + "sensors": json.dumps(self.sensors, sort_keys=True),
         }
 
     def summary(self) -> str:
         """Human-readable per-flight summary."""
+        share = self.usable_share
         lines = [
             f"preprocess {self.source}: {self.n_raw_rows} raw rows -> {self.n_grid_rows} grid rows "
             f"({self.n_inserted_rows} inserted) at {self.nominal_rate_hz:.6g} Hz "
             f"({'inferred' if self.rate_inferred else 'given'})",
+            f"  rows used (every channel a measurement or a held value): {self.n_used_rows} of "
+            f"{self.n_raw_rows} recorded ({100.0 * share['share']:.2f} %)",
             f"  usable rows (all channels): {self.n_usable_rows} "
             f"({100.0 * self.n_usable_rows / max(self.n_grid_rows, 1):.2f} %)",
             "  rows with flag: " + (", ".join(f"{k}={v}" for k, v in self.flag_counts.items() if v) or "none"),
             f"  longest all-channel gap: {self.longest_gap_s:.3f} s; "
-            f"long gaps (> {self.params.max_interp_gap_s:g} s): {len(self.long_gaps)}"
+            f"long gaps (> max_interp_gap_s = {self.params.max_interp_gap_s:g} s): {len(self.long_gaps)}"
             + "".join(f"\n    {a:.3f} .. {b:.3f} s" for a, b in self.long_gaps),
         ]
         for c in self.flag_counts_by_channel:
             counts = {k: v for k, v in self.flag_counts_by_channel[c].items() if v}
             if counts:
-                lines.append(f"  {c}: usable {self.n_usable_by_channel[c]}, "
+                lines.append(f"  {c}: used {100.0 * share['by_channel'][c]['share']:.1f} %, "
+                             f"usable {self.n_usable_by_channel[c]}, "
                              f"longest bad run {self.longest_gap_s_by_channel[c]:.3f} s, "
                              + ", ".join(f"{k}={v}" for k, v in counts.items()))
+        for c, prof in self.sensors.items():
+            text = sensors.SensorProfile(**{k: (tuple(v) if k == "given" else v) for k, v in prof.items()
+                                            if k != "threshold_sigma"}).describe(self.nominal_rate_hz,
+                                                                                UNITS.get(c, ""))
+            if text:
+                lines.append(f"  sensor {c}: {text}")
         if self.ignored_columns:
             lines.append(f"  ignored columns: {list(self.ignored_columns)}")
         return "\n".join(lines)
@@ -347,9 +278,11 @@ def _grid(t: np.ndarray, params: PreprocessParams, source: str):
     dt = 1.0 / rate
     big = np.flatnonzero(np.diff(t) > params.max_time_gap_s)
     if big.size:
-        raise TelemetryError(f"time jumps by {t[big[0] + 1] - t[big[0]]:.6g} s > max_time_gap_s="
-                             f"{params.max_time_gap_s:g} s (clock error?)", file=source, column="t_s",
-                             rows=[int(big[0]), int(big[0]) + 1])
+        raise TelemetryError(f"time jumps by {t[big[0] + 1] - t[big[0]]:.6g} s, more than the longest gap taken "
+                             f"for a dropout, max_time_gap_s = {params.max_time_gap_s:g} s (clock error?); if the "
+                             "recording really paused, raise it: aerosid run --preprocess max_time_gap_s=SECONDS "
+                             "or max_time_gap_s in the vehicle file's [preprocess] table", file=source,
+                             column="t_s", rows=[int(big[0]), int(big[0]) + 1])
     if (t[-1] - t[0]) / dt + 1 > MAX_GRID_ROWS:
         raise TelemetryError(f"span {t[-1] - t[0]:.6g} s at {rate:.6g} Hz needs more than {MAX_GRID_ROWS} grid "
                              "rows", file=source, column="t_s")
@@ -372,23 +305,63 @@ def _grid(t: np.ndarray, params: PreprocessParams, source: str):
     return rate, dt, inferred, t0, k, resid
 
 
-def _run_bits(bad: np.ndarray, max_interp: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Classify runs of bad samples: interpolate / long / edge masks, and run lengths."""
+def _run_bits(bad: np.ndarray, fault: np.ndarray, limit: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Classify runs of bad samples: interpolate / long / edge masks.  A run is long when
+    it holds a fault and lasts more than ``limit`` samples (a run of held samples
+    alone is the hold between two updates, always bridged)."""
     n = bad.size
     starts, ends = detect.runs(bad)
     lengths = ends - starts
+    csum = np.concatenate(([0], np.cumsum(fault)))
+    has_fault = (csum[ends] - csum[starts]) > 0
     edge = (starts == 0) | (ends == n)
-    long_ = lengths > max_interp
+    long_ = has_fault & (lengths > limit)
     interp = ~edge & ~long_
     return (detect.mark_runs(n, starts[interp], ends[interp]),
             detect.mark_runs(n, starts[long_], ends[long_]),
-            detect.mark_runs(n, starts[edge], ends[edge]),
-            lengths)
+            detect.mark_runs(n, starts[edge], ends[edge]))
+
+
+def _update_series(anchor: np.ndarray, u: float) -> tuple[np.ndarray, np.ndarray]:
+    """Grid indices of the update instants and their positions on an update grid
+    (a step of ``u`` samples; a gap of several updates keeps its length)."""
+    idx = np.flatnonzero(anchor)
+    if idx.size == 0:
+        return idx, idx
+    steps = np.maximum(1, np.round(np.diff(idx) / u)).astype(np.int64)
+    return idx, np.concatenate(([0], np.cumsum(steps)))
+
+
+def _outliers(cand: np.ndarray, anchor: np.ndarray, held: np.ndarray, prof: sensors.SensorProfile, channel: str,
+              params: PreprocessParams, rate: float) -> tuple[np.ndarray, float, float]:
+    """Outlier mask on the grid (an outlying update and the samples holding it), the
+    whole-record noise sigma, and the threshold used [standard deviations]."""
+    n = cand.size
+    u = prof.update_interval
+    idx, pos = _update_series(anchor, u)
+    y = np.full(int(pos[-1]) + 1 if pos.size else 0, np.nan)
+    y[pos] = cand[idx]
+    floor = max(params.min_noise_scale_of(channel), prof.resolution if prof.resolution > 0 else detect.quantum(y))
+    window = max(3, int(round(params.noise_window_s * rate / u)))
+    sigma, sigma_global = detect.noise_scale(y, window, floor)
+    fixed = params.sensor(channel, "outlier_threshold_sigma")
+    threshold = float(fixed) if fixed is not None else detect.gaussian_threshold(
+        idx.size, float(params.sensor(channel, "false_alarm")))
+    out = np.zeros(n, dtype=bool)
+    if params.sensor(channel, "detect_outliers", True) and y.size:
+        h = max(int(params.outlier_min_window), int(round(params.outlier_window_s * rate / u)))
+        bad = idx[detect.spike_mask(y, h, sigma, threshold, window)[pos]]
+        out[bad] = True
+        if prof.held and bad.size:  # the samples holding an outlying update hold its bad value too
+            nxt = np.append(idx, n)[np.searchsorted(idx, bad, side="right")]
+            out |= detect.mark_runs(n, bad, nxt) & held
+    return out, sigma_global, threshold
 
 
 def _channel(x: np.ndarray, present: np.ndarray, jitter: np.ndarray, channel: str, params: PreprocessParams,
              rate: float, max_interp: int):
-    """Flags (uint16), clean values and noise sigma of one channel on the grid."""
+    """Flags (uint16), clean values, noise sigma, longest fault run and the sensor's
+    profile (a dict) of one channel on the grid."""
     n = x.size
     f = np.zeros(n, dtype=np.int64)
     f[~present] |= QualityFlag.MISSING_ROW
@@ -401,16 +374,24 @@ def _channel(x: np.ndarray, present: np.ndarray, jitter: np.ndarray, channel: st
     f[oor] |= QualityFlag.OUT_OF_RANGE
     f[jitter] |= QualityFlag.TIME_JITTER
     cand = np.where(f == 0, x, np.nan)
-    if channel in params.frozen_channels:
-        f[detect.frozen_mask(cand, int(params.frozen_min_run))] |= QualityFlag.FROZEN
-        cand = np.where(f == 0, x, np.nan)
-    floor = max(params.min_noise_scale_of(channel), detect.quantum(cand))
-    sigma, sigma_global = detect.noise_scale(cand, int(round(params.noise_window_s * rate)), floor)
-    h = max(int(params.outlier_min_window), int(round(params.outlier_window_s * rate)))
-    f[detect.spike_mask(cand, h, sigma, params.outlier_threshold_sigma)] |= QualityFlag.OUTLIER
+    prof = sensors.profile(
+        cand, channel, rate_hz=rate, noise_window=int(round(params.noise_window_s * rate)),
+        min_run=int(params.sensor(channel, "frozen_min_run")), still_share=params.still_share,
+        false_alarm=float(params.sensor(channel, "false_alarm")),
+        check_frozen=bool(params.sensor(channel, "detect_frozen")),
+        given_resolution=params.sensor(channel, "resolution"),
+        given_update_s=params.sensor(channel, "update_interval_s"),
+        max_still_s=params.sensor(channel, "frozen_max_still_s"))
+    frozen, held, anchor = sensors.frozen_and_held(cand, prof, 1.0 / rate)
+    f[frozen] |= QualityFlag.FROZEN
+    out, sigma_global, threshold = _outliers(cand, anchor, held, prof, channel, params, rate)
+    f[out] |= QualityFlag.OUTLIER
+    f[held & ~out] |= QualityFlag.HELD
 
     bad = (f & int(DETECTION)) != 0
-    interp, long_, edge, lengths = _run_bits(bad, max_interp)
+    fault = (f & int(FAULT)) != 0
+    limit = max(max_interp, int(math.ceil(2 * prof.update_interval)) - 1) if prof.held else max_interp
+    interp, long_, edge = _run_bits(bad, fault, limit)
     f[interp] |= QualityFlag.INTERPOLATED
     f[long_] |= QualityFlag.LONG_GAP
     f[edge] |= QualityFlag.EDGE_GAP
@@ -419,8 +400,10 @@ def _channel(x: np.ndarray, present: np.ndarray, jitter: np.ndarray, channel: st
         good = np.flatnonzero(~bad)
         idx = np.flatnonzero(interp)
         clean[idx] = np.interp(idx, good, x[good])
-    longest = int(lengths.max()) if lengths.size else 0
-    return f.astype(FLAGS_DTYPE), clean, sigma_global, longest
+    starts, ends = detect.runs(fault)
+    longest = int((ends - starts).max()) if starts.size else 0
+    info = {**prof.to_dict(), "threshold_sigma": threshold}
+    return f.astype(FLAGS_DTYPE), clean, sigma_global, longest, info
 
 
 def preprocess(raw: pd.DataFrame, params: PreprocessParams = PreprocessParams(),
@@ -453,8 +436,9 @@ def preprocess(raw: pd.DataFrame, params: PreprocessParams = PreprocessParams(),
     t_raw[k] = t
     cols: dict[str, np.ndarray] = {"t_s": t_grid}
     clean_cols, flag_cols = {}, {}
-    sigmas, longest_by = {}, {}
+    sigmas, longest_by, profiles = {}, {}, {}
     all_bad = np.ones(n, dtype=bool)
+    all_used = present.copy()
     air = tuple(c for c in AIR_DATA_CHANNELS if c in raw.columns)
     for c in air:
         if raw[c].dtype != np.float64:
@@ -464,13 +448,14 @@ def preprocess(raw: pd.DataFrame, params: PreprocessParams = PreprocessParams(),
         x = np.full(n, np.nan)
         x[k] = raw[c].to_numpy()  # plain assignment: bit patterns are kept
         cols[c] = x
-        f, clean, sig, longest = _channel(x, present, jitter, c, params, rate, max_interp)
+        f, clean, sig, longest, profiles[c] = _channel(x, present, jitter, c, params, rate, max_interp)
         clean_cols[f"{c}_clean"] = clean
         flag_cols[f"flags_{c}"] = f
         sigmas[c] = sig
         longest_by[c] = longest * dt
         if c in CHANNELS:
-            all_bad &= (f & np.uint16(int(DETECTION))) != 0
+            all_bad &= (f & np.uint16(int(FAULT))) != 0
+            all_used &= (f & np.uint16(int(FAULT))) == 0
     flags_all = np.zeros(n, dtype=FLAGS_DTYPE)
     for c in CHANNELS:
         flags_all |= flag_cols[f"flags_{c}"]
@@ -488,6 +473,8 @@ def preprocess(raw: pd.DataFrame, params: PreprocessParams = PreprocessParams(),
                       for nm in names} for c in (*CHANNELS, *air)}
     unusable = np.uint16(int(UNUSABLE))
     usable_by = {c: int(((flag_cols[f"flags_{c}"] & unusable) == 0).sum()) for c in (*CHANNELS, *air)}
+    fault = np.uint16(int(FAULT))
+    used_by = {c: int((present & ((flag_cols[f"flags_{c}"] & fault) == 0)).sum()) for c in (*CHANNELS, *air)}
     result = PreprocessResult(
         frame=frame,
         params=params,
@@ -507,6 +494,9 @@ def preprocess(raw: pd.DataFrame, params: PreprocessParams = PreprocessParams(),
         long_gaps=long_gaps,
         noise_sigma=sigmas,
         ignored_columns=tuple(str(c) for c in raw.columns if c not in RAW_COLUMNS and c not in air),
+        n_used_rows=int(all_used.sum()),
+        n_used_by_channel=used_by,
+        sensors=profiles,
     )
     validate(frame, PreprocessedTelemetry, source)
     return result

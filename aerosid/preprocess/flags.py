@@ -14,20 +14,28 @@ Detection bits (the raw value is not a trustworthy measurement):
 ``SENTINEL``      the raw value is one of the sentinel values
                   (``PreprocessParams.sentinel_values``).
 ``FROZEN``        the raw value repeats the previous sample's value exactly, within a
-                  run of at least ``frozen_min_run`` identical samples (the run's first
-                  sample, the last genuine update, is not flagged).
+                  run of at least ``frozen_min_run`` identical updates in a channel whose
+                  updates otherwise change (the run's first sample, the last genuine
+                  update, is not flagged); a channel that rests at its resolution (a
+                  quantised surface holding still) is not frozen by that.
 ``OUTLIER``       an isolated spike: it lies beyond both the left and the right
                   neighbourhood (robust two-sided test, see ``detect_outliers``).
 ``OUT_OF_RANGE``  finite, not a sentinel, but outside the physical bounds
                   (``schemas.telemetry.PHYSICAL_BOUNDS``).
 ``TIME_JITTER``   the raw timestamp lies further than ``snap_tolerance`` grid steps
                   from its grid point (set on all channels of that row).
+``HELD``          the channel is sampled and held (updated every few grid samples,
+                  ``aerosid.preprocess.sensors``) and this sample repeats its last
+                  update: a true value, but not a new measurement.  Not a fault: the
+                  row still counts as used; the Kalman filter skips it (no new
+                  information) and ``<channel>_clean`` is interpolated linearly between
+                  the update instants.
 
 Action bits (what ``<channel>_clean`` holds at a flagged sample):
 
 ``INTERPOLATED``  linearly interpolated between the nearest good samples (a run of
                   bad samples no longer than ``max_interp_gap_s`` with good samples
-                  on both sides).
+                  on both sides; held samples between two update instants always).
 ``LONG_GAP``      left NaN: the run of bad samples is longer than
                   ``max_interp_gap_s``.
 ``EDGE_GAP``      left NaN: the run of bad samples touches the first or the last grid
@@ -56,6 +64,7 @@ class QualityFlag(enum.IntFlag):
     OUTLIER = 1 << 4
     OUT_OF_RANGE = 1 << 5
     TIME_JITTER = 1 << 6
+    HELD = 1 << 7
     INTERPOLATED = 1 << 8
     LONG_GAP = 1 << 9
     EDGE_GAP = 1 << 10
@@ -63,8 +72,10 @@ class QualityFlag(enum.IntFlag):
 
 #: The raw value carries no measurement at all (the "dropout" kinds).
 DROPOUT = QualityFlag.MISSING_ROW | QualityFlag.NAN | QualityFlag.SENTINEL
-#: Any bit saying the raw value is not a trustworthy measurement.
-DETECTION = DROPOUT | QualityFlag.FROZEN | QualityFlag.OUTLIER | QualityFlag.OUT_OF_RANGE | QualityFlag.TIME_JITTER
+#: Any bit saying the raw value is not a trustworthy measurement (a fault).
+FAULT = DROPOUT | QualityFlag.FROZEN | QualityFlag.OUTLIER | QualityFlag.OUT_OF_RANGE | QualityFlag.TIME_JITTER
+#: Any bit saying the raw value is not a new, trustworthy measurement (a fault, or held).
+DETECTION = FAULT | QualityFlag.HELD
 #: Bits saying what the clean value holds at a flagged sample.
 ACTION = QualityFlag.INTERPOLATED | QualityFlag.LONG_GAP | QualityFlag.EDGE_GAP
 #: The clean value is NaN.
