@@ -72,13 +72,18 @@ def write_text_atomic(text: str, path: str | Path) -> Path:
 
 
 def telemetry_vehicle(path: str | Path, default: str = "seed-rlv") -> str:
-    """The built-in vehicle a telemetry file names in its Parquet metadata
-    (``aerosid.case``, written by ``aerosid simulate``), else `default`."""
+    """The vehicle a telemetry file names in its Parquet metadata: ``aerosid.vehicle``, a
+    vehicle file relative to the telemetry's folder (a generated JSBSim flight writes
+    ``vehicle.toml`` beside it), else the built-in vehicle ``aerosid.case`` (written by
+    ``aerosid simulate``), else `default`."""
     from aerosid.vehicle import builtin_vehicles
 
     try:
         meta = pq.read_schema(path).metadata or {}
     except (OSError, pa.ArrowInvalid):  # unreadable: the preprocessing stage reports it with the file name
         return default
+    vehicle = meta.get(b"aerosid.vehicle", b"").decode("utf-8", "replace")
+    if vehicle and (Path(path).parent / vehicle).is_file():
+        return str(Path(path).parent / vehicle)
     case = meta.get(b"aerosid.case", b"").decode("utf-8", "replace")
     return case if case in builtin_vehicles() else default

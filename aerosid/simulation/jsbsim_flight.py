@@ -38,10 +38,15 @@ from aerosid.simulation.jsbsim_tables import AeroTables, body_coefficients
 from aerosid.simulation.sensors import IMU_COLUMNS, RAW_COLUMNS, apply_faults
 from aerosid.vehicle import DATA_DIR
 
-__all__ = ["JSBSimUnavailable", "simulate_jsbsim", "SUPPORTED_AIRCRAFT", "MANOEUVRES", "AeroTables",
+__all__ = ["JSBSimUnavailable", "simulate_jsbsim", "SUPPORTED_AIRCRAFT", "GENERATED_AIRCRAFT", "MANOEUVRES", "AeroTables",
            "TELEMETRY_COLUMNS"]
 
+# aircraft with a hand-written flight (aerosid/data/<aircraft>/simulation.toml); any other
+# aircraft of the jsbsim package is flown with a generated design and vehicle file
+# (aerosid.simulation.jsbsim_aircraft), when it trims; GENERATED_AIRCRAFT are the ones
+# checked (tests, bench/bench_generalisation.py, docs/jsbsim.md)
 SUPPORTED_AIRCRAFT = ("c172x",)
+GENERATED_AIRCRAFT = ("pa28", "c310", "T37", "A4", "Concorde")
 MANOEUVRES = ("3211",)
 VANE_COLUMNS = ["alpha_vane_rad", "beta_vane_rad"]
 TELEMETRY_COLUMNS = RAW_COLUMNS + VANE_COLUMNS
@@ -220,10 +225,12 @@ def _trimmed_fdm(jsbsim, sim_cfg: dict):
     return fdm
 
 
-def _fly(fdm, t: np.ndarray, inputs: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+def _fly(fdm, t: np.ndarray, inputs: dict[str, np.ndarray], record: list[str] = _RECORD) -> dict[str, np.ndarray]:
+    """Fly the input increments on top of the current (trimmed) commands; the properties
+    `record` at every sample."""
     trim_cmd = {"elevator": fdm["fcs/elevator-cmd-norm"], "aileron": fdm["fcs/aileron-cmd-norm"],
                 "rudder": fdm["fcs/rudder-cmd-norm"]}
-    out = np.empty((len(t), len(_RECORD)))
+    out = np.empty((len(t), len(record)))
     get = fdm.get_property_value
     for k in range(len(t)):
         if k > 0:
@@ -235,8 +242,8 @@ def _fly(fdm, t: np.ndarray, inputs: dict[str, np.ndarray]) -> dict[str, np.ndar
                                ("rudder", "fcs/rudder-cmd-norm")):
                 fdm[prop] = trim_cmd[name] + inputs[name][k]
             fdm.run()
-        out[k] = [get(p) for p in _RECORD]
-    rec = {p: out[:, j] for j, p in enumerate(_RECORD)}
+        out[k] = [get(p) for p in record]
+    rec = {p: out[:, j] for j, p in enumerate(record)}
     if np.max(np.abs(rec["simulation/sim-time-sec"] - rec["simulation/sim-time-sec"][0] - t)) > 1e-6:
         raise RuntimeError("JSBSim time does not follow the sample grid")
     return rec
@@ -429,7 +436,17 @@ def rates_at_the_moments(x: np.ndarray, x_dot: np.ndarray, dt: float) -> np.ndar
 
 def simulate_jsbsim(aircraft: str = "c172x", manoeuvre: str = "3211", seed: int = 0, *,
                     faults: bool = True) -> SimulatedFlight:
-    """Fly JSBSim's `aircraft` through `manoeuvre`; noise and faults from `seed`."""
+    """Fly JSBSim's `aircraft` through `manoeuvre`; noise and faults from `seed`.
+
+    c172x flies its hand-written simulation.toml; any other aircraft of the jsbsim
+    package a generated design, with its vehicle file in ``flight.files`` (raises
+    aerosid.simulation.jsbsim_design.UnsupportedAircraft, a ValueError, when it cannot)."""
+    if manoeuvre not in MANOEUVRES:
+        raise ValueError(f"unknown manoeuvre {manoeuvre!r}; choices: {', '.join(MANOEUVRES)}")
+    if aircraft not in SUPPORTED_AIRCRAFT:
+        from aerosid.simulation.jsbsim_aircraft import simulate_aircraft
+
+        return simulate_aircraft(aircraft, seed, faults=faults)
     _check_names(aircraft, manoeuvre)
     jsbsim = _import_jsbsim()
     sim_cfg, veh_cfg = load_jsbsim_config(aircraft)
