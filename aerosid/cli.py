@@ -50,7 +50,7 @@ def main() -> None:
 @click.option("--list-effects", is_flag=True, help="Print the hidden-effect catalogue and exit.")
 @click.option("--jsbsim", "jsbsim_aircraft", default=None, metavar="AIRCRAFT",
               help="Fly AIRCRAFT in JSBSim instead of the built-in simulator: c172x (hand-written flight) or "
-                   "any aircraft of the jsbsim package that trims (e.g. pa28, c310, T37, A4, Concorde; flight "
+                   "any aircraft of the jsbsim package that trims (e.g. pa28, OV10, T37, F4N; flight "
                    "design and DIR/vehicle.toml generated). Needs the extra: pip install 'aerosid[jsbsim]'.")
 @click.option("--manoeuvre", default="3211", show_default=True,
               help="JSBSim input sequence: 3211 = elevator 3-2-1-1, then aileron and rudder doublets.")

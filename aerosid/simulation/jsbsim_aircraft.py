@@ -30,8 +30,8 @@ import pandas as pd
 from aerosid.rigid_body import lever_arm_acceleration
 from aerosid.simulation import SimulatedFlight
 from aerosid.simulation.jsbsim_design import (DT_S, FT, INCH, LBF, PSF, SLUG, SLUG_FT2, SLUG_FT3, FlightDesign,
-                                              UnsupportedAircraft, abs_beta_slope, flight_design, mach_slopes,
-                                              model_coefficients, symmetric_loading)
+                                              UnsupportedAircraft, flight_design, symmetric_loading)
+from aerosid.simulation.jsbsim_linear import abs_beta_slope, mach_slopes, model_coefficients
 from aerosid.simulation.jsbsim_flight import (_fly, _import_jsbsim, _schedule, _takeup_steps, _truth_check,
                                               make_telemetry, rates_at_the_moments)
 from aerosid.simulation.jsbsim_tables import DEG, AeroTables

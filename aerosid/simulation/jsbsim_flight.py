@@ -46,7 +46,7 @@ __all__ = ["JSBSimUnavailable", "simulate_jsbsim", "SUPPORTED_AIRCRAFT", "GENERA
 # (aerosid.simulation.jsbsim_aircraft), when it trims; GENERATED_AIRCRAFT are the ones
 # checked (tests, bench/bench_generalisation.py, docs/jsbsim.md)
 SUPPORTED_AIRCRAFT = ("c172x",)
-GENERATED_AIRCRAFT = ("pa28", "c310", "T37", "A4", "Concorde")
+GENERATED_AIRCRAFT = ("pa28", "OV10", "T37", "F4N")
 MANOEUVRES = ("3211",)
 VANE_COLUMNS = ["alpha_vane_rad", "beta_vane_rad"]
 TELEMETRY_COLUMNS = RAW_COLUMNS + VANE_COLUMNS

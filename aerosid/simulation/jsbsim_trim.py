@@ -16,7 +16,9 @@ the throttle (``mode="level"``: γ fixed).
 from __future__ import annotations
 
 import math
+import xml.etree.ElementTree as ET
 from dataclasses import asdict, dataclass
+from pathlib import Path
 
 import numpy as np
 
@@ -56,8 +58,8 @@ class TrimPoint:
 
 
 def open_fdm(jsbsim, model: str, dt: float):
-    """A JSBSim instance of `model` in the clean configuration (gear, flaps and
-    speed brakes retracted), no output files, fuel consumption frozen (the mass and
+    """A JSBSim instance of `model` in the clean configuration (a retractable gear, flaps
+    and speed brakes retracted), no output files, fuel consumption frozen (the mass and
     CG stay those of the trim; some models' engines feed from small collector tanks
     that only FlightGear's transfer scripts refill: Concorde's flame out after ~10 s)."""
     fdm = jsbsim.FGFDMExec(jsbsim.get_default_root_dir())
@@ -69,8 +71,11 @@ def open_fdm(jsbsim, model: str, dt: float):
     catalogue = {p.split(" ")[0] for p in fdm.get_property_catalog()}
     if "propulsion/fuel_freeze" in catalogue:
         fdm["propulsion/fuel_freeze"] = 1
-    for prop in ("gear/gear-cmd-norm", "gear/gear-pos-norm", "fcs/flap-cmd-norm", "fcs/speedbrake-cmd-norm",
-                 "fcs/spoiler-cmd-norm"):
+    xml = Path(jsbsim.get_default_root_dir()) / "aircraft" / model / f"{model}.xml"
+    retractable = xml.is_file() and any((el.text or "").strip() == "1" for el in ET.parse(xml).getroot().iter("retractable"))
+    # a fixed gear stays down: its drag is part of the aircraft (pa28's CDgear reads gear/gear-pos-norm)
+    for prop in (("gear/gear-cmd-norm", "gear/gear-pos-norm") if retractable else ()) + (
+            "fcs/flap-cmd-norm", "fcs/speedbrake-cmd-norm", "fcs/spoiler-cmd-norm"):
         if prop in catalogue:
             fdm[prop] = 0.0
     return fdm
