@@ -150,6 +150,9 @@ def simulate_aircraft(aircraft: str, seed: int = 0, *, faults: bool = True) -> S
             takeup[name] = []  # hysteresis not modelled the way c172x does it: no take-up
     inputs, windows = _schedule(t, m, takeup)
     rec = _fly(fdm, t, inputs, record)
+    for prop in _STANDARD:  # an aircraft without propulsion (a glider) has no forces/*-prop-* properties
+        if prop not in rec and "-prop-" in prop:
+            rec[prop] = np.zeros(len(t))
 
     # ---- geometry and mass ----
     S_ft2, cbar_ft, b_ft = trim["metrics/Sw-sqft"], trim["metrics/cbarw-ft"], trim["metrics/bw-ft"]

@@ -432,7 +432,7 @@ def _design(jsbsim, aircraft: str) -> FlightDesign:
     if abs(cg_y) > ASYMMETRY_MAX or cross > 5 * ASYMMETRY_MAX:
         raise UnsupportedAircraft(f"{aircraft}: its loading is asymmetric even with the symmetric point masses: "
                                   f"{text}; aerosid's rigid-body model has Ixy = Iyz = 0")
-    if cg_y != 0.0 or cross > 0.0:
+    if abs(cg_y) > 1e-6 or cross > 1e-6:
         notes.append(f"loading: {text}; the vehicle file leaves them out (aerosid's rigid body has Ixy = Iyz = 0)")
     d_cg, d_rp, lin = linear_truth(tables, base, controls, gains)
     modes = mode_frequencies(d_cg, base)
