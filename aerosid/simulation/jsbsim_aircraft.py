@@ -101,7 +101,7 @@ def _surfaces(design: FlightDesign, rec: dict) -> tuple[list[np.ndarray], list[s
     return channels, ["elevator", *names, "rudder"], mixing, limits
 
 
-def _xml_check(tables: AeroTables, rec: dict, design: FlightDesign, truth: pd.DataFrame) -> dict:
+def _xml_check(tables: AeroTables, rec: dict, truth: pd.DataFrame) -> dict:
     """The aircraft's XML model at every sample (from the recorded properties) against
     JSBSim's own coefficients about the CG."""
     leaves = tables.leaf_properties()
@@ -202,7 +202,7 @@ def simulate_aircraft(aircraft: str, seed: int = 0, *, faults: bool = True) -> S
         "Cn_prop": rec["moments/n-prop-lbsft"] / (qS_lbs * b_ft),
         "thrust_N": prop_thrust * np.ones(n), "mass_kg": mass_kg, "x_cg_m": rec["inertia/cg-x-in"] * INCH,
     })
-    xml_diff = _xml_check(tables, rec, design, truth)
+    xml_diff = _xml_check(tables, rec, truth)
     worst = max(xml_diff, key=xml_diff.get)
     if xml_diff[worst] > XML_TOLERANCE:
         raise UnsupportedAircraft(
