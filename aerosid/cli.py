@@ -49,8 +49,9 @@ def main() -> None:
 @click.option("--no-faults", is_flag=True, help="No dropouts, outliers or sync gap (noise only).")
 @click.option("--list-effects", is_flag=True, help="Print the hidden-effect catalogue and exit.")
 @click.option("--jsbsim", "jsbsim_aircraft", default=None, metavar="AIRCRAFT",
-              help="Fly AIRCRAFT (c172x) in JSBSim instead of the built-in simulator (needs the extra: "
-                   "pip install 'aerosid[jsbsim]').")
+              help="Fly AIRCRAFT in JSBSim instead of the built-in simulator: c172x (hand-written flight) or "
+                   "any aircraft of the jsbsim package that trims (e.g. pa28, OV10, T37, F4N; flight "
+                   "design and DIR/vehicle.toml generated). Needs the extra: pip install 'aerosid[jsbsim]'.")
 @click.option("--manoeuvre", default="3211", show_default=True,
               help="JSBSim input sequence: 3211 = elevator 3-2-1-1, then aileron and rudder doublets.")
 def simulate(case_name, effects, seed, out_dir, duration, rate, no_faults, list_effects, jsbsim_aircraft,

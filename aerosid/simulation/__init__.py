@@ -36,6 +36,8 @@ class SimulatedFlight:
     truth: pd.DataFrame
     coefficients: dict[str, float]
     info: dict = field(default_factory=dict)
+    #: other files that belong with the telemetry, name -> text (a generated vehicle.toml)
+    files: dict[str, str] = field(default_factory=dict)
 
     def truth_document(self) -> dict:
         """The content of truth.json."""
@@ -66,14 +68,20 @@ class SimulatedFlight:
         return "\n".join(lines)
 
     def write(self, out_dir: str | Path) -> dict[str, Path]:
-        """Write telemetry.parquet, truth.parquet and truth.json atomically into out_dir."""
-        from aerosid.io import write_json_atomic, write_parquet_atomic
+        """Write telemetry.parquet, truth.parquet and truth.json (and `files`, e.g. a
+        generated vehicle.toml, which the telemetry's metadata then names as
+        ``aerosid.vehicle``, a path relative to the telemetry) atomically into out_dir."""
+        from aerosid.io import write_json_atomic, write_parquet_atomic, write_text_atomic
 
         out = Path(out_dir)
         out.mkdir(parents=True, exist_ok=True)
         meta = {"aerosid.kind": "raw_telemetry", "aerosid.case": self.case, "aerosid.seed": str(self.seed),
                 "aerosid.sample_rate_hz": str(self.info["sample_rate_hz"])}
+        extra = {name: write_text_atomic(text, out / name) for name, text in self.files.items()}
+        if "vehicle.toml" in self.files:
+            meta["aerosid.vehicle"] = "vehicle.toml"
         paths = {
+            **{Path(name).stem: path for name, path in extra.items()},
             "telemetry": write_parquet_atomic(self.telemetry, out / "telemetry.parquet", metadata=meta),
             "truth": write_parquet_atomic(self.truth, out / "truth.parquet", metadata={"aerosid.kind": "truth"}),
             "truth_json": write_json_atomic(self.truth_document(), out / "truth.json"),

@@ -38,10 +38,15 @@ from aerosid.simulation.jsbsim_tables import AeroTables, body_coefficients
 from aerosid.simulation.sensors import IMU_COLUMNS, RAW_COLUMNS, apply_faults
 from aerosid.vehicle import DATA_DIR
 
-__all__ = ["JSBSimUnavailable", "simulate_jsbsim", "SUPPORTED_AIRCRAFT", "MANOEUVRES", "AeroTables",
+__all__ = ["JSBSimUnavailable", "simulate_jsbsim", "SUPPORTED_AIRCRAFT", "GENERATED_AIRCRAFT", "MANOEUVRES", "AeroTables",
            "TELEMETRY_COLUMNS"]
 
+# aircraft with a hand-written flight (aerosid/data/<aircraft>/simulation.toml); any other
+# aircraft of the jsbsim package is flown with a generated design and vehicle file
+# (aerosid.simulation.jsbsim_aircraft), when it trims; GENERATED_AIRCRAFT are the ones
+# checked (tests, bench/bench_generalisation.py, docs/jsbsim.md)
 SUPPORTED_AIRCRAFT = ("c172x",)
+GENERATED_AIRCRAFT = ("pa28", "OV10", "T37", "F4N")
 MANOEUVRES = ("3211",)
 VANE_COLUMNS = ["alpha_vane_rad", "beta_vane_rad"]
 TELEMETRY_COLUMNS = RAW_COLUMNS + VANE_COLUMNS
@@ -220,10 +225,12 @@ def _trimmed_fdm(jsbsim, sim_cfg: dict):
     return fdm
 
 
-def _fly(fdm, t: np.ndarray, inputs: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+def _fly(fdm, t: np.ndarray, inputs: dict[str, np.ndarray], record: list[str] = _RECORD) -> dict[str, np.ndarray]:
+    """Fly the input increments on top of the current (trimmed) commands; the properties
+    `record` at every sample."""
     trim_cmd = {"elevator": fdm["fcs/elevator-cmd-norm"], "aileron": fdm["fcs/aileron-cmd-norm"],
                 "rudder": fdm["fcs/rudder-cmd-norm"]}
-    out = np.empty((len(t), len(_RECORD)))
+    out = np.empty((len(t), len(record)))
     get = fdm.get_property_value
     for k in range(len(t)):
         if k > 0:
@@ -235,8 +242,8 @@ def _fly(fdm, t: np.ndarray, inputs: dict[str, np.ndarray]) -> dict[str, np.ndar
                                ("rudder", "fcs/rudder-cmd-norm")):
                 fdm[prop] = trim_cmd[name] + inputs[name][k]
             fdm.run()
-        out[k] = [get(p) for p in _RECORD]
-    rec = {p: out[:, j] for j, p in enumerate(_RECORD)}
+        out[k] = [get(p) for p in record]
+    rec = {p: out[:, j] for j, p in enumerate(record)}
     if np.max(np.abs(rec["simulation/sim-time-sec"] - rec["simulation/sim-time-sec"][0] - t)) > 1e-6:
         raise RuntimeError("JSBSim time does not follow the sample grid")
     return rec
@@ -363,13 +370,83 @@ def _truth_check(truth: pd.DataFrame, table: dict, t_lateral_s: float) -> dict:
     }
 
 
+
+def sensor_sigma(sens: dict) -> dict[str, float]:
+    """1-sigma noise per telemetry channel from a [sensors] table (simulation.toml)."""
+    sigma = dict(zip(IMU_COLUMNS, (*sens["accel_noise_m_s2"], *(g * DEG for g in sens["gyro_noise_deg_s"]))))
+    sigma.update({f"d{i}_rad": sens["surface_noise_deg"] * DEG for i in range(1, 5)})
+    sigma.update({"V_m_s": sens["V_noise_m_s"], "h_m": sens["h_noise_m"],
+                  "alpha_vane_rad": sens["vane_noise_deg"] * DEG, "beta_vane_rad": sens["vane_noise_deg"] * DEG})
+    return sigma
+
+
+def make_telemetry(clean: dict[str, np.ndarray], truth: pd.DataFrame, sens: dict, fcfg: dict, seed: int,
+                   faults: bool):
+    """Noise ([sensors]) and faults ([faults]) on the clean signals: each channel's noise
+    from its own child of SeedSequence(seed).  Adds the fault masks (fault_*) and the
+    noise actually added (noise_*) to `truth`.  Returns (telemetry, masks, FaultSpec, sigma)."""
+    t = clean["t_s"]
+    n = len(t)
+    sigma = sensor_sigma(sens)
+    channels = TELEMETRY_COLUMNS[1:]
+    children = np.random.SeedSequence(seed).spawn(2 + len(channels))
+    rng_drop, rng_out = np.random.default_rng(children[0]), np.random.default_rng(children[1])
+    noisy = {"t_s": t.copy()}
+    for child, col in zip(children[2:], channels):
+        noisy[col] = clean[col] + sigma[col] * np.random.default_rng(child).standard_normal(n)
+    spec = FaultSpec(
+        dropout_rate_per_s=fcfg["dropout_rate_per_s"], dropout_length_s=tuple(fcfg["dropout_length_s"]),
+        dropout_nan_fraction=fcfg["dropout_nan_fraction"], outlier_probability=fcfg["outlier_probability"],
+        outlier_size_sigma=tuple(fcfg["outlier_size_sigma"]), sync_gap_at=fcfg["sync_gap_at"],
+        sync_gap_s=fcfg["sync_gap_s"])
+    if not faults:
+        spec = spec.without_faults()
+    sigma_imu = np.array([sigma[c] for c in IMU_COLUMNS])
+    telemetry, masks = apply_faults({c: noisy[c] for c in RAW_COLUMNS}, sigma_imu, spec, rng_drop, rng_out)
+    keep = ~masks["dropout_missing_row"].to_numpy()
+    nan_rows = masks["dropout_nan"].to_numpy()
+    for col in VANE_COLUMNS:
+        v = noisy[col].copy()
+        v[nan_rows] = np.nan
+        telemetry[col] = v[keep]
+    telemetry = telemetry[TELEMETRY_COLUMNS]
+    for col in masks.columns[1:]:
+        truth[f"fault_{col}"] = masks[col].to_numpy()
+    for col in channels:
+        truth[f"noise_{col}"] = noisy[col] - clean[col]
+    return telemetry, masks, spec, sigma
+
+
+def rates_at_the_moments(x: np.ndarray, x_dot: np.ndarray, dt: float) -> np.ndarray:
+    """Body rates re-timed to the instant of the sample's moments.
+
+    JSBSim integrates the body rates with rectangular Euler (its default
+    simulation/integrator/rate/rotational = 1): x[k+1] = x[k] + dt x_dot[k], where
+    x_dot[k] comes from the moments of sample k.  Those moments therefore act at
+    t_k + dt/2 as far as the rates are concerned: the logged rates run half a step late
+    relative to the logged moments and accelerations (a derivative of the logged q is
+    (q_dot[k-1] + q_dot[k])/2, not q_dot[k]; docs/jsbsim.md).  The rate at t_k + dt/2 is
+    exactly x[k] + dt/2 x_dot[k] (x is linear over the step); as the gyros' reading at
+    sample k, its derivative matches the moment of sample k."""
+    return x + 0.5 * dt * x_dot
+
 # --------------------------------------------------------------------------------------
 # the flight
 # --------------------------------------------------------------------------------------
 
 def simulate_jsbsim(aircraft: str = "c172x", manoeuvre: str = "3211", seed: int = 0, *,
                     faults: bool = True) -> SimulatedFlight:
-    """Fly JSBSim's `aircraft` through `manoeuvre`; noise and faults from `seed`."""
+    """Fly JSBSim's `aircraft` through `manoeuvre`; noise and faults from `seed`.
+
+    c172x flies its hand-written simulation.toml; any other aircraft of the jsbsim
+    package a generated design, with its vehicle file in ``flight.files`` (raises
+    aerosid.simulation.jsbsim_design.UnsupportedAircraft, a ValueError, when it cannot)."""
+    if manoeuvre not in MANOEUVRES:
+        raise ValueError(f"unknown manoeuvre {manoeuvre!r}; choices: {', '.join(MANOEUVRES)}")
+    if aircraft not in SUPPORTED_AIRCRAFT:
+        from aerosid.simulation.jsbsim_aircraft import simulate_aircraft
+
+        return simulate_aircraft(aircraft, seed, faults=faults)
     _check_names(aircraft, manoeuvre)
     jsbsim = _import_jsbsim()
     sim_cfg, veh_cfg = load_jsbsim_config(aircraft)
@@ -420,6 +497,11 @@ def simulate_jsbsim(aircraft: str = "c172x", manoeuvre: str = "3211", seed: int 
     p, q, r = rec["velocities/p-rad_sec"], rec["velocities/q-rad_sec"], rec["velocities/r-rad_sec"]
     pd_, qd_, rd_ = (rec["accelerations/pdot-rad_sec2"], rec["accelerations/qdot-rad_sec2"],
                      rec["accelerations/rdot-rad_sec2"])
+    # the gyros' rates at the instant of the sample's moments (JSBSim's Euler step logs
+    # them half a step late; rates_at_the_moments); the state JSBSim's aerodynamics
+    # used stays in p/q/r_state_rad_s and p/q/r_hat
+    p_state, q_state, r_state = p, q, r
+    p, q, r = (rates_at_the_moments(x, xd, dt) for x, xd in ((p, pd_), (q, qd_), (r, rd_)))
     # specific force at the CG: all external non-gravitational forces / mass (JSBSim's
     # forces/fb*-total are aero + propulsion + ground + external; gravity is not in them)
     f_cg = [rec[f"forces/fb{a}-total-lbs"] * LBF / mass_kg for a in "xyz"]
@@ -444,6 +526,7 @@ def simulate_jsbsim(aircraft: str = "c172x", manoeuvre: str = "3211", seed: int 
         "rho_kg_m3": rec["atmosphere/rho-slugs_ft3"] * SLUG_FT3, "g_m_s2": rec["accelerations/gravity-ft_sec2"] * FT,
         "phi_rad": rec["attitude/phi-rad"], "theta_rad": rec["attitude/theta-rad"], "psi_rad": rec["attitude/psi-rad"],
         "p_rad_s": p, "q_rad_s": q, "r_rad_s": r,
+        "p_state_rad_s": p_state, "q_state_rad_s": q_state, "r_state_rad_s": r_state,
         "p_dot_rad_s2": pd_, "q_dot_rad_s2": qd_, "r_dot_rad_s2": rd_,
         "ax_cg_m_s2": f_cg[0], "ay_cg_m_s2": f_cg[1], "az_cg_m_s2": f_cg[2],
         "ax_sensor_m_s2": f_sensor[0], "ay_sensor_m_s2": f_sensor[1], "az_sensor_m_s2": f_sensor[2],
@@ -502,43 +585,15 @@ def simulate_jsbsim(aircraft: str = "c172x", manoeuvre: str = "3211", seed: int 
     clean = {
         "t_s": t,
         "ax_m_s2": f_sensor[0], "ay_m_s2": f_sensor[1], "az_m_s2": f_sensor[2],
-        "p_rad_s": p, "q_rad_s": q, "r_rad_s": r,
+        "p_rad_s": truth["p_rad_s"].to_numpy(), "q_rad_s": truth["q_rad_s"].to_numpy(),
+        "r_rad_s": truth["r_rad_s"].to_numpy(),
         "d1_rad": truth["d1_rad"].to_numpy(), "d2_rad": truth["d2_rad"].to_numpy(),
         "d3_rad": truth["d3_rad"].to_numpy(), "d4_rad": truth["d4_rad"].to_numpy(),
         "V_m_s": V, "h_m": truth["h_m"].to_numpy(),
         "alpha_vane_rad": alpha + air["alpha_bias_deg"] * DEG,
         "beta_vane_rad": beta + air["beta_bias_deg"] * DEG,
     }
-    sigma = dict(zip(IMU_COLUMNS, (*sens["accel_noise_m_s2"], *(g * DEG for g in sens["gyro_noise_deg_s"]))))
-    sigma.update({f"d{i}_rad": sens["surface_noise_deg"] * DEG for i in range(1, 5)})
-    sigma.update({"V_m_s": sens["V_noise_m_s"], "h_m": sens["h_noise_m"],
-                  "alpha_vane_rad": sens["vane_noise_deg"] * DEG, "beta_vane_rad": sens["vane_noise_deg"] * DEG})
-    channels = TELEMETRY_COLUMNS[1:]
-    children = np.random.SeedSequence(seed).spawn(2 + len(channels))
-    rng_drop, rng_out = np.random.default_rng(children[0]), np.random.default_rng(children[1])
-    noisy = {"t_s": t.copy()}
-    for child, col in zip(children[2:], channels):
-        noisy[col] = clean[col] + sigma[col] * np.random.default_rng(child).standard_normal(n)
-    spec = FaultSpec(
-        dropout_rate_per_s=fcfg["dropout_rate_per_s"], dropout_length_s=tuple(fcfg["dropout_length_s"]),
-        dropout_nan_fraction=fcfg["dropout_nan_fraction"], outlier_probability=fcfg["outlier_probability"],
-        outlier_size_sigma=tuple(fcfg["outlier_size_sigma"]), sync_gap_at=fcfg["sync_gap_at"],
-        sync_gap_s=fcfg["sync_gap_s"])
-    if not faults:
-        spec = spec.without_faults()
-    sigma_imu = np.array([sigma[c] for c in IMU_COLUMNS])
-    telemetry, masks = apply_faults({c: noisy[c] for c in RAW_COLUMNS}, sigma_imu, spec, rng_drop, rng_out)
-    keep = ~masks["dropout_missing_row"].to_numpy()
-    nan_rows = masks["dropout_nan"].to_numpy()
-    for col in VANE_COLUMNS:
-        v = noisy[col].copy()
-        v[nan_rows] = np.nan
-        telemetry[col] = v[keep]
-    telemetry = telemetry[TELEMETRY_COLUMNS]
-    for col in masks.columns[1:]:
-        truth[f"fault_{col}"] = masks[col].to_numpy()
-    for col in channels:
-        truth[f"noise_{col}"] = noisy[col] - clean[col]
+    telemetry, masks, spec, sigma = make_telemetry(clean, truth, sens, fcfg, seed, faults)
 
     # ---- info ----
     deg = 1.0 / DEG

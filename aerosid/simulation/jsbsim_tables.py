@@ -1,15 +1,27 @@
-"""c172x's aerodynamics re-evaluated from its JSBSim XML: a small vectorised evaluator
-of JSBSim functions and tables (the truth of aerosid.simulation.jsbsim_flight), and
-the wind-to-body and AERORP-to-CG transfer JSBSim applies."""
+"""JSBSim aerodynamic models re-evaluated from their XML: a small vectorised evaluator
+of JSBSim functions and tables (the truth of aerosid.simulation.jsbsim_flight and
+aerosid.simulation.jsbsim_aircraft), and the wind-to-body and AERORP-to-CG transfer
+JSBSim applies.
+
+``AeroTables(xml).axis_sums(env)`` evaluates every function of the six axes of any
+aircraft whose <aerodynamics> uses the LIFT/DRAG/SIDE + ROLL/PITCH/YAW axis system,
+with the properties the functions read taken from ``env`` (a mapping from property
+name to a number or an array; ``leaf_properties()`` lists the names it needs):
+the forces [lbf] and moments about the aerodynamic reference point [lbf ft], exactly
+as JSBSim sums them.  The functions' names are whatever the XML calls them (c172x's
+``aero/coefficient/Cm_alpha``, f16's ``aero/coefficient/Cma_M``, ...).
+"""
 from __future__ import annotations
 
 import math
 import xml.etree.ElementTree as ET
 from pathlib import Path
+from typing import Callable, Mapping
 
 import numpy as np
 
 DEG = math.pi / 180.0
+AXES = ("DRAG", "SIDE", "LIFT", "ROLL", "PITCH", "YAW")
 
 
 # --------------------------------------------------------------------------------------
@@ -65,39 +77,117 @@ class _Table:
         xc = env(self.col_var) if self.col_var else None
         if self.table_var is None:
             return self._lookup2(self.tables[0], xr, xc)
-        it, ft = _bracket(self.breakpoints, env(self.table_var))
-        values = np.stack([self._lookup2(tab, xr, xc) * np.ones_like(np.asarray(xr, float)) for tab in self.tables])
+        xt = np.asarray(env(self.table_var), float)
+        shape = np.broadcast(np.asarray(xr, float), np.asarray(xc if xc is not None else 0.0, float), xt).shape
+        it, ft = _bracket(self.breakpoints, np.broadcast_to(xt, shape))
+        values = np.stack([np.broadcast_to(self._lookup2(tab, xr, xc), shape) for tab in self.tables])
         it1 = np.minimum(it + 1, len(self.tables) - 1)
-        idx = np.arange(values.shape[1]) if values.ndim > 1 else None
-        if idx is None:
+        if values.ndim == 1:
             return values[it] * (1 - ft) + values[it1] * ft
-        return values[it, idx] * (1 - ft) + values[it1, idx] * ft
+        idx = np.indices(shape)
+        return values[(it, *idx)] * (1 - ft) + values[(it1, *idx)] * ft
+
+
+def _truth(x) -> np.ndarray:
+    return np.asarray(x, float) != 0.0
+
+
+# element -> (minimum number of arguments, numpy implementation on the evaluated arguments)
+_ELEMENTS: dict[str, Callable] = {
+    "sum": lambda a: sum(a[1:], a[0]),
+    "difference": lambda a: a[0] - sum(a[1:], 0.0),
+    "quotient": lambda a: np.divide(a[0], a[1]),
+    "pow": lambda a: np.power(a[0], a[1]),
+    "sqrt": lambda a: np.sqrt(a[0]),
+    "abs": lambda a: np.abs(a[0]),
+    "sin": lambda a: np.sin(a[0]),
+    "cos": lambda a: np.cos(a[0]),
+    "tan": lambda a: np.tan(a[0]),
+    "asin": lambda a: np.arcsin(a[0]),
+    "acos": lambda a: np.arccos(a[0]),
+    "atan": lambda a: np.arctan(a[0]),
+    "atan2": lambda a: np.arctan2(a[0], a[1]),
+    "exp": lambda a: np.exp(a[0]),
+    "ln": lambda a: np.log(a[0]),
+    "log2": lambda a: np.log2(a[0]),
+    "log10": lambda a: np.log10(a[0]),
+    "min": lambda a: np.minimum.reduce(np.broadcast_arrays(*a)),
+    "max": lambda a: np.maximum.reduce(np.broadcast_arrays(*a)),
+    "avg": lambda a: sum(a[1:], a[0]) / len(a),
+    "sign": lambda a: np.where(np.asarray(a[0]) < 0.0, -1.0, 1.0),
+    "floor": lambda a: np.floor(a[0]),
+    "ceil": lambda a: np.ceil(a[0]),
+    "integer": lambda a: np.trunc(a[0]),
+    "fraction": lambda a: np.asarray(a[0], float) - np.trunc(a[0]),
+    "mod": lambda a: np.fmod(a[0], a[1]),
+    "toradians": lambda a: np.asarray(a[0], float) * DEG,
+    "todegrees": lambda a: np.asarray(a[0], float) / DEG,
+    "lt": lambda a: (np.asarray(a[0]) < a[1]) * 1.0,
+    "le": lambda a: (np.asarray(a[0]) <= a[1]) * 1.0,
+    "gt": lambda a: (np.asarray(a[0]) > a[1]) * 1.0,
+    "ge": lambda a: (np.asarray(a[0]) >= a[1]) * 1.0,
+    "eq": lambda a: (np.asarray(a[0]) == a[1]) * 1.0,
+    "nq": lambda a: (np.asarray(a[0]) != a[1]) * 1.0,
+    "and": lambda a: np.logical_and.reduce([_truth(x) for x in np.broadcast_arrays(*a)]) * 1.0,
+    "or": lambda a: np.logical_or.reduce([_truth(x) for x in np.broadcast_arrays(*a)]) * 1.0,
+    "not": lambda a: (~_truth(a[0])) * 1.0,
+    "ifthen": lambda a: np.where(_truth(a[0]), a[1], a[2]),
+}
 
 
 class AeroTables:
     """The aerodynamic model of a JSBSim aircraft XML, evaluated in numpy.
 
-    ``coefficients(**state)`` returns wind-axis C_D, C_Y(side), C_L and the body-axis
-    moment coefficients about the aerodynamic reference point, by evaluating every
-    function of the <aerodynamics> axes with q̄S = 1, b = c̄ = 1 and the rates given
-    already non-dimensional (ci2vel = bi2vel = 1, q = q̂, ...).  Supports the
-    function elements c172x uses (product, sum, difference, quotient, table,
-    property, value).
+    ``axis_sums(env)`` sums every function of each <axis> as JSBSim does (wind-axis
+    DRAG, SIDE, LIFT forces and body-axis ROLL, PITCH, YAW moments about the
+    aerodynamic reference point); ``rp_shift(env)`` is the <aero_ref_pt_shift_x>
+    function (a shift of the AERORP, in chords, positive aft) or None.
+
+    ``coefficients(**state)`` is c172x's form: C_D, C_Y(side), C_L and the moment
+    coefficients about the AERORP with q̄S = 1, b = c̄ = 1 and the rates given already
+    non-dimensional.
     """
 
     def __init__(self, xml_path: str | Path):
         self.path = Path(xml_path)
         root = ET.parse(self.path).getroot()
         aero = root.find("aerodynamics")
+        if aero is None or aero.get("file"):
+            raise ValueError(f"{self.path}: no inline <aerodynamics> section")
         self.root = root
-        self.named = {f.get("name"): f for f in aero.findall("function")}
+        # every named function of the section (top level, in an axis or nested): another
+        # function may read any of them by name
+        self.named = {f.get("name"): f for f in aero.iter("function") if f.get("name")}
         self.axes = {ax.get("name"): ax.findall("function") for ax in aero.findall("axis")}
-        if not {"DRAG", "SIDE", "LIFT", "ROLL", "PITCH", "YAW"} <= set(self.axes):
-            raise ValueError(f"{self.path}: only the LIFT/DRAG/SIDE + ROLL/PITCH/YAW axis system is supported")
+        if not set(AXES) <= set(self.axes):
+            raise ValueError(f"{self.path}: only the LIFT/DRAG/SIDE + ROLL/PITCH/YAW axis system is supported "
+                             f"(this model has {', '.join(self.axes) or 'no'} axes)")
+        shift = aero.find("aero_ref_pt_shift_x")
+        self.rp_shift_el = shift.find("function") if shift is not None else None
         self._tables: dict[int, _Table] = {}
+        self._check_elements(aero)
+
+    def _check_elements(self, aero: ET.Element) -> None:
+        known = set(_ELEMENTS) | {"function", "product", "table", "property", "p", "value", "v", "independentVar",
+                                  "tableData", "description", "documentation", "axis", "aerodynamics",
+                                  "aero_ref_pt_shift_x", "alphalimits", "hysteresis_limits", "limit"}
+        bad = sorted({el.tag for el in aero.iter() if el.tag not in known and not callable(el.tag)})
+        if bad:
+            raise NotImplementedError(f"{self.path}: JSBSim function element(s) <{'>, <'.join(bad)}> "
+                                      "are not supported by the evaluator")
 
     def function_names(self, axis: str) -> list[str]:
         return [f.get("name") for f in self.axes[axis]]
+
+    def leaf_properties(self) -> list[str]:
+        """The properties the model reads that it does not define itself."""
+        out = set()
+        for el in self.root.find("aerodynamics").iter():
+            if el.tag in ("property", "p", "independentVar") and el.text:
+                name = el.text.strip().lstrip("-")
+                if name not in self.named:
+                    out.add(name)
+        return sorted(out)
 
     def _eval(self, el: ET.Element, env):
         tag = el.tag
@@ -108,7 +198,12 @@ class AeroTables:
             return env(name)
         if tag in ("value", "v"):
             return float(el.text)
-        kids = [k for k in el if k.tag != "description"]
+        if tag == "table":
+            table = self._tables.get(id(el))
+            if table is None:
+                table = self._tables[id(el)] = _Table(el)
+            return table(env)
+        kids = [k for k in el if k.tag not in ("description", "documentation") and not callable(k.tag)]
         if tag == "function":
             (body,) = kids
             return self._eval(body, env)
@@ -117,28 +212,47 @@ class AeroTables:
             for k in kids:
                 out = out * self._eval(k, env)
             return out
-        if tag == "sum":
-            out = 0.0
-            for k in kids:
-                out = out + self._eval(k, env)
-            return out
-        if tag == "difference":
-            out = self._eval(kids[0], env)
-            for k in kids[1:]:
-                out = out - self._eval(k, env)
-            return out
-        if tag == "quotient":
-            return self._eval(kids[0], env) / self._eval(kids[1], env)
-        if tag == "table":
-            table = self._tables.get(id(el))
-            if table is None:
-                table = self._tables[id(el)] = _Table(el)
-            return table(env)
+        if tag in _ELEMENTS:
+            return _ELEMENTS[tag]([self._eval(k, env) for k in kids])
         raise NotImplementedError(f"{self.path}: JSBSim function element <{tag}> is not supported")
+
+    def _environment(self, values: Mapping[str, object]):
+        cache: dict[str, object] = {}
+
+        def env(name):
+            if name in values:
+                return values[name]
+            if name in cache:
+                return cache[name]
+            if name in self.named:
+                cache[name] = self._eval(self.named[name], env)
+                return cache[name]
+            raise KeyError(f"{self.path}: the aerodynamic model reads {name!r}, which the evaluator was not given")
+
+        return env
+
+    def axis_sums(self, values: Mapping[str, object]) -> dict[str, np.ndarray]:
+        """The six axis sums with the leaf properties taken from `values`."""
+        env = self._environment(values)
+        shape = np.broadcast(*[np.asarray(v, float) for v in values.values()]).shape
+        out = {}
+        for axis in AXES:
+            total = np.zeros(shape)
+            for f in self.axes[axis]:
+                name = f.get("name")
+                total = total + (env(name) if name else self._eval(f, env))
+            out[axis] = total
+        return out
+
+    def rp_shift(self, values: Mapping[str, object]):
+        """The AERORP shift [chords, along the structural x axis] or None."""
+        if self.rp_shift_el is None:
+            return None
+        return self._eval(self.rp_shift_el, self._environment(values))
 
     def coefficients(self, alpha, beta, delta_e, delta_a, delta_r, p_hat, q_hat, r_hat, alpha_dot_hat,
                      flaps_deg=0.0, h_over_b=1e3, stall_hyst=0.0) -> dict[str, np.ndarray]:
-        """delta_e = fcs/elevator-pos-rad, delta_a = fcs/effective-aileron-pos,
+        """c172x: delta_e = fcs/elevator-pos-rad, delta_a = fcs/effective-aileron-pos,
         delta_r = fcs/rudder-pos-rad [rad]; rates non-dimensional (q̂ = q c̄/2V,
         p̂ = p b/2V, r̂ = r b/2V, α̇̂ = α̇ c̄/2V)."""
         alpha, beta = np.asarray(alpha, float), np.asarray(beta, float)
@@ -156,28 +270,9 @@ class AeroTables:
             "aero/ci2vel": 1.0, "aero/bi2vel": 1.0,
             "fcs/flap-pos-deg": flaps_deg, "aero/h_b-mac-ft": h_over_b, "aero/stall-hyst-norm": stall_hyst,
         }
-        cache: dict[str, object] = {}
-
-        def env(name):
-            if name in base:
-                return base[name]
-            if name in cache:
-                return cache[name]
-            if name in self.named:
-                cache[name] = self._eval(self.named[name], env)
-                return cache[name]
-            raise KeyError(f"{self.path}: the aerodynamic model uses {name!r}, which the evaluator does not provide")
-
-        shape = np.broadcast(alpha, beta, np.asarray(delta_e), np.asarray(q_hat)).shape
-
-        def axis_sum(axis):
-            out = np.zeros(shape)
-            for f in self.axes[axis]:
-                out = out + self._eval(f, env)
-            return out
-
-        return {"CD": axis_sum("DRAG"), "CS": axis_sum("SIDE"), "CL": axis_sum("LIFT"),
-                "Cl_rp": axis_sum("ROLL"), "Cm_rp": axis_sum("PITCH"), "Cn_rp": axis_sum("YAW")}
+        s = self.axis_sums(base)
+        return {"CD": s["DRAG"], "CS": s["SIDE"], "CL": s["LIFT"],
+                "Cl_rp": s["ROLL"], "Cm_rp": s["PITCH"], "Cn_rp": s["YAW"]}
 
 
 def body_coefficients(c: dict, alpha, beta, arm_ft, cbar_ft: float, span_ft: float) -> dict[str, np.ndarray]:

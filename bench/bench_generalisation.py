@@ -1,0 +1,278 @@
+"""Generalisation bench (issue 16): the EBM pipeline with DEFAULT settings on vehicles the
+project was not tuned on, N seeds each.
+
+    python bench/bench_generalisation.py [--seeds 0-9] [--vehicles seed-rlv,c172x,pa28,...] [--jobs 1]
+    -> bench/results/generalisation.md and bench/results/generalisation_runs.csv
+
+Vehicles: seed-rlv (aerosid's own simulator), c172x (the hand-written JSBSim flight and
+its shipped vehicle file) and the JSBSim aircraft flown with a GENERATED flight design
+and vehicle file (aerosid.simulation.jsbsim_flight.GENERATED_AIRCRAFT: a light single,
+a twin, a jet trainer, a jet attack aircraft and a Mach 2 airliner).  The 737 and the
+787-8 are reserved for an independent check and never flown here.
+
+Each run: simulate (noise and faults from the seed), then ``aerosid.ebm.process_telemetry``
+with the vehicle file exactly as a user would have it (seed-rlv, c172x: the shipped files;
+the generated aircraft: the vehicle.toml written beside the telemetry) and every other
+setting at its default (including the Mach window of half-width 0.5).
+
+Per vehicle and coefficient the table gives the truth, the mean and RMS error [% of
+the truth] over the runs that completed, and the 95 % coverage: the fraction of runs
+whose |estimate - truth| <= 1.96 x the reported (corrected) standard error.  Coefficients
+(moments about the CG, SI per radian): Cm_alpha, Cm_delta (Cm_delta_p), damping =
+Cm_q + Cm_alpha_dot (``LinearFit.combination``, sigma from the full covariance; Cm_q alone
+where the model has no Cm_alpha_dot), CN_alpha, CN_delta (CN_delta_p), Cl_p, Cl_delta
+(Cl_delta_r), Cn_beta, Cn_r, Cn_delta (Cn_delta_y).  "-" = not in the vehicle's default
+model (seed-rlv's finned-class model has no rate terms).  seed-rlv's control derivatives
+are per radian of delta/2 (its own convention); the aircraft's per radian of deflection.
+The *oracle* column (aircraft) fits the same default model to the noise-free truth (the
+aerodynamic plus propulsive coefficients the sensors feel, the true regressors): the part
+of the error the model structure and the flight make, which no estimator removes.
+
+A SILENT FAILURE is a run the pipeline reports as fine -- it returned an identification,
+no smoothed segment is flagged diverged -- in which some coefficient with a bar in issue
+16 (Cm_alpha, Cm_delta, damping, CN_alpha, Cl_p, Cn_beta, Cn_r) is off the truth by more
+than 5 reported sigma, or by more than 30 % while its 95 % interval excludes the truth.
+A run that raises, or flags a segment as diverged, has announced itself and counts as a
+failed run instead (and as a miss of every coverage).
+
+The machine is shared: --jobs defaults to 1; each run takes ~0.5-1.5 min.
+"""
+from __future__ import annotations
+
+import argparse
+import math
+import os
+import platform
+import sys
+import tempfile
+import time
+import traceback
+import warnings
+from concurrent.futures import ProcessPoolExecutor
+from datetime import date
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+sys.path.insert(0, str(Path(__file__).parent))
+from machine import cpu_model, loadavg  # noqa: E402  (bench/machine.py)
+
+COEFFICIENTS = {  # bench name -> truth / estimate name
+    "Cm_alpha": "Cm_alpha", "Cm_delta": "Cm_delta_p", "damping": None, "CN_alpha": "CN_alpha",
+    "CN_delta": "CN_delta_p", "Cl_p": "Cl_p", "Cl_delta": "Cl_delta_r", "Cn_beta": "Cn_beta", "Cn_r": "Cn_r",
+    "Cn_delta": "Cn_delta_y",
+}
+BARRED = ("Cm_alpha", "Cm_delta", "damping", "CN_alpha", "Cl_p", "Cn_beta", "Cn_r")
+SILENT_SIGMA = 5.0
+SILENT_PCT = 30.0
+
+
+def default_vehicles() -> list[str]:
+    from aerosid.simulation.jsbsim_flight import GENERATED_AIRCRAFT
+
+    return ["seed-rlv", "c172x", *GENERATED_AIRCRAFT]
+
+
+def parse_seeds(text: str) -> list[int]:
+    out = []
+    for part in text.split(","):
+        a, _, b = part.partition("-")
+        out.extend(range(int(a), int(b) + 1) if b else [int(a)])
+    return out
+
+
+def simulate(vehicle: str, seed: int, workdir: Path):
+    """(flight, Vehicle) as a user would have them."""
+    from aerosid.vehicle import load_vehicle
+
+    if vehicle == "seed-rlv":
+        from aerosid.simulation import load_case, simulate as sim
+
+        case = load_case("seed-rlv")
+        return sim(case, seed=seed), case.vehicle
+    from aerosid.simulation.jsbsim_aircraft import RESERVED
+    from aerosid.simulation.jsbsim_flight import simulate_jsbsim
+
+    if vehicle in RESERVED:
+        raise ValueError(f"{vehicle} is reserved for an independent check")
+    flight = simulate_jsbsim(vehicle, "3211", seed)
+    if "vehicle.toml" in flight.files:  # generated: written beside the telemetry, loaded from there
+        paths = flight.write(workdir / f"{vehicle}-{seed}")
+        return flight, load_vehicle(paths["vehicle"])
+    return flight, load_vehicle(vehicle)
+
+
+def truth_of(flight, name: str) -> float:
+    c = flight.coefficients
+    if name == "damping":
+        if "Cm_q_plus_alpha_dot" in c:
+            return float(c["Cm_q_plus_alpha_dot"])
+        return float(c.get("Cm_q", math.nan) + c.get("Cm_alpha_dot", 0.0))
+    return float(c.get(COEFFICIENTS[name], math.nan))
+
+
+def estimate_of(ident, name: str) -> tuple[float, float]:
+    """(estimate, corrected sigma) or (nan, nan) when the model lacks the term."""
+    fit = ident.fits.get("Cm")
+    if name == "damping":
+        if fit is None or "Cm_q" not in fit.names:
+            return math.nan, math.nan
+        weights = {"Cm_q": 1.0, **({"Cm_alpha_dot": 1.0} if "Cm_alpha_dot" in fit.names else {})}
+        est, se, *_ = fit.combination(weights)
+        return est, se
+    tab = ident.table().set_index("coefficient")
+    key = COEFFICIENTS[name]
+    if key not in tab.index:
+        return math.nan, math.nan
+    return float(tab.loc[key, "estimate"]), float(tab.loc[key, "std_error"])
+
+
+def oracle(flight, vehicle) -> dict[str, float]:
+    """The vehicle's default models fitted to the noise-free truth (what the sensors see:
+    aerodynamic + propulsive coefficients) with the true regressors (aircraft only)."""
+    from aerosid.models import default_models
+
+    T = flight.truth
+    if vehicle.vehicle_class != "aircraft" or "q_hat" not in T:
+        return {}
+    sig = {"alpha": T["alpha_rad"].to_numpy(), "beta": T["beta_rad"].to_numpy(), "mach": T["mach"].to_numpy(),
+           "V": T["V_m_s"].to_numpy(), "qbar": T["qbar_pa"].to_numpy(), "delta_p": T["delta_p_rad"].to_numpy(),
+           "delta_r": T["delta_r_rad"].to_numpy(), "delta_y": T["delta_y_rad"].to_numpy(),
+           "p": T["p_rad_s"].to_numpy(), "q": T["q_rad_s"].to_numpy(), "r": T["r_rad_s"].to_numpy(),
+           "p_hat": T["p_hat"].to_numpy(), "q_hat": T["q_hat"].to_numpy(), "r_hat": T["r_hat"].to_numpy(),
+           "alpha_dot_hat": T["alpha_dot_hat"].to_numpy(), "beta_dot_hat": np.zeros(len(T)), "t": T["t_s"].to_numpy()}
+    target = {"Cm": T["Cm"] + T["Cm_prop"], "CN": T["CN"] - T["CZ_prop"], "Cl": T["Cl"] + T["Cl_prop"],
+              "Cn": T["Cn"] + T["Cn_prop"]}
+    out = {}
+    for ch, model in default_models(vehicle).items():
+        if ch not in target:
+            continue
+        X = model.regressors(sig)
+        sol = dict(zip(X.columns, np.linalg.lstsq(X.to_numpy(), target[ch].to_numpy(), rcond=None)[0]))
+        for name, key in COEFFICIENTS.items():
+            if key in sol:
+                out[name] = sol[key]
+        if ch == "Cm" and "Cm_q" in sol:
+            out["damping"] = sol["Cm_q"] + sol.get("Cm_alpha_dot", 0.0)
+    return out
+
+
+def one(job: tuple[str, int]) -> dict:
+    vehicle_name, seed = job
+    from aerosid.ebm import process_telemetry
+
+    row = {"vehicle": vehicle_name, "seed": seed, "failed": "", "diverged": False}
+    with tempfile.TemporaryDirectory() as tmp:
+        try:
+            flight, vehicle = simulate(vehicle_name, seed, Path(tmp))
+        except Exception as exc:  # the flight itself: recorded, not the pipeline's fault
+            row["failed"] = f"simulation: {type(exc).__name__}: {exc}"
+            return row
+    orc = oracle(flight, vehicle)
+    t0 = time.perf_counter()
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            run = process_telemetry(flight.telemetry, vehicle)
+    except Exception as exc:
+        row["failed"] = f"{type(exc).__name__}: {exc}"
+        row["traceback"] = traceback.format_exc(limit=3)
+        return row
+    row["time_s"] = time.perf_counter() - t0
+    row["diverged"] = any(bool(getattr(s.result, "diverged", False)) for s in run.smoothed)
+    for name in COEFFICIENTS:
+        truth = truth_of(flight, name)
+        est, se = estimate_of(run.identification, name)
+        row[f"{name}_truth"], row[f"{name}_est"], row[f"{name}_se"] = truth, est, se
+        if math.isfinite(est) and math.isfinite(truth) and truth != 0:
+            row[f"{name}_err_pct"] = 100.0 * (est / truth - 1.0)
+            row[f"{name}_z"] = (est - truth) / se if se > 0 else math.inf
+            row[f"{name}_cover"] = bool(abs(est - truth) <= 1.96 * se)
+        if name in orc and math.isfinite(truth) and truth != 0:
+            row[f"{name}_oracle_pct"] = 100.0 * (orc[name] / truth - 1.0)
+    silent = []
+    if not row["diverged"]:
+        for name in BARRED:
+            z, e, cov = row.get(f"{name}_z"), row.get(f"{name}_err_pct"), row.get(f"{name}_cover")
+            if z is None:
+                continue
+            if abs(z) > SILENT_SIGMA or (abs(e) > SILENT_PCT and not cov):
+                silent.append(f"{name} {e:+.0f} % ({z:+.1f} sigma)")
+    row["silent_failure"] = "; ".join(silent)
+    return row
+
+
+def report(df: pd.DataFrame, seeds: list[int], label: str, load: tuple[str, str], jobs: int, wall_s: float) -> str:
+    lines = [f"# Generalisation bench ({label}): {len(seeds)} seed(s) per vehicle, default settings", "",
+             f"{date.today()}, Python {platform.python_version()}, machine: {cpu_model()}, {os.cpu_count()} cores, "
+             f"load average {load[0]} (start) / {load[1]} (end); {jobs} process(es), wall time {wall_s / 60:.1f} min; "
+             f"seeds {seeds[0]}..{seeds[-1]}.", "",
+             "Flights and definitions: bench/bench_generalisation.py (docstring).  Errors in % of the truth "
+             "(mean / RMS over the completed runs); coverage = share of ALL runs whose 95 % interval (1.96 reported "
+             "sigma) holds the truth; oracle = the default model fitted to the noise-free truth.", ""]
+    if label == "smoke":
+        lines += ["**Smoke run** (a check of the harness on a shared machine, 2 seeds): not the bench result; the "
+                  "full bench is `python bench/bench_generalisation.py --seeds 0-9`.", ""]
+    lines += ["| vehicle | runs | failed (announced) | silent failures | pipeline time per run [s] |", "|---|---|---|---|---|"]
+    for v, g in df.groupby("vehicle", sort=False):
+        ok = g[g["failed"] == ""]
+        failed = len(g) - len(ok) + int(ok["diverged"].sum())
+        silent = int((ok["silent_failure"].fillna("") != "").sum()) if len(ok) else 0
+        t = f"{ok['time_s'].mean():.0f}" if len(ok) else "-"
+        lines.append(f"| {v} | {len(g)} | {failed} | {silent} | {t} |")
+    for v, g in df.groupby("vehicle", sort=False):
+        ok = g[(g["failed"] == "") & ~g["diverged"].astype(bool)]
+        lines += ["", f"## {v}", "", "| coefficient | truth | mean error % | RMS error % | 95 % coverage | "
+                  "mean sigma % | oracle % |", "|---|---|---|---|---|---|---|"]
+        for name in COEFFICIENTS:
+            col = f"{name}_err_pct"
+            if col not in g or g[col].notna().sum() == 0:
+                lines.append(f"| {name} | {g.get(f'{name}_truth', pd.Series([math.nan])).iloc[0]:.4g} | - | - | - | - | - |")
+                continue
+            e = ok[col].dropna()
+            cover = ok[f"{name}_cover"].fillna(False).astype(bool).sum() / len(g)
+            sig = (100 * ok[f"{name}_se"] / ok[f"{name}_truth"].abs()).mean()
+            orc = ok.get(f"{name}_oracle_pct")
+            orc_txt = f"{orc.mean():+.1f}" if orc is not None and orc.notna().any() else "-"
+            lines.append(f"| {name} | {ok[f'{name}_truth'].iloc[0]:.4g} | {e.mean():+.1f} | "
+                         f"{np.sqrt((e ** 2).mean()):.1f} | {cover:.0%} | {sig:.1f} | {orc_txt} |")
+        for _, r in g.iterrows():
+            if r["failed"]:
+                lines.append(f"\nseed {r['seed']}: failed: {r['failed']}")
+            elif r["diverged"]:
+                lines.append(f"\nseed {r['seed']}: a smoothed segment is flagged diverged")
+            elif r.get("silent_failure"):
+                lines.append(f"\nseed {r['seed']}: SILENT FAILURE: {r['silent_failure']}")
+    return "\n".join(lines) + "\n"
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--seeds", default="0-9")
+    ap.add_argument("--vehicles", default=None, help="comma-separated (default: seed-rlv, c172x and the generated set)")
+    ap.add_argument("--jobs", type=int, default=1)
+    ap.add_argument("--label", default=None, help="'smoke' or 'full' (default: full with >= 10 seeds)")
+    args = ap.parse_args()
+    seeds = parse_seeds(args.seeds)
+    vehicles = args.vehicles.split(",") if args.vehicles else default_vehicles()
+    label = args.label or ("full" if len(seeds) >= 10 else "smoke")
+    jobs = [(v, s) for v in vehicles for s in seeds]
+    load0, t0 = loadavg(), time.perf_counter()
+    if args.jobs > 1:
+        with ProcessPoolExecutor(args.jobs) as pool:
+            rows = list(pool.map(one, jobs))
+    else:
+        rows = [one(j) for j in jobs]
+    wall = time.perf_counter() - t0
+    df = pd.DataFrame(rows)
+    out = Path(__file__).parent / "results"
+    df.drop(columns=["traceback"], errors="ignore").to_csv(out / "generalisation_runs.csv", index=False,
+                                                           float_format="%.6g")
+    text = report(df, seeds, label, (load0, loadavg()), args.jobs, wall)
+    (out / "generalisation.md").write_text(text)
+    print(text)
+
+
+if __name__ == "__main__":
+    main()

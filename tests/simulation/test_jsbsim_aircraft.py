@@ -1,0 +1,225 @@
+"""JSBSim aircraft flown with a generated flight design and vehicle file
+(aerosid.simulation.jsbsim_aircraft / jsbsim_design / jsbsim_trim / jsbsim_tables)."""
+from __future__ import annotations
+
+import math
+import tomllib
+import xml.etree.ElementTree as ET
+
+import numpy as np
+import pytest
+
+pytest.importorskip("jsbsim")
+
+from aerosid.io import read_parquet_metadata, telemetry_vehicle  # noqa: E402
+from aerosid.rigid_body import body_rate_derivatives, inertia_constants  # noqa: E402
+from aerosid.simulation.jsbsim_aircraft import XML_TOLERANCE, simulate_aircraft  # noqa: E402
+from aerosid.simulation.jsbsim_design import UnsupportedAircraft, flight_design  # noqa: E402
+from aerosid.simulation.jsbsim_flight import (  # noqa: E402
+    TELEMETRY_COLUMNS,
+    _import_jsbsim,
+    _trimmed_fdm,
+    load_jsbsim_config,
+    simulate_jsbsim,
+)
+from aerosid.simulation.jsbsim_tables import AeroTables  # noqa: E402
+from aerosid.simulation.jsbsim_trim import open_fdm, start_engines, trim  # noqa: E402
+from aerosid.vehicle import load_vehicle  # noqa: E402
+
+AIRCRAFT = "pa28"   # a light single: ~36 s of flight, ~1 s to simulate
+
+
+@pytest.fixture(scope="module")
+def flight():
+    return simulate_aircraft(AIRCRAFT, seed=0)
+
+
+@pytest.fixture(scope="module")
+def written(flight, tmp_path_factory):
+    out = tmp_path_factory.mktemp("pa28")
+    return flight.write(out)
+
+
+def test_generated_vehicle_file_loads_and_holds_jsbsims_numbers(flight, written):
+    doc = tomllib.loads(written["vehicle"].read_text())
+    assert "estimation" not in doc  # the estimation settings come from the data (issue 16)
+    veh = load_vehicle(written["vehicle"])
+    info = flight.info
+    assert veh.name == AIRCRAFT and veh.vehicle_class == "aircraft" and veh.air_data_source == "vanes"
+    for key in ("mass_kg", "Ixx_kg_m2", "Iyy_kg_m2", "Izz_kg_m2"):
+        assert getattr(veh, key) == pytest.approx(info["mass"][key], rel=1e-5), key
+    # Ixz: aerosid's convention is minus JSBSim's property
+    assert veh.Ixz_kg_m2 == pytest.approx(-info["mass"]["Ixz_jsbsim_property_kg_m2"], abs=1e-6)
+    ref = info["reference"]
+    assert (veh.S_m2, veh.chord_m, veh.span_m) == pytest.approx((ref["S_m2"], ref["chord_m"], ref["span_m"]), rel=1e-5)
+    assert veh.mach_reference == pytest.approx(info["trim"]["mach"], rel=1e-5)
+    assert veh.accel_offset_m == pytest.approx(tuple(info["accel_offset_m"]))
+    # the mixing rebuilds the deflections the aircraft's aerodynamics read from d1..d4
+    tr = flight.truth
+    d_r, d_p, d_y = veh.mix(*(tr[f"d{i}_rad"].to_numpy() for i in range(1, 5)))
+    assert np.allclose(d_r, tr["delta_r_rad"]) and np.allclose(d_p, tr["delta_p_rad"])
+    assert np.allclose(d_y, tr["delta_y_rad"])
+    assert np.ptp(tr["delta_r_rad"]) > 1e-2  # the aileron doublet moved it
+    lo, hi = np.array(doc["controls"]["surface_limits_rad"]).T
+    for i in range(4):
+        assert lo[i] - 1e-9 <= tr[f"d{i + 1}_rad"].min() and tr[f"d{i + 1}_rad"].max() <= hi[i] + 1e-9
+
+
+def test_truth_equals_the_xml_model_at_every_sample(flight):
+    """JSBSim's own aerodynamic coefficients about the CG = the aircraft's XML model
+    re-evaluated independently from the recorded properties, at every sample."""
+    tr = flight.truth
+    for k in ("CA", "CY", "CN", "Cl", "Cm", "Cn"):
+        assert np.max(np.abs(tr[k] - tr[f"{k}_xml"])) < 1e-9, k
+        assert flight.info["truth_check"]["xml_vs_jsbsim_max_abs"][k] < XML_TOLERANCE
+    assert np.ptp(tr["Cm"]) > 0.02 and np.ptp(tr["Cl"]) > 0.005  # a manoeuvre, not a steady state
+
+
+def test_linear_truth_agrees_with_a_fit_of_the_noise_free_truth(flight):
+    check = flight.info["truth_check"]
+    rel = check["Cm"]["rel_diff"]
+    assert abs(rel["Cm_alpha"]) < 0.03 and abs(rel["Cm_delta_p"]) < 0.02
+    assert abs(check["CN"]["rel_diff"]["CN_alpha"]) < 0.03
+    for coef, names in (("Cl", ("Cl_beta", "Cl_p", "Cl_delta_r")), ("Cn", ("Cn_beta", "Cn_r", "Cn_delta_y"))):
+        for name in names:
+            assert abs(check[coef]["rel_diff"][name]) < 0.03, name
+    c = flight.coefficients
+    assert c["Cm_alpha"] < 0 and c["Cm_delta_p"] < 0 and c["Cl_p"] < 0 and c["Cn_beta"] > 0 and c["Cn_r"] < 0
+    assert c["Cm_q_plus_alpha_dot"] == pytest.approx(c["Cm_q"] + c["Cm_alpha_dot"])
+
+
+def test_rigid_body_with_the_vehicle_file_gives_jsbsims_angular_accelerations(flight):
+    veh = tomllib.loads(flight.files["vehicle.toml"])
+    m, ref = veh["mass"], veh["reference"]
+    c = inertia_constants(m["Ixx_kg_m2"], m["Iyy_kg_m2"], m["Izz_kg_m2"], m["Ixz_kg_m2"])
+    tr = flight.truth
+    qS = tr["qbar_pa"] * ref["S_m2"]
+    L = (tr["Cl"] + tr["Cl_prop"]) * qS * ref["span_m"]
+    M = (tr["Cm"] + tr["Cm_prop"]) * qS * ref["chord_m"]
+    N = (tr["Cn"] + tr["Cn_prop"]) * qS * ref["span_m"]
+    rates = [tr[f"{a}_state_rad_s"] for a in "pqr"]
+    for mine, theirs in zip(body_rate_derivatives(*rates, L / c.Ixx, M / c.Iyy, N / c.Izz, c),
+                            ("p_dot_rad_s2", "q_dot_rad_s2", "r_dot_rad_s2")):
+        assert np.max(np.abs(mine - tr[theirs])) < 1e-3 * np.max(np.abs(tr[theirs])), theirs
+
+
+def test_gyro_rates_are_retimed_to_the_moments(flight):
+    """JSBSim steps the body rates with rectangular Euler (x[k+1] = x[k] + dt x_dot[k]);
+    the recorded rate is the value half a step later, x[k] + dt/2 x_dot[k], so that its
+    central difference is centred on the moment of sample k."""
+    tr, dt = flight.truth, 1.0 / flight.info["sample_rate_hz"]
+    for a in "pqr":
+        x, xd, rate = tr[f"{a}_state_rad_s"].to_numpy(), tr[f"{a}_dot_rad_s2"].to_numpy(), tr[f"{a}_rad_s"].to_numpy()
+        # the premise: Euler (to 1e-9 rad/s: the Earth-rate terms between inertial and Earth-relative rates)
+        assert np.allclose(x[1:], x[:-1] + dt * xd[:-1], atol=1e-9, rtol=0)
+        assert np.allclose(rate, x + 0.5 * dt * xd, atol=1e-15, rtol=0)
+        lagged = np.sqrt(np.mean(((x[2:] - x[:-2]) / (2 * dt) - xd[1:-1]) ** 2))
+        centred = np.sqrt(np.mean(((rate[2:] - rate[:-2]) / (2 * dt) - xd[1:-1]) ** 2))
+        assert centred < 0.3 * lagged, a
+
+
+def test_trimmed_before_the_manoeuvre_and_telemetry_layout(flight):
+    tel, tr = flight.telemetry, flight.truth
+    assert list(tel.columns) == TELEMETRY_COLUMNS
+    quiet = tr[tr["t_s"] < flight.info["manoeuvre_settings"]["elevator_starts_s"][0] - 0.1]
+    assert len(quiet) > 250
+    assert np.abs(quiet[["p_rad_s", "q_rad_s", "r_rad_s"]]).to_numpy().max() < 1e-3
+    assert np.ptp(quiet["alpha_rad"]) < 2e-4 and np.ptp(quiet["V_m_s"]) < 0.05
+    trim = flight.info["trim"]
+    assert trim["mode"] == "glide" and trim["throttle"] == 0.0 and -10.0 < trim["gamma_deg"] < 0.0
+    assert quiet["alpha_rad"].iloc[0] == pytest.approx(math.radians(trim["alpha_deg"]), abs=1e-6)
+    # the manoeuvre stays in the linear range: alpha within a few degrees of trim
+    assert flight.info["alpha_max_deg"] - flight.info["alpha_min_deg"] < 8.0
+    assert abs(flight.info["phi_max_deg"]) < 30 and abs(flight.info["phi_min_deg"]) < 30
+
+
+def test_written_telemetry_names_its_vehicle_file(written):
+    tel = written["telemetry"]
+    assert read_parquet_metadata(tel)["aerosid.vehicle"] == "vehicle.toml"
+    assert telemetry_vehicle(tel) == str(written["vehicle"])
+    assert load_vehicle(telemetry_vehicle(tel)).name == AIRCRAFT
+
+
+def test_own_trim_reproduces_jsbsims_trim_of_c172x():
+    """aerosid's Newton trim, at c172x's configured glide angle, finds JSBSim's own
+    do_simple_trim solution (alpha, throttle, elevator position)."""
+    jsbsim = _import_jsbsim()
+    sim_cfg, _ = load_jsbsim_config("c172x")
+    ref = _trimmed_fdm(jsbsim, sim_cfg)
+    tr = sim_cfg["trim"]
+    fdm = open_fdm(jsbsim, "c172x", sim_cfg["jsbsim"]["dt_s"])
+    fdm["propulsion/fuel_freeze"] = 0
+    for i, w in enumerate(sim_cfg["loading"]["pointmass_weights_lbs"]):
+        fdm[f"inertia/pointmass-weight-lbs[{i}]"] = float(w)
+    start_engines(fdm, tr["h_m"], tr["V_m_s"])
+    point = trim(fdm, tr["h_m"], tr["V_m_s"], "level", gamma_deg=tr["gamma_deg"])
+    # (two trims within their tolerances: JSBSim stops at |w-dot| ~ 2e-4 ft/s^2 and a different
+    # bank angle; 0.02 deg of alpha is ~1e-3 of the 1.06 deg trim)
+    assert point.alpha_deg == pytest.approx(ref["aero/alpha-deg"], abs=0.02)
+    assert point.throttle == pytest.approx(ref["fcs/throttle-cmd-norm"], abs=0.005)
+    assert fdm["fcs/elevator-pos-rad"] == pytest.approx(ref["fcs/elevator-pos-rad"], abs=5e-4)
+    assert max(point.max_residual) < 1e-3
+
+
+def test_design_rules_by_class():
+    jsbsim = _import_jsbsim()
+    jet = flight_design(jsbsim, "T37")
+    assert jet.propulsion == "jet" and jet.trim.mode == "level" and 0.0 < jet.trim.throttle < 1.0
+    prop = flight_design(jsbsim, "pa28")
+    assert prop.propulsion == "propeller" and prop.trim.mode == "glide" and prop.trim.throttle == 0.0
+    for d in (jet, prop):
+        m = d.manoeuvre
+        # the 3-2-1-1's first step raises C_m (nose up); sized by the aircraft's own derivatives
+        assert np.sign(m["elevator_amplitudes_norm"][0] * d.gains["pitch"] * d.derivatives["Cm_delta_p"]) > 0
+        w = d.modes["omega_pitch_design_rad_s"]
+        assert m["elevator_unit_s"] == pytest.approx(min(max(2.0 / w, 0.1), 1.0), abs=0.006)
+        assert m["aileron_start_s"] > m["elevator_starts_s"][1] > m["elevator_starts_s"][0]
+        assert m["rudder_start_s"] > m["aileron_start_s"] and d.duration_s > m["rudder_start_s"]
+
+
+def test_aircraft_that_cannot_be_flown_say_why():
+    jsbsim = _import_jsbsim()
+    with pytest.raises(UnsupportedAircraft, match="pitch rate"):  # fly-by-wire: closed-loop pitch
+        simulate_jsbsim("f16")
+    with pytest.raises(UnsupportedAircraft, match="statically unstable"):
+        flight_design(jsbsim, "XB-70")
+    with pytest.raises(UnsupportedAircraft, match="steeper than"):  # X-15 burnt out: a -15 deg glide
+        flight_design(jsbsim, "X15")
+    with pytest.raises(UnsupportedAircraft, match="ships .*pa28"):
+        flight_design(jsbsim, "no-such-aircraft")
+    assert issubclass(UnsupportedAircraft, ValueError)
+
+
+def test_evaluator_elements_against_closed_forms(tmp_path):
+    xml = tmp_path / "toy.xml"
+    axes = "".join(f'<axis name="{a}"><function name="aero/{a}"><value>0</value></function></axis>'
+                   for a in ("DRAG", "SIDE", "ROLL", "PITCH", "YAW"))
+    xml.write_text(f"""<fdm_config><aerodynamics>
+      <function name="aero/k"><product><p>aero/x</p><v>2</v></product></function>
+      {axes}
+      <axis name="LIFT">
+        <function name="aero/a"><ifthen><gt><p>aero/x</p><v>0</v></gt><pow><p>aero/x</p><v>2</v></pow>
+          <abs><p>aero/k</p></abs></ifthen></function>
+        <function name="aero/b"><table><independentVar lookup="row">aero/x</independentVar>
+          <independentVar lookup="column">aero/y</independentVar>
+          <tableData>  0 1
+            -1 0 10
+             1 2 30 </tableData></table></function>
+        <function name="aero/c"><sum><min><p>aero/x</p><v>0.5</v></min><atan2><p>aero/y</p><v>1</v></atan2>
+          <difference><v>1</v><p>-aero/y</p></difference></sum></function>
+      </axis></aerodynamics></fdm_config>""")
+    t = AeroTables(xml)
+    assert t.leaf_properties() == ["aero/x", "aero/y"]
+    x, y = np.array([-0.5, 0.25, 3.0]), np.array([0.5, 0.0, 2.0])
+    lift = t.axis_sums({"aero/x": x, "aero/y": y})["LIFT"]
+    a = np.where(x > 0, x**2, np.abs(2 * x))
+    xc = np.clip(x, -1, 1)
+    b = np.interp(xc, [-1, 1], [0, 2]) * (1 - np.clip(y, 0, 1)) + np.interp(xc, [-1, 1], [10, 30]) * np.clip(y, 0, 1)
+    c = np.minimum(x, 0.5) + np.arctan2(y, 1.0) + 1 + y
+    assert np.allclose(lift, a + b + c)
+    bad = tmp_path / "bad.xml"
+    bad.write_text(xml.read_text().replace("<min>", "<unknown_op>").replace("</min>", "</unknown_op>"))
+    with pytest.raises(NotImplementedError, match="unknown_op"):
+        AeroTables(bad)
+    root = ET.parse(xml).getroot()
+    assert root.find("aerodynamics") is not None
