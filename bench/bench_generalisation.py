@@ -29,7 +29,8 @@ aerodynamic plus propulsive coefficients the sensors feel, the true regressors):
 of the error the model structure and the flight make, which no estimator removes.
 
 A SILENT FAILURE is a run the pipeline reports as fine -- it returned an identification,
-no smoothed segment is flagged diverged -- in which some coefficient with a bar in issue
+no smoothed segment is flagged diverged and the run has no finding (aerosid.estimation.findings:
+a run with one is "ok with findings" and names the spans) -- in which some coefficient with a bar in issue
 16 (Cm_alpha, Cm_delta, damping, CN_alpha, Cl_p, Cn_beta, Cn_r) is off the truth by more
 than 5 reported sigma, or by more than 30 % while its 95 % interval excludes the truth.
 A run that raises, or flags a segment as diverged, has announced itself and counts as a
@@ -181,6 +182,10 @@ def one(job: tuple[str, int]) -> dict:
         return row
     row["time_s"] = time.perf_counter() - t0
     row["diverged"] = any(bool(getattr(s.result, "diverged", False)) for s in run.smoothed)
+    found = list(getattr(run, "findings", []))
+    row["findings"] = "; ".join(f"{f['kind']} {f['channel']} {f['t0_s']:.1f}-{f['t1_s']:.1f} s".replace("  ", " ")
+                                for f in found)
+    row["band_hz"] = float(run.flight_data["band_hz"].median()) if "band_hz" in run.flight_data else math.nan
     for name in COEFFICIENTS:
         truth = truth_of(flight, name)
         est, se = estimate_of(run.identification, name)
@@ -192,7 +197,7 @@ def one(job: tuple[str, int]) -> dict:
         if name in orc and math.isfinite(truth) and truth != 0:
             row[f"{name}_oracle_pct"] = 100.0 * (orc[name] / truth - 1.0)
     silent = []
-    if not row["diverged"]:
+    if not row["diverged"] and not found:  # a run with findings said so ("ok with findings")
         for name in BARRED:
             z, e, cov = row.get(f"{name}_z"), row.get(f"{name}_err_pct"), row.get(f"{name}_cover")
             if z is None:
@@ -214,13 +219,16 @@ def report(df: pd.DataFrame, seeds: list[int], label: str, load: tuple[str, str]
     if label == "smoke":
         lines += ["**Smoke run** (a check of the harness on a shared machine, 2 seeds): not the bench result; the "
                   "full bench is `python bench/bench_generalisation.py --seeds 0-9`.", ""]
-    lines += ["| vehicle | runs | failed (announced) | silent failures | pipeline time per run [s] |", "|---|---|---|---|---|"]
+    lines += ["| vehicle | runs | failed (announced) | with findings | silent failures | band edge [Hz] | "
+              "pipeline time per run [s] |", "|---|---|---|---|---|---|---|"]
     for v, g in df.groupby("vehicle", sort=False):
         ok = g[g["failed"] == ""]
         failed = len(g) - len(ok) + int(ok["diverged"].sum())
         silent = int((ok["silent_failure"].fillna("") != "").sum()) if len(ok) else 0
         t = f"{ok['time_s'].mean():.0f}" if len(ok) else "-"
-        lines.append(f"| {v} | {len(g)} | {failed} | {silent} | {t} |")
+        flagged = int((ok["findings"].fillna("") != "").sum()) if "findings" in ok and len(ok) else 0
+        band = f"{ok['band_hz'].median():.2f}" if "band_hz" in ok and len(ok) else "-"
+        lines.append(f"| {v} | {len(g)} | {failed} | {flagged} | {silent} | {band} | {t} |")
     for v, g in df.groupby("vehicle", sort=False):
         ok = g[(g["failed"] == "") & ~g["diverged"].astype(bool)]
         lines += ["", f"## {v}", "", "| coefficient | truth | mean error % | RMS error % | 95 % coverage | "
