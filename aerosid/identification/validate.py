@@ -304,7 +304,7 @@ def validate(run_dir: str | Path, telemetry: str | Path, *, vehicle: str | None 
     est = estimate_flight_data(raw, veh, flight=Path(telemetry).stem, windows=windows,
                                preprocess_params=job.get("preprocess_params") or None,
                                smoothing_options=job.get("smoothing_options") or None,
-                               min_segment_s=float(job.get("min_segment_s", 5.0)), source=str(telemetry),
+                               min_segment_s=job.get("min_segment_s"), source=str(telemetry),
                                skip_failed=True)
     notes += [f"segment {s} of {telemetry} left out: {why}" for s, why in est.failed]
     fd = est.flight_data.sort_values(["flight", "t_s"], kind="stable").reset_index(drop=True)
