@@ -1,0 +1,63 @@
+"""Failures announce themselves and cost only what they touch (issue 16): a run of gated
+samples and an end-of-flight excursion out of the force database are each reported with
+their span, cut, and the rest of the segment is used."""
+import numpy as np
+import pytest
+
+from aerosid.ebm import process_telemetry
+from aerosid.estimation.findings import Finding, dilate, true_runs
+from aerosid.vehicle import load_vehicle
+
+
+def _run(telemetry):
+    return process_telemetry(telemetry, load_vehicle("seed-rlv"), flight="f")
+
+
+def _kept(run, t0, t1):
+    t = run.flight_data["t_s"].to_numpy()
+    return np.count_nonzero((t >= t0) & (t <= t1))
+
+
+def test_a_sensor_step_is_a_gated_span_cut_whole_and_the_rest_is_used(reference_flight, reference_run):
+    tel = reference_flight.telemetry.copy()
+    t = tel["t_s"].to_numpy()
+    step = (t > 30.0) & (t < 31.5)
+    tel.loc[step, "az_m_s2"] += 25.0  # a 1.5 s accelerometer bias jump: not a spike, not the vehicle
+    run = _run(tel)
+    gated = [Finding(**f) for f in run.findings if f["kind"] == "gated" and f["channel"] == "az"]
+    assert gated, [Finding(**f).summary() for f in run.findings]
+    g = gated[0]
+    assert g.cut and g.t0_s <= 30.05 and g.t1_s >= 31.45  # the whole step, not only its two edges
+    assert "30.0" in g.summary() and "az" in g.summary()
+    assert _kept(run, 30.0, 31.5) == 0
+    # the rest of the segment is kept: at most a few seconds of the ~40 s before the sync gap go
+    assert len(run.flight_data) > 0.9 * len(reference_run.flight_data)
+    tab = run.identification.table().set_index("coefficient")
+    for name in ("Cm_alpha", "Cm_delta_p"):  # and the estimates keep issue 5's bar (5 %)
+        assert tab.loc[name, "estimate"] == pytest.approx(reference_flight.coefficients[name], rel=0.05)
+
+
+def test_an_excursion_out_of_the_database_at_the_end_is_cut_and_named(reference_flight, reference_run):
+    tel = reference_flight.telemetry.copy()
+    t = tel["t_s"].to_numpy()
+    late = t > 86.0  # a high-qbar transient in the last 4 s drives alpha past the table's 20 deg
+    tel.loc[late, "az_m_s2"] -= 60.0 * (t[late] - 86.0)
+    run = _run(tel)
+    edge = [Finding(**f) for f in run.findings if f["kind"] == "database_edge"]
+    assert edge and edge[-1].cut and edge[-1].t1_s >= 89.5 and 86.0 <= edge[-1].t0_s <= 88.5
+    assert np.degrees(run.flight_data["alpha_r_rad"].max()) < 20.0  # nothing pinned at the edge is used
+    assert _kept(run, edge[-1].t0_s, edge[-1].t1_s) == 0
+    assert _kept(run, 43.0, 85.0) == _kept(reference_run, 43.0, 85.0)  # the segment before is all kept
+    assert run.findings and all("cut" in f for f in run.findings)
+
+
+def test_a_clean_reference_flight_has_no_finding(reference_run):
+    assert reference_run.findings == []
+
+
+def test_true_runs_and_dilate_agree():
+    m = np.zeros(50, bool)
+    m[[3, 4, 5, 20, 48, 49]] = True
+    assert true_runs(m) == [(3, 6), (20, 21), (48, 50)]
+    d = dilate(m, 2)
+    assert true_runs(d) == [(1, 8), (18, 23), (46, 50)]
