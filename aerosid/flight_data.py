@@ -14,8 +14,8 @@ from aerosid.atmosphere import MEASURED, H_MAX_M, H_MIN_M, AirDataError, air_dat
 from aerosid.flight_coefficients import flight_coefficients
 from aerosid.derivatives import zero_phase_low_pass
 from aerosid.estimation.findings import DEPARTURE_MIN_S, DEPARTURE_SIGMA, Finding, dilate, span_findings
-from aerosid.identification.band import (band_limited_signals, band_noise_gain, finite_runs, low_pass_runs,
-                                         white_noise_sigma)
+from aerosid.identification.band import (accel_at_cg, band_limited_signals, band_noise_gain, bridge_spikes,
+                                         finite_runs, low_pass_runs, white_noise_sigma)
 from aerosid.inversion import invert_alpha_beta, total_angles
 from aerosid.vehicle import Vehicle
 
@@ -181,6 +181,17 @@ def _band_signals(t, measured: pd.DataFrame, smoothed: pd.DataFrame, vehicle: Ve
     measurement cut out, each with a margin of one band period.  Returns the signals, the
     rows kept and the findings (aerosid.estimation.findings)."""
     imu = np.column_stack([measured[f"{c}_clean"].to_numpy(dtype=float) for c in BAND_IMU])
+    # spikes the preprocessing left (it leaves 5-7 sigma ones to the filter) would go through
+    # the derivative and the band into a band period of C_m: bridge them as the preprocessing
+    # does its own outliers (aerosid.identification.band.bridge_spikes), against the smoother
+    inertia0 = (vehicle.Ixx_kg_m2, vehicle.Iyy_kg_m2, vehicle.Izz_kg_m2, vehicle.Ixz_kg_m2)
+    ws = smoothed[["p_rad_s", "q_rad_s", "r_rad_s"]].to_numpy(float)
+    if {"X1_m_s2", "Y1_m_s2", "Z1_m_s2"} <= set(smoothed.columns):
+        wd = np.gradient(ws, t, axis=0) if len(t) > 2 else np.zeros_like(ws)
+        a_cg_meas = accel_at_cg(imu[:, :3], ws, wd, vehicle.accel_offset_m)
+        ref = np.column_stack([smoothed[c].to_numpy(float) for c in ("X1_m_s2", "Y1_m_s2", "Z1_m_s2")])
+        imu[:, :3] = bridge_spikes(imu[:, :3], a_cg_meas - ref)
+    imu[:, 3:] = bridge_spikes(imu[:, 3:], imu[:, 3:] - ws)
     inertia = (vehicle.Ixx_kg_m2, vehicle.Iyy_kg_m2, vehicle.Izz_kg_m2, vehicle.Ixz_kg_m2)
     fs = 1.0 / float(np.median(np.diff(t)))
 

@@ -104,3 +104,18 @@ def test_dilate_and_merge():
     m[8] = True
     assert merge_close(m, 4).nonzero()[0].tolist() == [4, 5, 6, 7, 8]
     assert merge_close(m, 3).nonzero()[0].tolist() == [4, 8]
+
+
+def test_bridge_spikes_replaces_isolated_spikes_only():
+    from aerosid.identification.band import bridge_spikes
+
+    rng = np.random.default_rng(5)
+    t = np.arange(4000) * 0.01
+    truth = np.sin(2 * np.pi * 0.5 * t)
+    x = truth + 0.01 * rng.standard_normal(t.size)
+    x[[500, 1500, 1501]] += [0.2, -0.15, -0.15]  # a spike and a two-sample spike
+    x[3000:3050] += 0.3  # a 0.5 s step: a fault for the findings, not a spike
+    y = bridge_spikes(x[:, None], (x - truth)[:, None])[:, 0]
+    assert abs(y[500] - truth[500]) < 0.03 and abs(y[1500] - truth[1500]) < 0.03
+    assert np.array_equal(y[3000:3050], x[3000:3050])
+    assert np.count_nonzero(y != x) == 3
