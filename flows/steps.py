@@ -102,6 +102,8 @@ class FlightJob:
         from aerosid.preprocess import DEFAULT_MIN_SEGMENT_S, merge_settings
         from aerosid.vehicle import load_vehicle
 
+        if self.vehicle is None:  # an unreadable telemetry file names none: its preprocessing reports it
+            return dict(self.preprocess_params or {}), float(self.min_segment_s or DEFAULT_MIN_SEGMENT_S)
         veh = load_vehicle(self.vehicle)
         params = merge_settings(veh.preprocess, self.preprocess_params or {})
         min_seg = next(v for v in (self.min_segment_s, veh.min_segment_s, DEFAULT_MIN_SEGMENT_S) if v is not None)
