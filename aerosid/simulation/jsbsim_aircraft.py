@@ -32,7 +32,7 @@ from aerosid.simulation import SimulatedFlight
 from aerosid.simulation.jsbsim_design import (DT_S, FT, INCH, LBF, PSF, SLUG, SLUG_FT2, SLUG_FT3, FlightDesign,
                                               UnsupportedAircraft, flight_design, symmetric_loading)
 from aerosid.simulation.jsbsim_linear import abs_beta_slope, mach_slopes, model_coefficients
-from aerosid.simulation.jsbsim_flight import (_fly, _import_jsbsim, _schedule, _takeup_steps, _truth_check,
+from aerosid.simulation.jsbsim_flight import (COMMON_PROPERTIES, _fly, _import_jsbsim, _schedule, _takeup_steps, _truth_check,
                                               make_telemetry, rates_at_the_moments)
 from aerosid.simulation.jsbsim_tables import DEG, AeroTables
 from aerosid.simulation.jsbsim_trim import initialise, open_fdm, start_engines
@@ -46,18 +46,7 @@ XML_TOLERANCE = 1e-6   # largest |coefficient from the XML - JSBSim's| accepted 
 RESERVED = ("737", "787-8")
 
 _STANDARD = [
-    "simulation/sim-time-sec",
-    "position/h-sl-ft", "velocities/vt-fps", "velocities/mach", "aero/qbar-psf", "atmosphere/rho-slugs_ft3",
-    "attitude/phi-rad", "attitude/theta-rad", "attitude/psi-rad",
-    "velocities/p-rad_sec", "velocities/q-rad_sec", "velocities/r-rad_sec",
-    "velocities/p-aero-rad_sec", "velocities/q-aero-rad_sec", "velocities/r-aero-rad_sec",
-    "accelerations/pdot-rad_sec2", "accelerations/qdot-rad_sec2", "accelerations/rdot-rad_sec2",
-    "forces/fbx-total-lbs", "forces/fby-total-lbs", "forces/fbz-total-lbs",
-    "forces/fbx-aero-lbs", "forces/fby-aero-lbs", "forces/fbz-aero-lbs",
-    "forces/fbx-prop-lbs", "forces/fby-prop-lbs", "forces/fbz-prop-lbs",
-    "moments/l-aero-lbsft", "moments/m-aero-lbsft", "moments/n-aero-lbsft",
-    "moments/l-prop-lbsft", "moments/m-prop-lbsft", "moments/n-prop-lbsft",
-    "inertia/mass-slugs", "inertia/cg-x-in", "inertia/cg-y-in", "inertia/cg-z-in",
+    *COMMON_PROPERTIES,
     "aero/alpha-rad", "aero/beta-rad", "aero/alphadot-rad_sec", "aero/ci2vel", "aero/bi2vel",
     "fcs/elevator-cmd-norm", "fcs/aileron-cmd-norm", "fcs/rudder-cmd-norm",
     "accelerations/gravity-ft_sec2", "metrics/Sw-sqft", "metrics/cbarw-ft", "metrics/bw-ft",

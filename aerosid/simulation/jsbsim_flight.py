@@ -181,7 +181,8 @@ def _schedule(t: np.ndarray, m: dict, takeup: dict) -> tuple[dict[str, np.ndarra
 # flying JSBSim
 # --------------------------------------------------------------------------------------
 
-_RECORD = [
+#: Properties every JSBSim flight records (the hand-written c172x one and the generated ones).
+COMMON_PROPERTIES = [
     "simulation/sim-time-sec",
     "position/h-sl-ft", "velocities/vt-fps", "velocities/mach", "aero/qbar-psf", "atmosphere/rho-slugs_ft3",
     "attitude/phi-rad", "attitude/theta-rad", "attitude/psi-rad",
@@ -194,6 +195,10 @@ _RECORD = [
     "moments/l-aero-lbsft", "moments/m-aero-lbsft", "moments/n-aero-lbsft",
     "moments/l-prop-lbsft", "moments/m-prop-lbsft", "moments/n-prop-lbsft",
     "inertia/mass-slugs", "inertia/cg-x-in", "inertia/cg-y-in", "inertia/cg-z-in",
+]
+
+_RECORD = [
+    *COMMON_PROPERTIES,
     "aero/alpha-rad", "aero/beta-rad", "aero/alphadot-rad_sec",
     "fcs/elevator-pos-rad", "fcs/left-aileron-pos-rad", "fcs/right-aileron-pos-rad", "fcs/rudder-pos-rad",
     "fcs/effective-aileron-pos", "fcs/elevator-control",

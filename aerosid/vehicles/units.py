@@ -19,19 +19,12 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
+from schemas.telemetry import UNITS
+
 #: SI unit (pint spelling) of every column an importer may write: the raw contract
 #: (schemas/telemetry.py RAW_COLUMNS), the vanes and the optional measured air data
 #: and attitude columns (docs/real-flight.md).
-TARGET_UNITS: dict[str, str] = {
-    "t_s": "s",
-    "ax_m_s2": "m/s^2", "ay_m_s2": "m/s^2", "az_m_s2": "m/s^2",
-    "p_rad_s": "rad/s", "q_rad_s": "rad/s", "r_rad_s": "rad/s",
-    "d1_rad": "rad", "d2_rad": "rad", "d3_rad": "rad", "d4_rad": "rad",
-    "V_m_s": "m/s", "h_m": "m",
-    "alpha_vane_rad": "rad", "beta_vane_rad": "rad",
-    "rho_kg_m3": "kg/m^3", "qbar_pa": "Pa", "p_static_pa": "Pa", "T_total_K": "K",
-    "phi_rad": "rad", "theta_rad": "rad",
-}
+TARGET_UNITS: dict[str, str] = {**UNITS, "phi_rad": "rad", "theta_rad": "rad"}
 
 #: Flight-test and SIDPAC spellings -> pint spellings (matched on the whole,
 #: stripped, lower-cased text; anything else goes to pint as written).
