@@ -213,6 +213,7 @@ def _band_signals(t, measured: pd.DataFrame, smoothed: pd.DataFrame, vehicle: Ve
         gain = band_noise_gain(fs, bl.band_hz)
         noise = {"X1_m_s2": bl.accel_noise_m_s2[0], "Y1_m_s2": bl.accel_noise_m_s2[1],
                  "Z1_m_s2": bl.accel_noise_m_s2[2]}
+        gone = np.zeros(len(t), bool)
         for col, meas in pairs:
             sm = low_pass_runs(smoothed[col].to_numpy(float), fs, bl.band_hz, runs)
             white = noise.get(col, white_noise_sigma(imu[:, 3 + ("p_rad_s", "q_rad_s", "r_rad_s").index(col)]
@@ -226,11 +227,14 @@ def _band_signals(t, measured: pd.DataFrame, smoothed: pd.DataFrame, vehicle: Ve
             sigma = np.maximum(np.hypot(gain * white, sig_sm), typical)
             with np.errstate(invalid="ignore"):
                 off = np.abs(diff) > DEPARTURE_SIGMA * sigma
-            f, _ = span_findings("departure", segment, col, t, off & bl.used, int(np.ceil(DEPARTURE_MIN_S * fs)),
-                                 False, f"the smoothed {col} departs from its band-limited measurement by more "
-                                 f"than {DEPARTURE_SIGMA:g} sigma (the smoother's states and sigma are suspect "
-                                 "here; the regression reads the measurement)")
+            f, hit = span_findings("departure", segment, col, t, off & bl.used, int(np.ceil(DEPARTURE_MIN_S * fs)),
+                                   True, f"the smoothed {col} departs from its band-limited measurement by more "
+                                   f"than {DEPARTURE_SIGMA:g} sigma")
             findings += f
+            gone |= hit
+        if gone.any():
+            keep &= ~dilate(gone, margin)
+            bl = signals(keep)
     if not bl.used.any():
         raise SegmentUnusable(f"segment {segment}: no run of {int(np.ceil(0.5 * fs / bl.band_hz))} consecutive samples "
                          f"with every IMU channel, control, V and h available and not condemned (t = {_span(t)}): "
