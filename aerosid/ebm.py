@@ -96,8 +96,7 @@ def estimate_flight_data(raw: pd.DataFrame, vehicle: Vehicle, *, flight: str = "
             failed.append((seg.segment_id, str(exc)))
             continue
         if sm.lost:  # more than half the segment condemned by findings: failed, as the flow does (tasks.stages)
-            failed.append((seg.segment_id, "more than half the samples condemned: "
-                           + "; ".join(f.summary() for f in sm.findings)))
+            failed.append((seg.segment_id, sm.lost_reason()))
             continue
         smoothed.append(sm)
     if not smoothed:

@@ -99,9 +99,17 @@ def build_flight_data(smoothed: pd.DataFrame, measured: pd.DataFrame, vehicle: V
     band_hz = np.nan
     findings: list = []
     if signals == "band":
-        bl, ok, findings = _band_signals(t, measured, smoothed, vehicle, ok, segment)
+        # measured air data and altitude are scale factors of the coefficients (through the
+        # density and qbar), not regressors: left as measured, and a gap in them does not
+        # split the filter's runs (their rows are dropped afterwards)
+        scale_cols = (*airdata, "h_m")
+        scales_ok = np.all(np.isfinite(np.column_stack([clean[c] for c in scale_cols])), axis=1)
+        filt_ok = np.all(np.isfinite(np.column_stack([v for c, v in clean.items() if c not in scale_cols])),
+                         axis=1) & (clean["V_m_s"] > 0)
+        bl, used, findings = _band_signals(t, measured, smoothed, vehicle, filt_ok, segment)
         fs = 1.0 / float(np.median(np.diff(t)))
-        clean = {c: low_pass_runs(v, fs, bl.band_hz, finite_runs(ok)) for c, v in clean.items()}
+        clean = {c: (v if c in scale_cols else bl.low_pass(v, fs)) for c, v in clean.items()}
+        ok = used & scales_ok
         band_hz = bl.band_hz
         band_rates = bl.rates_rad_s[ok]
         acc, ang = bl.accel_cg_m_s2[ok], bl.ang_accel_rad_s2[ok]

@@ -33,6 +33,12 @@ class SmoothedSegmentResult:
     findings: tuple = ()  # aerosid.estimation.findings.Finding: gated runs, NIS excursions, mean NIS
     process_noise_note: str = ""  # aerosid.estimation.adaptive: escalations of the chains' process noise
 
+    def lost_reason(self) -> str:
+        """Why the segment is failed: the divergence (with its samples) and the findings."""
+        why = "; ".join(f.summary() for f in self.findings if f.cut)
+        head = f"filter diverged: {self.divergence_note()}; " if self.result.diverged else ""
+        return f"{head}more than half the samples condemned ({why})"
+
     @property
     def lost(self) -> bool:
         """More than half the segment is condemned (the ``suspect`` column): not worth keeping."""

@@ -93,8 +93,7 @@ def smooth_segment_task(pre_path: str, run_dir: str, ctx: StageContext, segment:
         rows = pre.iloc[segment["start"]:segment["stop"]].reset_index(drop=True)
         smoothed = smooth_segment_frame(rows, load_vehicle(vehicle), options, segment["segment_id"])
         if smoothed.lost:
-            raise StageFailed(f"segment {segment['segment_id']}: more than half the samples condemned "
-                              f"({'; '.join(f.summary() for f in smoothed.findings)})")
+            raise StageFailed(f"segment {segment['segment_id']}: {smoothed.lost_reason()}")
         findings_seen.extend(f.as_dict() for f in smoothed.findings)
         return Produced(smoothed.frame, {"aerosid.nis": smoothed.nis_record(),
                                          "aerosid.findings": json.dumps(list(findings_seen))}, rows_in=len(rows),

@@ -41,7 +41,7 @@ def test_flow_gives_the_same_coefficients_as_the_core(prefect_harness, flights, 
     from flows.pipeline import process_flight
 
     summary = process_flight(str(flights[0]), str(tmp_path / "run"))
-    assert summary["status"] == "ok" and len(summary["segments"]) == 2
+    assert summary["status"] in ("ok", "ok with findings") and len(summary["segments"]) == 2
     flow_table = pd.read_parquet(tmp_path / "run" / "coefficients.parquet")
     core = process_telemetry(pd.read_parquet(flights[0]), load_vehicle("seed-rlv"), flight=summary["flight"])
     pd.testing.assert_frame_equal(flow_table[COLS], core.identification.table()[COLS], check_exact=True)
@@ -112,7 +112,7 @@ def test_a_failed_segment_is_recorded_and_retry_failed_completes_only_it(prefect
     assert result["retried"] == ["f12"]
     smooth_after = [r for r in ledger.read(led)[n_before:] if r["stage"] == "smooth"]
     assert {(r["segment"], r["status"]) for r in smooth_after} == {("seg00", "reused"), ("seg01", "ok")}
-    assert json.loads((out / "f12" / "run.json").read_text())["status"] == "ok"
+    assert json.loads((out / "f12" / "run.json").read_text())["status"] in ("ok", "ok with findings")
     assert retry_failed(str(out))["retried"] == []  # nothing left to retry
 
 
@@ -121,7 +121,8 @@ def test_campaign_on_dask_equals_the_serial_run(prefect_harness, flights, tmp_pa
 
     serial = campaign([str(p) for p in flights], str(tmp_path / "serial"))
     parallel = campaign_runner(n_workers=2)([str(p) for p in flights], str(tmp_path / "dask"))
-    assert [s["status"] for s in serial] == ["ok"] * 3 == [s["status"] for s in parallel]
+    assert [s["status"] for s in serial] == [s["status"] for s in parallel]
+    assert all(s["status"] in ("ok", "ok with findings") for s in serial)
     for a, b in zip(serial, parallel):
         ta = pd.read_parquet(a["coefficients"]["path"])[COLS]
         tb = pd.read_parquet(b["coefficients"]["path"])[COLS]

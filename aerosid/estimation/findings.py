@@ -9,10 +9,12 @@ regression (with a margin) and the rest of the segment is kept:
   one local event where the measurement and the other sensors disagree, a sensor step or
   bias jump -- cut (the measurement is what the regression reads);
 * ``nis_excursion``: the windowed NIS far outside its band (the divergence test of
-  aerosid.estimation.pipeline) -- reported: the smoother could not follow the vehicle
-  there, but the regression reads the measurements (aerosid.identification.band), and
-  cutting where the smoother fails is cutting where the vehicle moves hardest -- a
-  selection on the dependent variable that took C_m_alpha to -39 % on one c172x seed;
+  aerosid.estimation.pipeline) -- cut when it lasts SUSTAINED_EXCURSION_S (the measurements
+  and the model disagree for seconds: a pitch gyro reading 10x, a lost filter); a shorter
+  one is reported only: the smoother could not follow the vehicle for a moment, but the
+  regression reads the measurements (aerosid.identification.band), and cutting where the
+  smoother lags is cutting where the vehicle moves hardest -- a selection on the
+  dependent variable that took C_m_alpha to -39 % on one c172x seed;
 * ``nis_mean``: the segment's mean NIS outside its chi-square band, either way (R or Q
   mis-set for this flight: the smoother's sigma are not to be trusted) -- reported;
 * ``departure``: the smoothed signal departs from its band-limited measurement by more
@@ -34,6 +36,9 @@ GATED_RUN_MIN_S = 0.1
 #: Gated runs of one channel closer than this are one event [s]: a sensor step is gated at
 #: its two edges while the filter adapts in between, and the whole step is the fault.
 MERGE_GAP_S = 2.0
+#: A windowed-NIS excursion this long is sustained: cut (shorter ones are reported) [s];
+#: the divergence test's own minimum run (EBMOptions.divergence_min_s).
+SUSTAINED_EXCURSION_S = 3.0
 #: Departure threshold in sigma of (measured - smoothed) after the common band.
 DEPARTURE_SIGMA = 6.0
 #: A departure must last this long to count [s].
@@ -118,11 +123,19 @@ def smoother_findings(t_s: np.ndarray, gated: dict[str, np.ndarray], excursion: 
                                f"{MERGE_GAP_S:g} s apart taken as one event)")
         found += f
         cut |= hit
-    f, _ = span_findings("nis_excursion", segment, "", t, merge_close(excursion, int(round(MERGE_GAP_S / dt))), 1,
-                         False, "windowed NIS far outside its chi-square band: the smoother could not follow "
-                         "the vehicle here (its states and sigma are suspect; the regression reads the "
-                         "measurements, which it keeps)")
-    found += f
+    merged = merge_close(excursion, int(round(MERGE_GAP_S / dt)))
+    need = int(np.ceil(SUSTAINED_EXCURSION_S / dt))
+    for a, b in true_runs(merged):
+        sustained = b - a >= need
+        found.append(Finding(
+            "nis_excursion", segment, "", float(t[a]), float(t[b - 1]), int(b - a), sustained,
+            "windowed NIS far outside its chi-square band for "
+            + (f"{SUSTAINED_EXCURSION_S:g} s or more: the measurements and the vehicle model disagree for "
+               "seconds (a sensor fault, a lost filter)" if sustained else
+               "a moment: the smoother could not follow the vehicle here (its states and sigma are "
+               "suspect; the regression reads the measurements, which it keeps)")))
+        if sustained:
+            cut[a:b] = True
     lo, hi = nis_band
     if np.isfinite(mean_nis) and not (lo <= mean_nis <= hi):
         side = "above" if mean_nis > hi else "below"

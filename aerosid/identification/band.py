@@ -51,6 +51,11 @@ BAND_KAPPA = 15.0
 #: A run of finite samples shorter than this many periods of the band edge is left out
 #: (the zero-phase filter's start and end transients would be most of it).
 MIN_RUN_CYCLES = 0.5
+#: Samples at both ends of a run left out of the regression, in band periods (the filter's
+#: transients there made the smoothed-vs-measured check fire at every segment edge), and
+#: at most EDGE_MAX_S seconds.
+EDGE_CYCLES = 0.5
+EDGE_MAX_S = 0.5
 #: The band edge is kept within [BAND_MIN_HZ, 0.4 x the sample rate].
 BAND_MIN_HZ = 0.2
 #: Share of the gyros' signal power (above the noise floor) inside the band.
@@ -74,6 +79,11 @@ class BandLimitedSignals:
     used: np.ndarray
     band_source: str
     accel_noise_m_s2: tuple = (np.nan, np.nan, np.nan)  # white-noise 1-sigma of ax, ay, az [m/s^2]
+    filter_runs: tuple = ()  # the (start, stop) runs the low-pass ran over (used is inside them)
+
+    def low_pass(self, x: np.ndarray, fs_hz: float) -> np.ndarray:
+        """Another signal of the same grid through the same low-pass, on the same runs."""
+        return low_pass_runs(x, fs_hz, self.band_hz, [slice(a, b) for a, b in self.filter_runs])
 
     def summary(self) -> str:
         return (f"band-limited flight signals: low-pass {self.band_hz:.2f} Hz ({self.band_source}), "
@@ -246,9 +256,13 @@ def band_limited_signals(t_s: np.ndarray, rates_rad_s: np.ndarray, accel_m_s2: n
         source = "flight"
     min_len = max(16, int(np.ceil(MIN_RUN_CYCLES * fs / band_hz)))
     runs = [r for r in runs if r.stop - r.start >= min_len]
+    # the zero-phase filter's start and end transients: the first and last EDGE_CYCLES band
+    # period of every run (at most EDGE_MAX_S) are filtered but not used
+    edge = int(np.ceil(min(EDGE_CYCLES / band_hz, EDGE_MAX_S) * fs))
     used = np.zeros(t.size, bool)
     for r in runs:
-        used[r] = True
+        if r.stop - r.start > 2 * edge + 16:
+            used[r.start + edge:r.stop - edge] = True
     # filter first, then differentiate: the two commute for a linear filter, but a noisy
     # derivative would make the filter's edge padding (odd reflection about the first and
     # last sample) start from a sample with the full differentiated noise
@@ -262,4 +276,5 @@ def band_limited_signals(t_s: np.ndarray, rates_rad_s: np.ndarray, accel_m_s2: n
     return BandLimitedSignals(
         rates_rad_s=wf, ang_accel_rad_s2=ang, accel_cg_m_s2=acc,
         band_hz=float(band_hz), used=used, band_source=source,
-        accel_noise_m_s2=tuple(white_noise_sigma(a[:, j], runs) for j in range(3)))
+        accel_noise_m_s2=tuple(white_noise_sigma(a[:, j], runs) for j in range(3)),
+        filter_runs=tuple((r.start, r.stop) for r in runs))
