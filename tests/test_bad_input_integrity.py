@@ -135,7 +135,7 @@ def test_i6_i7_inbox_files_never_share_a_run_folder_and_none_is_skipped_without_
     (inbox / "folder.parquet").mkdir()
     write(raw, inbox / f"{flight_id_from_path('a b.parquet')}x.parquet")  # an innocent neighbour
     for scan in range(2):
-        report = flows.pipeline.reprocess_inbox(str(inbox), str(out), settle_s=0.01)
+        report = flows.pipeline.reprocess_inbox(str(inbox), str(out), vehicle="seed-rlv", settle_s=0.01)
         assert report["failed"] == []
         for name, sha in contents.items():
             run_dir = out / flight_id_from_path(name)
@@ -148,7 +148,7 @@ def test_i6_i7_inbox_files_never_share_a_run_folder_and_none_is_skipped_without_
     fd = os.open(out / ".locks" / "held.lock", os.O_RDWR | os.O_CREAT)
     fcntl.flock(fd, fcntl.LOCK_EX)
     try:
-        report = flows.pipeline.reprocess_inbox(str(inbox), str(out), settle_s=0.01)
+        report = flows.pipeline.reprocess_inbox(str(inbox), str(out), vehicle="seed-rlv", settle_s=0.01)
     finally:
         os.close(fd)
     assert (out / flight_id_from_path("a b.parquet") / "source.sha256").read_text() == contents["a b.parquet"]
