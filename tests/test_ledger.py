@@ -125,7 +125,7 @@ def test_concurrent_appends_from_processes_chain_correctly(tmp_path):
     import multiprocessing
 
     path = tmp_path / "ledger.jsonl"
-    ctx = multiprocessing.get_context("fork")
+    ctx = multiprocessing.get_context("spawn")  # fork of a process with Prefect's threads may die before it appends
     procs = [ctx.Process(target=_append_many, args=(str(path), k, 60)) for k in range(3)]
     for p in procs:
         p.start()

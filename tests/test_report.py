@@ -147,8 +147,8 @@ def test_full_report_is_self_contained_and_complete(run_copy):
     coef_html = coef_html[:coef_html.index("</table>")]
     for name in table["coefficient"]:
         assert f"<td>{name}</td>" in coef_html
-    cn_alpha = table.set_index("coefficient").loc["CN_alpha"]
-    assert format(cn_alpha["estimate"] * math.pi / 180, ".5g") in coef_html
+    cm_alpha = table.set_index("coefficient").loc["Cm_alpha"]  # (C_N of seed-rlv is an identity: no number)
+    assert format(cm_alpha["estimate"] * math.pi / 180, ".5g") in coef_html
     assert format(truth["coefficients"]["CN_alpha"] * math.pi / 180, ".5g") in coef_html
     assert "per degree" in doc and "deg pair" in coef_html and "error %" in coef_html
     for ch in CHANNELS:
