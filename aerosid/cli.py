@@ -20,7 +20,32 @@ Examples:
 """
 
 
-@click.group(context_settings={"help_option_names": ["-h", "--help"], "max_content_width": 100})
+class _NoTracebackGroup(click.Group):
+    """The command group: an error no command turned into a message still reaches the
+    user as one `Error: ...` line, never as a traceback (AEROSID_TRACEBACK=1 re-raises
+    it, for debugging)."""
+
+    def invoke(self, ctx):
+        import os
+
+        try:
+            return super().invoke(ctx)
+        except (click.exceptions.ClickException, click.exceptions.Exit, click.exceptions.Abort):
+            raise
+        except RecursionError as exc:
+            if os.environ.get("AEROSID_TRACEBACK"):
+                raise
+            raise click.ClickException("an input is nested too deeply to be read (RecursionError); check the "
+                                       "TOML and Parquet files given") from exc
+        except Exception as exc:
+            if os.environ.get("AEROSID_TRACEBACK"):
+                raise
+            raise click.ClickException(f"{type(exc).__name__}: {exc} (unexpected; AEROSID_TRACEBACK=1 shows "
+                                       "where it came from)") from exc
+
+
+@click.group(cls=_NoTracebackGroup,
+             context_settings={"help_option_names": ["-h", "--help"], "max_content_width": 100})
 @click.version_option(package_name="aerosid")
 def main() -> None:
     """Estimate a flight vehicle's aerodynamic coefficients from its own noisy
@@ -109,15 +134,62 @@ def simulate(case_name, effects, seed, out_dir, duration, rate, no_faults, list_
         click.echo(f"  wrote {path}")
 
 
+#: How long `aerosid run` waits for Prefect's ephemeral API server to answer [s].  The
+#: first run on a machine builds Prefect's SQLite database first: 20-40 s on an idle
+#: 2-core machine, 37-125 s measured on a loaded one, past Prefect's default 20 s.
+SERVER_STARTUP_TIMEOUT_S = 300
+
+
 def _hermetic_defaults() -> None:
     """Prefect without a server: its ephemeral mode; no analytics call leaves the machine."""
     import os
 
     os.environ.setdefault("PREFECT_SERVER_ANALYTICS_ENABLED", "false")
     os.environ.setdefault("PREFECT_LOGGING_LEVEL", "INFO")
-    # The first run on a machine builds Prefect's SQLite database before the ephemeral
-    # server answers: ~20-40 s on 2 cores, past Prefect's default 20 s wait.
-    os.environ.setdefault("PREFECT_SERVER_EPHEMERAL_STARTUP_TIMEOUT_SECONDS", "180")
+    os.environ.setdefault("PREFECT_SERVER_EPHEMERAL_STARTUP_TIMEOUT_SECONDS", str(SERVER_STARTUP_TIMEOUT_S))
+
+
+def _start_prefect_server() -> None:
+    """Start Prefect's ephemeral API server once, before the flow (which then uses it),
+    unless PREFECT_API_URL names a running server.  The server process writes its own
+    output to PREFECT_HOME/aerosid-server.log rather than the terminal: its shutdown
+    used to print ~150 lines of tracebacks after a run's clear error.  A server that
+    does not start is a one-line error naming the wait and the log."""
+    import os
+
+    import prefect.settings as ps
+
+    if ps.PREFECT_API_URL.value():
+        return
+    from prefect.server.api.server import SubprocessASGIServer
+
+    server = SubprocessASGIServer()
+    if server.running:
+        return
+    home = Path(ps.PREFECT_HOME.value()).expanduser()
+    home.mkdir(parents=True, exist_ok=True)
+    log = home / "aerosid-server.log"
+    timeout = int(ps.PREFECT_SERVER_EPHEMERAL_STARTUP_TIMEOUT_SECONDS.value())
+    sys.stdout.flush(), sys.stderr.flush()
+    saved = [os.dup(1), os.dup(2)]
+    try:
+        with open(log, "ab") as fh:  # the child inherits descriptors 1 and 2: point them at the log
+            os.dup2(fh.fileno(), 1)
+            os.dup2(fh.fileno(), 2)
+            try:
+                server.start(timeout=timeout)
+            finally:
+                os.dup2(saved[0], 1)
+                os.dup2(saved[1], 2)
+    except Exception as exc:
+        first = str(exc).split(" stdout:")[0]
+        raise click.ClickException(
+            f"Prefect's local API server did not start within {timeout} s ({first}); its log: {log}. "
+            "The machine may be overloaded: try again, raise PREFECT_SERVER_EPHEMERAL_STARTUP_TIMEOUT_SECONDS, or "
+            "start one server for many runs (`prefect server start`, then set PREFECT_API_URL)") from exc
+    finally:
+        for fd in saved:
+            os.close(fd)
 
 
 class _NoTraceback:
@@ -182,11 +254,12 @@ def run(telemetry, vehicle, out_dir, flight, windows, model_spec, mach_half_widt
         if flight is not None:
             check_flight_id(flight)
         _quiet_run_tracebacks()
+        _start_prefect_server()
         summary = process_flight(str(telemetry), str(out_dir), vehicle=vehicle, flight=flight,
                                  windows=[list(w) for w in windows] or None,
                                  model_spec=str(model_spec) if model_spec else None,
                                  mach_half_width=mach_half_width)
-    except (TelemetryError, VehicleError, ValueError) as exc:
+    except (TelemetryError, VehicleError, ValueError, RuntimeError) as exc:  # RuntimeError: tasks' StageFailed
         raise click.ClickException(str(exc)) from exc
     except OSError as exc:  # read-only or full output folder, a vanished file
         where = f" ({exc.filename})" if exc.filename else ""
@@ -207,19 +280,45 @@ def run(telemetry, vehicle, out_dir, flight, windows, model_spec, mach_half_widt
                                    f"see {out_dir}/ledger.jsonl")
 
 
+#: The shortest flight `aerosid run` accepts [s] (flows.steps.FlightJob.min_segment_s).
+MIN_FLIGHT_S = 5.0
+#: The inertial channels: a constant one is a dead sensor.
+IMU_COLUMNS = ("ax_m_s2", "ay_m_s2", "az_m_s2", "p_rad_s", "q_rad_s", "r_rad_s")
+#: Largest telemetry file `aerosid run` reads [bytes] (a 10-hour flight at 100 Hz is ~0.5 GB).
+MAX_TELEMETRY_BYTES = 4_000_000_000
+
+
+def _regular_file(path: Path, max_bytes: int) -> None:
+    """A regular telemetry file (not a device, FIFO or folder: /dev/zero would never end), of bounded size."""
+    import os
+    import stat
+
+    from aerosid.preprocess import TelemetryError
+
+    st = os.stat(path)
+    if not stat.S_ISREG(st.st_mode):
+        raise TelemetryError("not a regular file (a device, pipe or folder cannot be telemetry)", file=str(path))
+    if st.st_size > max_bytes:
+        raise TelemetryError(f"{st.st_size} bytes: more than the {max_bytes} a telemetry file may have", file=str(path))
+
+
 def _preflight(telemetry: Path, vehicle: str, model_spec: str | None) -> None:
-    """Cheap checks of the inputs before any flow starts: the telemetry file is
-    readable Parquet that follows RawTelemetry, has rows and no channel without a
-    single value; the vehicle file and the model specification load."""
+    """Cheap checks of the inputs before any flow starts: the telemetry file is a
+    regular file of readable Parquet that follows RawTelemetry, has rows, spans at
+    least MIN_FLIGHT_S, has no channel without a single value and no constant inertial
+    channel; the vehicle file loads and the telemetry's units fit its envelope
+    (aerosid.plausibility.units); the model specification loads."""
     import numpy as np
     import pyarrow.parquet as pq
 
     from aerosid.models import default_models, load_models
+    from aerosid.plausibility.units import check_units
     from aerosid.preprocess import TelemetryError
     from aerosid.vehicle import load_vehicle
     from schemas.telemetry import CHANNELS, RAW_COLUMNS, RawTelemetry, sentinel_mask
     from tasks.runner import read_validated
 
+    _regular_file(telemetry, MAX_TELEMETRY_BYTES)
     try:
         frame = read_validated(telemetry, RawTelemetry)
     except TelemetryError as exc:
@@ -238,7 +337,20 @@ def _preflight(telemetry: Path, vehicle: str, model_spec: str | None) -> None:
             raise TelemetryError(f"no value in the whole channel (all {len(frame)} rows NaN, infinite or a "
                                  "no-data sentinel): the pipeline needs every channel", file=str(telemetry),
                                  column=c, rows=range(len(frame)))
+    t = frame["t_s"].to_numpy(float)
+    if t[-1] - t[0] < MIN_FLIGHT_S:
+        raise TelemetryError(f"the flight spans {t[-1] - t[0]:.3g} s ({len(frame)} rows): a segment needs at least "
+                             f"{MIN_FLIGHT_S:g} s of telemetry to initialise and smooth the filter",
+                             file=str(telemetry), column="t_s", rows=range(len(frame)))
+    for c in IMU_COLUMNS:
+        x = frame[c].to_numpy(float)
+        x = x[np.isfinite(x) & ~sentinel_mask(x)]
+        if x.size > 1 and np.ptp(x) == 0.0:
+            raise TelemetryError(f"all {x.size} values are {x[0]!r}: a constant inertial channel is a dead or "
+                                 "frozen sensor, and the filter needs its measurements", file=str(telemetry),
+                                 column=c, rows=range(len(frame)))
     veh = load_vehicle(vehicle)
+    check_units(frame, veh, str(telemetry))
     if veh.air_data_source == "vanes":
         for c in (veh.alpha_column, veh.beta_column):
             if c not in frame.columns:

@@ -73,14 +73,18 @@ def run_flights(jobs: list[FlightJob], isolate: bool = False) -> list[dict]:
     for job in jobs:
         Path(job.run_dir).mkdir(parents=True, exist_ok=True)
     pre_futures = [preprocess_task.submit(j.telemetry, j.run_dir, j.context(), j.preprocess_params) for j in jobs]
-    plans, seg_futures, pre = [], [], []
+    plans, seg_futures, pre, plan_errors = [], [], [], {}
     for job, fut in zip(jobs, pre_futures):
         fut.wait()
         if not fut.state.is_completed():
             pre.append(None), plans.append([]), seg_futures.append([])
             continue
         p = fut.result()
-        plan = plan_segments_task(p["path"], job.windows, job.min_segment_s)
+        try:
+            plan = plan_segments_task(p["path"], job.windows, job.min_segment_s)
+        except Exception as exc:  # no segment (too short, all flagged): this flight fails, with the reason
+            plan_errors[job.flight] = exc
+            plan = []
         pre.append(p), plans.append(plan)
         seg_futures.append([smooth_segment_task.submit(p["path"], job.run_dir, job.context(s["segment_id"]), s,
                                                        job.vehicle, job.smoothing_options) for s in plan])
@@ -93,6 +97,9 @@ def run_flights(jobs: list[FlightJob], isolate: bool = False) -> list[dict]:
             if p is None:
                 summary["error"] = {"stage": "preprocess", "message": pre_future.state.message or "failed"}
                 pre_future.result()  # raises the stage's own error
+            if job.flight in plan_errors:
+                summary["error"] = {"stage": "plan", "message": str(plan_errors[job.flight])}
+                raise plan_errors[job.flight]
             _finish_flight(job, p, plan, futures, summary, logger)
         except Exception as exc:
             summary["status"] = "failed"

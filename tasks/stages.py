@@ -17,7 +17,7 @@ from aerosid.flight_data import build_flight_data_segments, load_database
 from aerosid.identify import identify
 from aerosid.models import default_models, load_models
 from aerosid.preprocess import PreprocessParams, preprocess
-from aerosid.segments import split_segments
+from aerosid.segments import flag_note, no_segment_reason, split_segments
 from aerosid.smoothing import smooth_segment_frame
 from aerosid.vehicle import load_vehicle
 from schemas.coefficients import Coefficients
@@ -71,6 +71,11 @@ def plan_segments_task(pre_path: str, windows: list | None, min_duration_s: floa
     gaps = json.loads(next((v for k, v in meta.items() if k.endswith("long_gaps")), "[]"))
     t = pd.read_parquet(pre_path, columns=["t_s"])["t_s"].to_numpy()
     segs = split_segments(t, [tuple(g) for g in gaps], windows, min_duration_s)
+    if not segs:
+        counts = json.loads(next((v for k, v in meta.items() if k.endswith("flag_counts_by_channel")), "{}"))
+        raise StageFailed(f"{pre_path}: no segment to filter: "
+                          f"{no_segment_reason(t, [tuple(g) for g in gaps], windows, min_duration_s)}"
+                          f"{flag_note(counts, len(t))}")
     return [s.__dict__ for s in segs]
 
 
