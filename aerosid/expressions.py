@@ -106,7 +106,7 @@ def _fold_constants(node: ast.AST, text: str):
     if isinstance(node, ast.BinOp):
         left, right = _fold_constants(node.left, text), _fold_constants(node.right, text)
         if isinstance(node.op, ast.Div) and right == 0.0:
-            raise ExpressionError(text, f"division by zero ({ast.unparse(node.right)!r} is 0)", col)
+            raise ExpressionError(text, f"division by zero (the divisor {ast.unparse(node.right)!r} is 0)", col)
         if left is None or right is None:
             return None
         value = _constant(_BINARY[type(node.op)], text, node, left, right)

@@ -240,9 +240,19 @@ def test_u14_an_unexpected_error_in_any_command_is_one_line(run_dir, monkeypatch
     assert isinstance(cli("history", str(run_dir)).exception, KeyError)
 
 
+def _free_port() -> int:
+    import socket
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
 def _subprocess_env(home: Path, **extra) -> dict:
+    """A hermetic environment; PREFECT_SERVER_API_PORT points at a free port so that a
+    Prefect server someone runs on this machine is not reused."""
     env = {**os.environ, "PREFECT_HOME": str(home), "PREFECT_SERVER_ANALYTICS_ENABLED": "false",
-           "PYTHONPATH": str(ROOT), **extra}
+           "PYTHONPATH": str(ROOT), "PREFECT_SERVER_API_PORT": str(_free_port()), **extra}
     env.pop("PREFECT_API_URL", None)
     env.pop("AEROSID_TRACEBACK", None)
     return env
@@ -301,3 +311,38 @@ def test_u16_the_test_harness_waits_long_enough_for_its_server(monkeypatch):
         with prefect_harness_context():
             pass
     assert seen["timeout"] >= 300
+
+
+def test_u15b_a_running_prefect_server_is_reused_only_if_it_answers_with_this_version():
+    """`aerosid run` reuses a server on Prefect's default address (no start-up cost) --
+    only one that answers /health and reports this Prefect's version."""
+    import http.server
+    import json
+    import threading
+
+    import prefect
+
+    from aerosid.cli import _running_server
+
+    version = {"v": prefect.__version__}
+
+    class Handler(http.server.BaseHTTPRequestHandler):
+        def do_GET(self):
+            body = {"/api/health": True, "/api/admin/version": version["v"]}.get(self.path)
+            self.send_response(200 if body is not None else 404)
+            self.end_headers()
+            self.wfile.write(json.dumps(body).encode())
+
+        def log_message(self, *args):
+            pass
+
+    httpd = http.server.HTTPServer(("127.0.0.1", 0), Handler)
+    threading.Thread(target=httpd.serve_forever, daemon=True).start()
+    url = f"http://127.0.0.1:{httpd.server_port}/api"
+    try:
+        assert _running_server(url) == url
+        version["v"] = "2.0.0"
+        assert _running_server(url) is None
+    finally:
+        httpd.shutdown()
+    assert _running_server(url) is None  # nothing listens any more
