@@ -174,6 +174,10 @@ def test_u11_a_term_that_drops_samples_says_so(synthetic_fd, tmp_path):
     assert "log of a value <= 0" in warning and "left out of the Cm fit" in warning
     assert ident.fits["Cm"].n_dropped == n_bad
     assert "Cm_log = log(alpha) is NaN" in ident.summary()
+    from aerosid.diagnosis import diagnose  # the diagnosis needs every sample: it refuses, naming the term
+
+    with pytest.raises(ValueError, match=f"Cm: {n_bad} samples with non-finite values .*term Cm_log = log"):
+        diagnose(synthetic_fd, veh, models, mach_half_width=None)
 
 
 def test_u12_too_many_terms_are_refused(flight, tmp_path):
