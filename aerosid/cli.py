@@ -244,7 +244,7 @@ def _running_server(api_url: str) -> str | None:
     import prefect
 
     try:
-        with httpx.Client(timeout=1.0) as client:
+        with httpx.Client(timeout=10.0) as client:  # a loaded server may take seconds; a refused connection does not
             if client.get(f"{api_url}/health").status_code != 200:
                 return None
             version = client.get(f"{api_url}/admin/version").json()
