@@ -160,6 +160,14 @@ def test_u10_a_term_never_finite_names_the_term_and_the_reason(run_dir, tmp_path
                   "fix the term or remove it")
 
 
+def test_u11_aerosid_fit_prints_the_samples_a_term_drops(run_dir, tmp_path):
+    spec = tmp_path / "model.toml"
+    spec.write_text('[Cm]\nterms = ["Cm_0 = 1", "Cm_alpha = alpha", "Cm_delta_p = delta_p/2", "Cm_log = log(alpha)"]\n')
+    result = cli("fit", str(run_dir), "--model", str(spec), "--mach-half-width", "1")
+    assert result.exit_code == 0, result.output
+    assert "warning: term Cm_log = log(alpha) is NaN at" in result.output and "left out of the Cm fit" in result.output
+
+
 def test_u11_a_term_that_drops_samples_says_so(synthetic_fd, tmp_path):
     veh = load_vehicle("seed-rlv")
     spec = tmp_path / "model.toml"
