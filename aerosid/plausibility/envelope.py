@@ -27,13 +27,13 @@ class Plausibility:
         return ", ".join(f"{f.name} {getattr(self, f.name)}" for f in fields(self))
 
 
-#: Defaults per vehicle class.  Aircraft: parameter-identification flights below ~15 km,
-#: 0.25-5 g median load, 10-400 m/s.  Finned (seed-rlv class: missiles, re-entry and
+#: Defaults per vehicle class.  Aircraft: 0.25-5 g median load, 10-1000 m/s (JSBSim's F4N
+#: flies its identification manoeuvre at 470 m/s, M 1.6), below 25 km, up to 150 kPa.  Finned (seed-rlv class: missiles, re-entry and
 #: hypersonic vehicles): 2-1000 m/s^2 (a vehicle whose aerodynamic forces are measurable),
 #: 30-8000 m/s, up to 100 km, 10 Pa - 500 kPa.
 CLASS_DEFAULTS: dict[str, Plausibility] = {
-    "aircraft": Plausibility(rate_rad_s=2.0, specific_force_m_s2=(2.5, 50.0), V_m_s=(10.0, 400.0),
-                             h_m=(-500.0, 15000.0), qbar_pa=(20.0, 80000.0), alpha_rad=(-0.35, 0.7)),
+    "aircraft": Plausibility(rate_rad_s=2.0, specific_force_m_s2=(2.5, 50.0), V_m_s=(10.0, 1000.0),
+                             h_m=(-500.0, 25000.0), qbar_pa=(20.0, 150000.0), alpha_rad=(-0.35, 0.7)),
     "finned": Plausibility(rate_rad_s=2.0, specific_force_m_s2=(2.0, 1000.0), V_m_s=(30.0, 8000.0),
                            h_m=(-500.0, 100000.0), qbar_pa=(10.0, 500000.0), alpha_rad=(-0.6, 0.6)),
 }
