@@ -334,7 +334,7 @@ def test_u15b_a_running_prefect_server_is_reused_only_if_it_answers_with_this_ve
 
     import prefect
 
-    from aerosid.cli import _running_server
+    from aerosid.cli_prefect import running_server
 
     version = {"v": prefect.__version__}
 
@@ -352,9 +352,9 @@ def test_u15b_a_running_prefect_server_is_reused_only_if_it_answers_with_this_ve
     threading.Thread(target=httpd.serve_forever, daemon=True).start()
     url = f"http://127.0.0.1:{httpd.server_port}/api"
     try:
-        assert _running_server(url) == url
+        assert running_server(url) == url
         version["v"] = "2.0.0"
-        assert _running_server(url) is None
+        assert running_server(url) is None
     finally:
         httpd.shutdown()
-    assert _running_server(url) is None  # nothing listens any more
+    assert running_server(url) is None  # nothing listens any more
