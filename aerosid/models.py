@@ -66,8 +66,16 @@ class ChannelModel:
         for t in self.terms:
             x = evaluate(t.expression, signals, n)
             inputs_ok = np.ones(n, dtype=bool)
-            for name in signal_names(t.expression, signals):
-                inputs_ok &= np.isfinite(np.asarray(signals[name], dtype=float))
+            for name in sorted(signal_names(t.expression, signals)):
+                finite = np.isfinite(np.asarray(signals[name], dtype=float))
+                if not finite.all():
+                    if not finite.any():
+                        raise ModelSpecError(f"[{self.channel}] term {t.coefficient} = {t.expression}: its signal "
+                                             f"{name!r} has no finite value in the flight data ({n} samples)")
+                    notes.append(f"term {t.coefficient} = {t.expression}: signal {name!r} is not finite at "
+                                 f"{int((~finite).sum())} of {n} samples: those samples are left out of the "
+                                 f"{self.channel} fit")
+                inputs_ok &= finite
             bad = inputs_ok & ~np.isfinite(x)
             n_in, n_bad = int(inputs_ok.sum()), int(bad.sum())
             if n_bad:

@@ -160,6 +160,21 @@ def test_u10_a_term_never_finite_names_the_term_and_the_reason(run_dir, tmp_path
                   "fix the term or remove it")
 
 
+def test_u10_a_term_over_a_signal_without_a_finite_value_names_term_and_signal(synthetic_fd):
+    from aerosid.models import ChannelModel, parse_term, vehicle_signals
+
+    veh = load_vehicle("seed-rlv")
+    signals = vehicle_signals(synthetic_fd, veh)
+    signals["beta"] = np.full(len(synthetic_fd), np.nan)  # e.g. a channel all NaN in the flight data
+    model = ChannelModel("Cn", (parse_term("Cn_0 = 1", "Cn"), parse_term("Cn_beta = beta", "Cn")))
+    with pytest.raises(ModelSpecError, match="term Cn_beta = beta: its signal 'beta' has no finite value"):
+        model.design(signals)
+    signals["beta"] = np.where(np.arange(len(synthetic_fd)) < 100, np.nan, 0.01)
+    _, notes = model.design(signals)
+    assert notes == (f"term Cn_beta = beta: signal 'beta' is not finite at 100 of {len(synthetic_fd)} samples: "
+                     "those samples are left out of the Cn fit",)
+
+
 def test_u11_aerosid_fit_prints_the_samples_a_term_drops(run_dir, tmp_path):
     spec = tmp_path / "model.toml"
     spec.write_text('[Cm]\nterms = ["Cm_0 = 1", "Cm_alpha = alpha", "Cm_delta_p = delta_p/2", "Cm_log = log(alpha)"]\n')
