@@ -139,7 +139,7 @@ def main() -> None:
         rows.append((f"aerosid run, warm, every stage cached #{k + 1}", *timed(run, e)))
     if args.with_server:
         rows += _with_running_server(py, env, tel, tmp)
-    lines = [f"## {args.label}: {datetime.now(timezone.utc):%Y-%m-%d %H:%M} UTC", "",
+    lines = [f"### {args.label}: {datetime.now(timezone.utc):%Y-%m-%d %H:%M} UTC", "",
              f"Code: {args.tree.resolve()} ({_commit(args.tree)}). Machine: {cpu_model()}, {os.cpu_count()} cores, "
              f"Python {platform.python_version()}, load average before {load_before} (other processes share "
              "the machine)", "",
