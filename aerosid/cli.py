@@ -20,7 +20,32 @@ Examples:
 """
 
 
-@click.group(context_settings={"help_option_names": ["-h", "--help"], "max_content_width": 100})
+class _NoTracebackGroup(click.Group):
+    """The command group: an error no command turned into a message still reaches the
+    user as one `Error: ...` line, never as a traceback (AEROSID_TRACEBACK=1 re-raises
+    it, for debugging)."""
+
+    def invoke(self, ctx):
+        import os
+
+        try:
+            return super().invoke(ctx)
+        except (click.exceptions.ClickException, click.exceptions.Exit, click.exceptions.Abort):
+            raise
+        except RecursionError as exc:
+            if os.environ.get("AEROSID_TRACEBACK"):
+                raise
+            raise click.ClickException("an input is nested too deeply to be read (RecursionError); check the "
+                                       "TOML and Parquet files given") from exc
+        except Exception as exc:
+            if os.environ.get("AEROSID_TRACEBACK"):
+                raise
+            raise click.ClickException(f"{type(exc).__name__}: {exc} (unexpected; AEROSID_TRACEBACK=1 shows "
+                                       "where it came from)") from exc
+
+
+@click.group(cls=_NoTracebackGroup,
+             context_settings={"help_option_names": ["-h", "--help"], "max_content_width": 100})
 @click.version_option(package_name="aerosid")
 def main() -> None:
     """Estimate a flight vehicle's aerodynamic coefficients from its own noisy
@@ -110,15 +135,19 @@ def simulate(case_name, effects, seed, out_dir, duration, rate, no_faults, list_
         click.echo(f"  wrote {path}")
 
 
+#: How long `aerosid run` waits for Prefect's ephemeral API server to answer [s].  The
+#: first run on a machine builds Prefect's SQLite database first: 20-40 s on an idle
+#: 2-core machine, 37-125 s measured on a loaded one, past Prefect's default 20 s.
+SERVER_STARTUP_TIMEOUT_S = 300
+
+
 def _hermetic_defaults() -> None:
     """Prefect without a server: its ephemeral mode; no analytics call leaves the machine."""
     import os
 
     os.environ.setdefault("PREFECT_SERVER_ANALYTICS_ENABLED", "false")
     os.environ.setdefault("PREFECT_LOGGING_LEVEL", "INFO")
-    # The first run on a machine builds Prefect's SQLite database before the ephemeral
-    # server answers: ~20-40 s on 2 cores, past Prefect's default 20 s wait.
-    os.environ.setdefault("PREFECT_SERVER_EPHEMERAL_STARTUP_TIMEOUT_SECONDS", "180")
+    os.environ.setdefault("PREFECT_SERVER_EPHEMERAL_STARTUP_TIMEOUT_SECONDS", str(SERVER_STARTUP_TIMEOUT_S))
 
 
 class _NoTraceback:
@@ -194,25 +223,31 @@ def run(telemetry, vehicle, out_dir, flight, windows, model_spec, mach_half_widt
                                    "window before pooling them")
         # bad input fails here, before Prefect starts
         named = [_preflight(t, vehicle, model_spec, params, windows, min_segment_s) for t in telemetry]
-        from flows.pipeline import pooled_vehicle, process_flight, process_manoeuvres
-        from flows.steps import check_flight_id
-
         if flight is not None:
+            from flows.steps import check_flight_id
+
             check_flight_id(flight)
+        from aerosid.cli_prefect import PrefectServer
+
+        server = PrefectServer()  # starts up while the flows are imported
+        from flows.pipeline import pooled_vehicle, process_flight, process_manoeuvres
+
         vehicle = pooled_vehicle([str(t) for t in telemetry], vehicle) if pooled else named[0]
         _quiet_run_tracebacks()
-        if pooled:
-            summary = process_manoeuvres([str(t) for t in telemetry], str(out_dir), vehicle=vehicle, name=flight,
+        server.wait()
+        with server.settings():
+            if pooled:
+                summary = process_manoeuvres([str(t) for t in telemetry], str(out_dir), vehicle=vehicle, name=flight,
+                                             model_spec=str(model_spec) if model_spec else None,
+                                             mach_half_width=mach_half_width, preprocess_params=params,
+                                             min_segment_s=min_segment_s)
+            else:
+                summary = process_flight(str(telemetry[0]), str(out_dir), vehicle=vehicle, flight=flight,
+                                         windows=[list(w) for w in windows] or None,
                                          model_spec=str(model_spec) if model_spec else None,
                                          mach_half_width=mach_half_width, preprocess_params=params,
                                          min_segment_s=min_segment_s)
-        else:
-            summary = process_flight(str(telemetry[0]), str(out_dir), vehicle=vehicle, flight=flight,
-                                     windows=[list(w) for w in windows] or None,
-                                     model_spec=str(model_spec) if model_spec else None,
-                                     mach_half_width=mach_half_width, preprocess_params=params,
-                                     min_segment_s=min_segment_s)
-    except (TelemetryError, VehicleError, ValueError) as exc:
+    except (TelemetryError, VehicleError, ValueError, RuntimeError) as exc:  # RuntimeError: tasks' StageFailed
         raise click.ClickException(str(exc)) from exc
     except OSError as exc:  # read-only or full output folder, a vanished file
         where = f" ({exc.filename})" if exc.filename else ""
@@ -277,24 +312,48 @@ def _echo_usable_share(share: dict | None) -> None:
                   if low else ""))
 
 
+#: The inertial channels: a constant one is a dead sensor.
+IMU_COLUMNS = ("ax_m_s2", "ay_m_s2", "az_m_s2", "p_rad_s", "q_rad_s", "r_rad_s")
+#: Largest telemetry file `aerosid run` reads [bytes] (a 10-hour flight at 100 Hz is ~0.5 GB).
+MAX_TELEMETRY_BYTES = 4_000_000_000
+
+
+def _regular_file(path: Path, max_bytes: int) -> None:
+    """A regular telemetry file (not a device, FIFO or folder: /dev/zero would never end), of bounded size."""
+    import os
+    import stat
+
+    from aerosid.preprocess import TelemetryError
+
+    st = os.stat(path)
+    if not stat.S_ISREG(st.st_mode):
+        raise TelemetryError("not a regular file (a device, pipe or folder cannot be telemetry)", file=str(path))
+    if st.st_size > max_bytes:
+        raise TelemetryError(f"{st.st_size} bytes: more than the {max_bytes} a telemetry file may have", file=str(path))
+
+
 def _preflight(telemetry: Path, vehicle: str | None, model_spec: str | None, preprocess_params: dict | None = None,
                windows=(), min_segment_s: float | None = None) -> str:
-    """Cheap checks of the inputs before any flow starts: the telemetry file is
-    readable Parquet that follows RawTelemetry, has rows and no channel without a
-    single value; the vehicle (given, else the one the file names: there is no
+    """Cheap checks of the inputs before any flow starts: the telemetry file is a
+    regular file of readable Parquet that follows RawTelemetry, has rows, spans at least
+    the minimum segment length, has no channel without a single value and no constant
+    inertial channel; the vehicle (given, else the one the file names: there is no
     default), its preprocessing settings with the run's on top, and the model
-    specification load; the time windows leave a segment of at least the minimum
-    segment length.  Returns the vehicle."""
+    specification load; the telemetry's units fit the vehicle's envelope
+    (aerosid.plausibility.units); the time windows leave a segment of at least the
+    minimum segment length.  Returns the vehicle."""
     import numpy as np
     import pyarrow.parquet as pq
 
     from aerosid.io import telemetry_vehicle
     from aerosid.models import default_models, load_models
+    from aerosid.plausibility.units import check_units
     from aerosid.preprocess import TelemetryError
     from aerosid.vehicle import load_vehicle
     from schemas.telemetry import CHANNELS, MEASURED_AIR_DATA_CHANNELS, RAW_COLUMNS, RawTelemetry, sentinel_mask
     from tasks.runner import read_validated
 
+    _regular_file(telemetry, MAX_TELEMETRY_BYTES)
     try:
         frame = read_validated(telemetry, RawTelemetry)
     except TelemetryError as exc:
@@ -319,12 +378,27 @@ def _preflight(telemetry: Path, vehicle: str | None, model_spec: str | None, pre
             raise TelemetryError(f"no value in the whole measured air-data column (all {len(frame)} rows NaN, "
                                  "infinite or a no-data sentinel): fill it, or drop the column to use the US-1976 "
                                  "atmosphere", file=str(telemetry), column=c, rows=range(len(frame)))
+    for c in IMU_COLUMNS:
+        x = frame[c].to_numpy(float)
+        x = x[np.isfinite(x) & ~sentinel_mask(x)]
+        if x.size > 1 and np.ptp(x) == 0.0:
+            raise TelemetryError(f"all {x.size} values are {float(x[0]):g}: a constant inertial channel is a dead or "
+                                 "frozen sensor, and the filter needs its measurements", file=str(telemetry),
+                                 column=c, rows=range(len(frame)))
     if vehicle is None:
         vehicle = telemetry_vehicle(telemetry)  # the file was read: names its vehicle or raises
     veh = load_vehicle(vehicle)
-    from aerosid.preprocess import PreprocessParams, merge_settings
+    from aerosid.preprocess import DEFAULT_MIN_SEGMENT_S, PreprocessParams, merge_settings
 
     PreprocessParams.from_dict(merge_settings(veh.preprocess, preprocess_params or {}))
+    shortest = next(v for v in (min_segment_s, veh.min_segment_s, DEFAULT_MIN_SEGMENT_S) if v is not None)
+    t = frame["t_s"].to_numpy(float)
+    if t[-1] - t[0] < shortest:
+        raise TelemetryError(f"the flight spans {t[-1] - t[0]:.3g} s ({len(frame)} rows): shorter than the minimum "
+                             f"segment length min_segment_s = {shortest:g} s (set it with --min-segment-s or the "
+                             "vehicle file's [preprocess] min_segment_s)", file=str(telemetry), column="t_s",
+                             rows=range(len(frame)))
+    check_units(frame, veh, str(telemetry))
     if veh.air_data_source == "vanes":
         for c in (veh.alpha_column, veh.beta_column):
             if c not in frame.columns:

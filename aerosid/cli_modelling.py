@@ -152,6 +152,8 @@ def fit(run_dir, model_spec, parent, note, mach_half_width):
     created = [x.id for x in h.versions if x.id not in {y.id for y in before.versions}]
     click.echo(f"created {', '.join(created)}")
     click.echo(v.summary())
+    for line in _loud_warnings(v.path / "coefficients.parquet"):
+        click.echo(line)
     if v.parent:
         p = h.get(v.parent)
         click.echo(f"changes vs {p.id}: {h.changes(v)}")
@@ -162,6 +164,23 @@ def fit(run_dir, model_spec, parent, note, mach_half_width):
     from aerosid.report import write_report
 
     click.echo(f"wrote {write_report(run_dir)} (run `aerosid diagnose` to re-diagnose this version)")
+
+
+def _loud_warnings(coefficients: Path) -> list[str]:
+    """Terms that dropped samples and estimates far from their preflight values, from a
+    version's coefficients table (the table `aerosid run` prints shows them too)."""
+    import pandas as pd
+
+    if not coefficients.is_file():
+        return []
+    table = pd.read_parquet(coefficients)
+    lines = []
+    for text in table.drop_duplicates("channel")["warnings"]:
+        lines += [f"  warning: {w}" for w in str(text).split(" | ") if "left out of the" in w]
+    if "preflight_warning" in table.columns:
+        for _, row in table[table["preflight_warning"].fillna("").astype(bool)].iterrows():
+            lines.append(f"!! WARNING {row['coefficient']}: {row['preflight_warning']}")
+    return lines
 
 
 @click.command()

@@ -22,6 +22,11 @@ FUNCTIONS = {
 _BINARY = {ast.Add: np.add, ast.Sub: np.subtract, ast.Mult: np.multiply, ast.Div: np.divide, ast.Pow: np.power}
 _UNARY = {ast.USub: np.negative, ast.UAdd: np.positive}
 MAX_LENGTH = 500
+#: Deepest expression tree accepted (nodes from the root to a leaf): a model term is a
+#: short formula; a deeper tree is a mistake or an attack on the interpreter's recursion.
+MAX_DEPTH = 32
+#: Largest magnitude of a number written in a term, and of a constant sub-expression.
+MAX_CONSTANT = 1e12
 
 
 class ExpressionError(ValueError):
@@ -30,7 +35,8 @@ class ExpressionError(ValueError):
     def __init__(self, expression: str, message: str, column: int | None = None):
         self.expression, self.column = expression, column
         where = f" at column {column + 1}" if column is not None else ""
-        super().__init__(f"bad term {expression!r}{where}: {message}")
+        shown = expression if len(expression) <= 80 else expression[:60] + f"... ({len(expression)} characters)"
+        super().__init__(f"bad term {shown!r}{where}: {message}")
 
 
 def parse(expression: str, signals: set[str] | frozenset[str]) -> ast.Expression:
@@ -43,15 +49,25 @@ def parse(expression: str, signals: set[str] | frozenset[str]) -> ast.Expression
         tree = ast.parse(expression.strip(), mode="eval")
     except SyntaxError as exc:
         raise ExpressionError(expression, f"syntax error ({exc.msg})", (exc.offset or 1) - 1) from None
-    _check(tree.body, expression, frozenset(signals))
+    _check(tree.body, expression, frozenset(signals), 1)
+    _fold_constants(tree.body, expression)
     return tree
 
 
-def _check(node: ast.AST, text: str, signals: frozenset[str]) -> None:
+def _check(node: ast.AST, text: str, signals: frozenset[str], depth: int) -> None:
     col = getattr(node, "col_offset", None)
+    if depth > MAX_DEPTH:
+        raise ExpressionError(text, f"nested deeper than {MAX_DEPTH} levels", col)
+    depth += 1
     if isinstance(node, ast.Constant):
         if isinstance(node.value, bool) or not isinstance(node.value, (int, float)):
             raise ExpressionError(text, f"only numbers are allowed as constants, not {node.value!r}", col)
+        if isinstance(node.value, int) and abs(node.value) > MAX_CONSTANT:
+            digits = len(str(abs(node.value))) if abs(node.value) < 10**4000 else "thousands of"
+            raise ExpressionError(text, f"the number at this column has {digits} digits: numbers in a term must "
+                                  f"lie within ±{MAX_CONSTANT:g}", col)
+        if isinstance(node.value, float) and not (abs(node.value) <= MAX_CONSTANT):
+            raise ExpressionError(text, f"the number {node.value!r} is outside ±{MAX_CONSTANT:g}", col)
     elif isinstance(node, ast.Name):
         if node.id not in signals:
             known = ", ".join(sorted(signals))
@@ -59,23 +75,57 @@ def _check(node: ast.AST, text: str, signals: frozenset[str]) -> None:
     elif isinstance(node, ast.BinOp):
         if type(node.op) not in _BINARY:
             raise ExpressionError(text, f"operator {type(node.op).__name__} is not allowed (use + - * / **)", col)
-        _check(node.left, text, signals)
-        _check(node.right, text, signals)
+        _check(node.left, text, signals, depth)
+        _check(node.right, text, signals, depth)
     elif isinstance(node, ast.UnaryOp):
         if type(node.op) not in _UNARY:
             raise ExpressionError(text, f"operator {type(node.op).__name__} is not allowed", col)
-        _check(node.operand, text, signals)
+        _check(node.operand, text, signals, depth)
     elif isinstance(node, ast.Call):
         if not isinstance(node.func, ast.Name) or node.func.id not in FUNCTIONS:
             name = node.func.id if isinstance(node.func, ast.Name) else ast.unparse(node.func)
             raise ExpressionError(text, f"call of {name!r} is not allowed; functions: {', '.join(FUNCTIONS)}", col)
         if node.keywords or len(node.args) != 1:
             raise ExpressionError(text, f"{node.func.id}() takes exactly one argument", col)
-        _check(node.args[0], text, signals)
+        _check(node.args[0], text, signals, depth)
     elif isinstance(node, ast.Attribute):
         raise ExpressionError(text, "attribute access is not allowed", col)
     else:
         raise ExpressionError(text, f"{type(node).__name__} is not allowed in a term", col)
+
+
+def _fold_constants(node: ast.AST, text: str):
+    """Evaluate every sub-expression without a signal (after _check): it must be a
+    finite number within ±MAX_CONSTANT, and no division may be by a constant zero.
+    Returns the node's value, or None when it depends on a signal."""
+    col = getattr(node, "col_offset", None)
+    if isinstance(node, ast.Constant):
+        return float(node.value)
+    if isinstance(node, ast.Name):
+        return None
+    if isinstance(node, ast.BinOp):
+        left, right = _fold_constants(node.left, text), _fold_constants(node.right, text)
+        if isinstance(node.op, ast.Div) and right == 0.0:
+            raise ExpressionError(text, f"division by zero (the divisor {ast.unparse(node.right)!r} is 0)", col)
+        if left is None or right is None:
+            return None
+        value = _constant(_BINARY[type(node.op)], text, node, left, right)
+    elif isinstance(node, ast.UnaryOp):
+        operand = _fold_constants(node.operand, text)
+        value = None if operand is None else _constant(_UNARY[type(node.op)], text, node, operand)
+    else:  # ast.Call
+        arg = _fold_constants(node.args[0], text)
+        value = None if arg is None else _constant(FUNCTIONS[node.func.id], text, node, arg)
+    return value
+
+
+def _constant(fn, text: str, node: ast.AST, *args) -> float:
+    with np.errstate(all="ignore"):
+        value = float(fn(*(np.float64(a) for a in args)))
+    if not (abs(value) <= MAX_CONSTANT):  # also NaN
+        what = "is not a number" if value != value else f"= {value:g}, outside ±{MAX_CONSTANT:g}"
+        raise ExpressionError(text, f"the constant {ast.unparse(node)!r} {what}", getattr(node, "col_offset", None))
+    return value
 
 
 def _eval(node: ast.AST, values: Mapping[str, np.ndarray]):
@@ -90,6 +140,13 @@ def _eval(node: ast.AST, values: Mapping[str, np.ndarray]):
     if isinstance(node, ast.Call):
         return FUNCTIONS[node.func.id](_eval(node.args[0], values))
     raise AssertionError(f"unchecked node {type(node).__name__}")  # parse() rejects everything else
+
+
+def signal_names(expression: str, signals) -> frozenset[str]:
+    """The signal names an expression reads (empty for a constant term)."""
+    signals = frozenset(signals)
+    tree = parse(expression, signals)
+    return frozenset(n.id for n in ast.walk(tree) if isinstance(n, ast.Name) and n.id in signals)
 
 
 def evaluate(expression: str, values: Mapping[str, np.ndarray], length: int | None = None) -> np.ndarray:

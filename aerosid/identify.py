@@ -7,7 +7,7 @@ plain least squares) vs F, printed per degree as the seed does.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import pandas as pd
@@ -15,6 +15,7 @@ import pandas as pd
 from aerosid.aeromodel import AeroModel
 from aerosid.eiv import simex_estimates
 from aerosid.models import ChannelModel, default_models, signals_from_flight_data, vehicle_signals
+from aerosid.plausibility.estimates import preflight_departure
 from aerosid.regression import LinearFit, fit_linear, with_corrected_estimate
 from aerosid.vehicle import Vehicle
 
@@ -33,6 +34,8 @@ class Identification:
     mach_window: tuple[float, float]
     #: channels whose fit is an identity by construction (alpha, beta inverted from them)
     identities: tuple[str, ...] = ()
+    #: estimates beyond preflight x/÷ this factor are reported (vehicle [plausibility])
+    preflight_factor: float = 3.0
 
     def table(self, alpha: float = 0.05) -> pd.DataFrame:
         """The coefficients.parquet rows.  A channel in ``identities`` is reported without
@@ -45,6 +48,9 @@ class Identification:
                     rec = {**rec, **{k: np.nan for k in ("estimate", "std_error", "std_error_ols", "ci_low",
                                                          "ci_high", "t_value", "p_value")}}
                 ident = bool(np.isfinite(rec["estimate"]))
+                reference = float(self.references.get(rec["coefficient"], np.nan))
+                ratio, departure = preflight_departure(float(rec["estimate"]), float(rec["std_error"]), reference,
+                                                       self.preflight_factor)
                 rows.append({
                     "channel": channel, "coefficient": rec["coefficient"],
                     "estimate": float(rec["estimate"]), "std_error": float(rec["std_error"]),
@@ -58,6 +64,7 @@ class Identification:
                     "r2": float(fit.r2), "pse": float(fit.pse), "rms_residual": float(fit.rms_residual),
                     "condition_number": float(fit.condition_number), "n_obs": int(fit.n_obs),
                     "n_eff": float(fit.n_eff), "warnings": " | ".join(fit.warnings),
+                    "preflight_ratio": ratio, "preflight_warning": departure,
                 })
         return pd.DataFrame(rows)
 
@@ -88,6 +95,10 @@ def format_table(table: pd.DataFrame) -> str:
                          f"   [{row['ci_low'] * k:.5g}, {row['ci_high'] * k:.5g}]")
         for i, w in enumerate(w for w in first["warnings"].split(" | ") if w):
             lines.append(f"  warning [{i + 1}] {w}")
+    if "preflight_warning" in table.columns:
+        far = table[table["preflight_warning"].fillna("").astype(bool)]
+        for _, row in far.iterrows():
+            lines.append(f"!! WARNING {row['coefficient']}: {row['preflight_warning']}")
     return "\n".join(lines)
 
 
@@ -178,13 +189,18 @@ def identify(flight_data: pd.DataFrame, vehicle: Vehicle, models: dict[str, Chan
     flights = fd["flight"].astype(str).to_numpy()
     fits: dict[str, LinearFit] = {}
     for channel, model in models.items():
-        X = model.regressors(signals)
-        fits[channel] = fit_linear(fd[channel].to_numpy(float), X, names=model.names, channel=channel, cov=cov,
-                                   groups=flights)
+        X, notes = model.design(signals)
+        try:
+            fit = fit_linear(fd[channel].to_numpy(float), X, names=model.names, channel=channel, cov=cov,
+                             groups=flights)
+        except ValueError as exc:
+            raise ValueError(f"[{channel}] the fit of {', '.join(model.names)} on {len(fd)} samples failed: {exc}"
+                             + (f" ({'; '.join(notes)})" if notes else "")) from None
+        fits[channel] = replace(fit, warnings=tuple(fit.warnings) + notes) if notes else fit
     sigma = _eiv_sigma(fd, vehicle)
     if sigma is not None:
         fits = _eiv_corrected(fd, vehicle, models, fits, sigma)
     refs = AeroModel.preflight(vehicle).linear_truth() if vehicle.preflight is not None else {}
     window = (float(fd["mach"].min()), float(fd["mach"].max()))
     identities = tuple(ch for ch in INVERSION_CHANNELS if ch in fits) if vehicle.air_data_source != "vanes" else ()
-    return Identification(fits, dict(models), refs, len(fd), window, identities)
+    return Identification(fits, dict(models), refs, len(fd), window, identities, vehicle.envelope.preflight_factor)

@@ -11,7 +11,6 @@ Spec files are TOML, one table per channel::
 """
 from __future__ import annotations
 
-import tomllib
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -20,7 +19,7 @@ import pandas as pd
 
 from aerosid.derivatives import smooth_derivative
 from aerosid.effects import CATALOGUE
-from aerosid.expressions import ExpressionError, evaluate, parse
+from aerosid.expressions import ExpressionError, evaluate, parse, signal_names
 
 SIGNALS = ("alpha", "beta", "alpha_r", "phi_r", "mach", "V", "qbar", "delta_p", "delta_y", "delta_r",
            "p", "q", "r", "p_hat", "q_hat", "r_hat", "alpha_dot_hat", "beta_dot_hat", "t")
@@ -28,6 +27,11 @@ CHANNELS = ("CN", "Cm", "CY", "Cn", "Cl")
 #: Default half-length of the Savitzky-Golay window of alpha_dot_hat and beta_dot_hat [s]
 #: (a vehicle file may set its own: [air_data] derivative_half_window_s)
 RATE_HALF_WINDOW_S = 0.25
+#: Most terms one channel's model may hold (the default models have 3-6; the regression's
+#: cost grows with the square of the count, and 2000 terms took 400 s and 1.5 GB).
+MAX_TERMS = 40
+#: Largest model specification file read [bytes].
+MAX_SPEC_BYTES = 1_000_000
 
 
 class ModelSpecError(ValueError):
@@ -51,13 +55,57 @@ class ChannelModel:
         return tuple(t.coefficient for t in self.terms)
 
     def regressors(self, signals: dict[str, np.ndarray]) -> pd.DataFrame:
+        return self.design(signals)[0]
+
+    def design(self, signals: dict[str, np.ndarray]) -> tuple[pd.DataFrame, tuple[str, ...]]:
+        """The regressor columns and a note for every term that is not finite on some
+        samples where its signals are (those samples leave the fit).  A term that is
+        finite on none of them raises ModelSpecError naming the term and the reason."""
         n = len(signals["alpha"])
-        return pd.DataFrame({t.coefficient: evaluate(t.expression, signals, n) for t in self.terms})
+        columns, notes = {}, []
+        for t in self.terms:
+            x = evaluate(t.expression, signals, n)
+            inputs_ok = np.ones(n, dtype=bool)
+            for name in sorted(signal_names(t.expression, signals)):
+                finite = np.isfinite(np.asarray(signals[name], dtype=float))
+                if not finite.all():
+                    if not finite.any():
+                        raise ModelSpecError(f"[{self.channel}] term {t.coefficient} = {t.expression}: its signal "
+                                             f"{name!r} has no finite value in the flight data ({n} samples)")
+                    notes.append(f"term {t.coefficient} = {t.expression}: signal {name!r} is not finite at "
+                                 f"{int((~finite).sum())} of {n} samples: those samples are left out of the "
+                                 f"{self.channel} fit")
+                inputs_ok &= finite
+            bad = inputs_ok & ~np.isfinite(x)
+            n_in, n_bad = int(inputs_ok.sum()), int(bad.sum())
+            if n_bad:
+                what = _nonfinite_kind(x[bad])
+                if n_bad == n_in:
+                    raise ModelSpecError(f"[{self.channel}] term {t.coefficient} = {t.expression}: {what} at every "
+                                         f"one of the {n_in} samples ({_likely_cause(t.expression)}); "
+                                         "fix the term or remove it")
+                notes.append(f"term {t.coefficient} = {t.expression} is {what} at {n_bad} of {n_in} samples "
+                             f"({100.0 * n_bad / n_in:.1f} %; {_likely_cause(t.expression)}): those samples are "
+                             f"left out of the {self.channel} fit")
+            columns[t.coefficient] = x
+        return pd.DataFrame(columns), tuple(notes)
 
     def with_term(self, term: Term) -> "ChannelModel":
         if term.coefficient in self.names:
             return self
         return ChannelModel(self.channel, self.terms + (term,))
+
+
+def _nonfinite_kind(x: np.ndarray) -> str:
+    kinds = [k for k, m in (("NaN", np.isnan(x)), ("infinite", np.isinf(x))) if m.any()]
+    return " or ".join(kinds)
+
+
+def _likely_cause(expression: str) -> str:
+    hints = [h for f, h in (("log", "log of a value <= 0"), ("sqrt", "sqrt of a negative value"),
+                            ("/", "division by zero"), ("**", "a power that overflows or of a negative base"),
+                            ("exp", "exp overflows"), ("tan", "tan at +-pi/2")) if f in expression]
+    return "likely " + " or ".join(hints) if hints else "overflow"
 
 
 DEFAULT_TERMS = {
@@ -96,18 +144,29 @@ def default_models(vehicle=None) -> dict[str, ChannelModel]:
     aircraft), else method.md §11 (the finned seed-rlv class)."""
     table = getattr(vehicle, "default_terms", None) or DEFAULT_TERMS
     where = f"{vehicle.source} [models]" if getattr(vehicle, "default_terms", None) else "<default>"
-    return {ch: ChannelModel(ch, tuple(parse_term(t, ch, where) for t in terms)) for ch, terms in table.items()}
+    return {ch: ChannelModel(ch, parse_terms(terms, ch, where)) for ch, terms in table.items()}
+
+
+def parse_terms(terms: list, channel: str, source: str = "<memory>") -> tuple[Term, ...]:
+    """A channel's term list: at most MAX_TERMS terms, each parsed, no coefficient twice."""
+    if len(terms) > MAX_TERMS:
+        raise ModelSpecError(f"{source}: [{channel}] {len(terms)} terms: at most {MAX_TERMS} per channel")
+    parsed = tuple(parse_term(t, channel, source) for t in terms)
+    names = [t.coefficient for t in parsed]
+    dup = {n for n in names if names.count(n) > 1}
+    if dup:
+        raise ModelSpecError(f"{source}: [{channel}] coefficient(s) {sorted(dup)} appear twice")
+    return parsed
 
 
 def load_models(path: str | Path, base: dict[str, ChannelModel] | None = None) -> dict[str, ChannelModel]:
     """Read a TOML spec; channels it does not mention keep `base` (default: the defaults)."""
+    from aerosid.vehicle import read_toml_file
+
     src = str(path)
-    try:
-        doc = tomllib.loads(Path(path).read_text())
-    except FileNotFoundError:
-        raise ModelSpecError(f"{src}: no such model specification file") from None
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
-        raise ModelSpecError(f"{src}: not valid TOML ({exc})") from exc
+    if not Path(path).exists():
+        raise ModelSpecError(f"{src}: no such model specification file")
+    doc = read_toml_file(Path(path), MAX_SPEC_BYTES, lambda msg: ModelSpecError(f"{src}: {msg}"))
     models = dict(base or default_models())
     for channel, table in doc.items():
         if channel not in CHANNELS:
@@ -115,12 +174,7 @@ def load_models(path: str | Path, base: dict[str, ChannelModel] | None = None) -
         terms = table.get("terms") if isinstance(table, dict) else None
         if not isinstance(terms, list) or not terms or not all(isinstance(t, str) for t in terms):
             raise ModelSpecError(f"{src}: [{channel}] needs terms = [\"NAME = EXPRESSION\", ...]")
-        parsed = tuple(parse_term(t, channel, src) for t in terms)
-        names = [t.coefficient for t in parsed]
-        dup = {n for n in names if names.count(n) > 1}
-        if dup:
-            raise ModelSpecError(f"{src}: [{channel}] coefficient(s) {sorted(dup)} appear twice")
-        models[channel] = ChannelModel(channel, parsed)
+        models[channel] = ChannelModel(channel, parse_terms(terms, channel, src))
     return models
 
 

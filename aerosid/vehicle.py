@@ -7,13 +7,17 @@ other TOML file with the same layout works too.
 from __future__ import annotations
 
 import math
+import os
+import stat
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
+from aerosid.plausibility.envelope import Plausibility, plausibility_for
 from aerosid.rigid_body import InertiaConstants, inertia_constants
+from aerosid.vehicles.keys import MAX_DATABASE_BYTES, MAX_VEHICLE_FILE_BYTES, VehicleKeyError, check_document
 
 DATA_DIR = Path(__file__).parent / "data"
 
@@ -106,6 +110,12 @@ class Vehicle:
     preprocess: dict = field(default_factory=dict)
     #: shortest segment the pipeline smooths [s] ([preprocess] min_segment_s; None: default)
     min_segment_s: float | None = None
+    #: the flight envelope the unit check compares telemetry with ([plausibility]; class defaults)
+    plausibility: Plausibility | None = None
+
+    @property
+    def envelope(self) -> Plausibility:
+        return self.plausibility or plausibility_for(self.vehicle_class)
 
     @property
     def length_pitch_m(self) -> float:
@@ -168,6 +178,9 @@ _REQUIRED = {
 }
 CLASSES = ("finned", "aircraft")
 AIR_DATA_SOURCES = ("database", "vanes")
+#: Folders besides the vehicle file's own where its aerodynamic database may live
+#: (resolved): the built-in vehicles' data.
+DATABASE_ALLOWED_DIRS: tuple[Path, ...] = (DATA_DIR,)
 
 
 def builtin_vehicles() -> list[str]:
@@ -190,10 +203,11 @@ def load_vehicle(name_or_path: str | Path = "seed-rlv") -> Vehicle:
     """Read and check a vehicle description; raises VehicleError naming file and key."""
     path = resolve_vehicle_path(name_or_path)
     src = str(path)
+    doc = read_toml_file(path, MAX_VEHICLE_FILE_BYTES, lambda msg: VehicleError(src, "-", msg))
     try:
-        doc = tomllib.loads(path.read_text())
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
-        raise VehicleError(src, "-", f"not valid TOML: {exc}") from exc
+        check_document(doc)
+    except VehicleKeyError as exc:
+        raise VehicleError(src, exc.key, str(exc)) from None
     for section, keys in _REQUIRED.items():
         if section not in doc:
             raise VehicleError(src, section, "section missing")
@@ -235,6 +249,13 @@ def load_vehicle(name_or_path: str | Path = "seed-rlv") -> Vehicle:
     mixing = doc["controls"]["mixing"]
     if len(mixing) != 3 or any(len(row) != 4 for row in mixing):
         raise VehicleError(src, "controls.mixing", "needs 3 rows (roll, pitch, yaw) of 4 fin weights")
+    for i, name in enumerate(("delta_r (roll)", "delta_p (pitch)", "delta_y (yaw)")):
+        if not any(mixing[i]):
+            raise VehicleError(src, "controls.mixing", f"row {i + 1}, {name}, is all zero: that control would "
+                               "always read 0 and its coefficients could not be identified")
+    if np.linalg.matrix_rank(np.asarray(mixing, dtype=float)) < 3:
+        raise VehicleError(src, "controls.mixing", f"rows {mixing} are linearly dependent: delta_r, delta_p and "
+                           "delta_y must be independent combinations of d1..d4")
     air = doc.get("air_data", {})
     source = str(air.get("source", "database"))
     if source not in AIR_DATA_SOURCES:
@@ -242,7 +263,7 @@ def load_vehicle(name_or_path: str | Path = "seed-rlv") -> Vehicle:
     if source == "database" and "database" not in doc["aero"]:
         raise VehicleError(src, "aero.database", "value missing (needed to invert alpha and beta; or set "
                            "[air_data] source = \"vanes\")")
-    database_path = path.parent / doc["aero"]["database"] if "database" in doc["aero"] else None
+    database_path = _database_path(path, doc["aero"]["database"]) if "database" in doc["aero"] else None
     pre = doc["aero"].get("preflight")
     preflight = None
     if pre is not None or source == "database":
@@ -253,6 +274,12 @@ def load_vehicle(name_or_path: str | Path = "seed-rlv") -> Vehicle:
             raise VehicleError(src, "aero.preflight", f"missing {', '.join(missing)}")
         preflight = PreflightAero(**{n: (tuple(pre[n]) if isinstance(pre[n], list) else float(pre[n]))
                                      for n in names})
+        bp, sf = preflight.mach_breakpoints, preflight.slope_factor
+        if not isinstance(bp, tuple) or not isinstance(sf, tuple) or len(bp) != len(sf):
+            raise VehicleError(src, "aero.preflight", "mach_breakpoints and slope_factor need one number each "
+                               "per breakpoint (two lists of the same length)")
+        if any(b <= a for a, b in zip(bp, bp[1:])):
+            raise VehicleError(src, "aero.preflight.mach_breakpoints", f"must increase strictly, got {list(bp)}")
     limit_key = "fin_limit_rad" if "fin_limit_rad" in doc["controls"] else "surface_limit_rad"
     if limit_key not in doc["controls"]:
         raise VehicleError(src, "controls.fin_limit_rad", "value missing (or surface_limit_rad)")
@@ -267,14 +294,13 @@ def load_vehicle(name_or_path: str | Path = "seed-rlv") -> Vehicle:
         if bad:
             raise VehicleError(src, "models", f"channels {bad}: each entry must be a channel "
                                f"({', '.join(MODEL_CHANNELS)}) with a list of terms")
-        from aerosid.models import ModelSpecError, parse_term
+        from aerosid.models import ModelSpecError, parse_terms
 
         for ch, items in terms.items():
-            for item in items:
-                try:
-                    parse_term(str(item), ch, src)
-                except ModelSpecError as exc:
-                    raise VehicleError(src, f"models.{ch}", str(exc)) from exc
+            try:
+                parse_terms([str(item) for item in items], ch, src)
+            except ModelSpecError as exc:
+                raise VehicleError(src, f"models.{ch}", str(exc)) from None
     preprocess, min_segment_s = _preprocess_settings(doc.get("preprocess", {}), src)
     return Vehicle(
         name=str(doc.get("name", path.parent.name)),
@@ -312,6 +338,7 @@ def load_vehicle(name_or_path: str | Path = "seed-rlv") -> Vehicle:
         default_terms={k: list(v) for k, v in terms.items()} if terms is not None else None,
         preprocess=preprocess,
         min_segment_s=min_segment_s,
+        plausibility=plausibility_for(vclass, doc.get("plausibility")),
     )
 
 
@@ -328,3 +355,58 @@ def _preprocess_settings(table, src: str) -> tuple[dict, float | None]:
         raise VehicleError(src, f"preprocess.{exc.key}", exc.reason) from None
     except ValueError as exc:
         raise VehicleError(src, "preprocess", str(exc)) from None
+
+
+def read_toml_file(path: Path, max_bytes: int, error) -> dict:
+    """Parse a TOML file that must be a regular file of at most max_bytes; every failure
+    (not a regular file, too large, not UTF-8, not TOML, nested too deep) is raised as
+    error(message)."""
+    try:
+        st = os.stat(path)
+    except OSError as exc:
+        raise error(f"cannot read: {exc.strerror or exc}") from None
+    if not stat.S_ISREG(st.st_mode):
+        raise error("not a regular file")
+    if st.st_size > max_bytes:
+        raise error(f"{st.st_size} bytes: larger than the {max_bytes} bytes a TOML file may have here")
+    try:
+        with open(path, "rb") as fh:
+            text = fh.read(max_bytes + 1).decode("utf-8")
+        return tomllib.loads(text)
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+        raise error(f"not valid TOML: {exc}") from None
+    except RecursionError:
+        raise error("not valid TOML here: nested deeper than this reader follows (arrays or tables inside "
+                    "each other hundreds of levels deep)") from None
+    except OSError as exc:
+        raise error(f"cannot read: {exc.strerror or exc}") from None
+
+
+def _database_path(vehicle_path: Path, name: str) -> Path:
+    """The aerodynamic database named in the vehicle file: a regular file of bounded size,
+    inside the vehicle file's folder (a relative name without '..') or, resolved, inside
+    one of DATABASE_ALLOWED_DIRS."""
+    src = str(vehicle_path)
+    rel = Path(name)
+    candidate = vehicle_path.parent / rel
+    inside = not rel.is_absolute() and ".." not in rel.parts
+    if not inside:
+        try:
+            real = candidate.resolve()
+        except (OSError, RuntimeError):
+            real = None
+        inside = real is not None and any(real.is_relative_to(d.resolve()) for d in DATABASE_ALLOWED_DIRS)
+    if not inside:
+        raise VehicleError(src, "aero.database", f"{name!r} is outside the vehicle file's folder "
+                           f"{vehicle_path.parent}: put the database beside the vehicle file and name it "
+                           "relative to it")
+    try:
+        st = os.stat(candidate)
+    except OSError as exc:
+        raise VehicleError(src, "aero.database", f"{name!r}: {exc.strerror or exc}") from None
+    if not stat.S_ISREG(st.st_mode):
+        raise VehicleError(src, "aero.database", f"{name!r} is not a regular file")
+    if st.st_size > MAX_DATABASE_BYTES:
+        raise VehicleError(src, "aero.database", f"{name!r} has {st.st_size} bytes, more than the "
+                           f"{MAX_DATABASE_BYTES} an aerodynamic database may have")
+    return candidate

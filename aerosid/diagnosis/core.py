@@ -630,10 +630,11 @@ def diagnose(flight_data: pd.DataFrame, vehicle, models: dict[str, ChannelModel]
     evidence: list[EffectEvidence] = []
     for ch, model in models.items():
         y = fd[ch].to_numpy(float)
-        Xb = model.regressors(signals)
+        Xb, notes = model.design(signals)
         base = fit_linear(y, Xb, names=model.names, channel=ch, cov=cov)
         if base.n_dropped:
-            raise ValueError(f"{ch}: {base.n_dropped} samples with non-finite values in the data or the terms")
+            raise ValueError(f"{ch}: {base.n_dropped} samples with non-finite values in the data or the terms"
+                             + (f" ({'; '.join(notes)}); the diagnosis needs every sample" if notes else ""))
         resid = np.asarray(base.residuals)
         reports[ch] = ChannelReport(
             ch, base, t, flight, y, np.asarray(base.fitted),

@@ -1,0 +1,49 @@
+"""The flight envelope a vehicle file states (``[plausibility]``), with class defaults.
+
+Every range is a plausibility bound for the *telemetry's summary statistics*, not a
+design limit: the unit check (aerosid.plausibility.units) compares the 99th percentile
+of |p|, |q|, |r| with ``rate_rad_s`` and the medians of the specific force, airspeed,
+altitude and dynamic pressure with their ranges.  A vehicle that flies outside its
+class's defaults states its own ranges in its file.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, fields, replace
+
+
+@dataclass(frozen=True)
+class Plausibility:
+    """Ranges are (low, high) closed intervals; SI units, radians."""
+
+    rate_rad_s: float  # largest plausible 99th percentile of |p|, |q|, |r| [rad/s]
+    specific_force_m_s2: tuple[float, float]  # median |(ax, ay, az)| [m/s^2]
+    V_m_s: tuple[float, float]  # median airspeed [m/s]
+    h_m: tuple[float, float]  # median altitude [m]
+    qbar_pa: tuple[float, float]  # median dynamic pressure (US-1976 density) [Pa]
+    alpha_rad: tuple[float, float]  # the angle of attack the flight stays within [rad]
+    preflight_factor: float = 3.0  # an estimate beyond preflight x/÷ this factor is reported
+
+    def summary(self) -> str:
+        return ", ".join(f"{f.name} {getattr(self, f.name)}" for f in fields(self))
+
+
+#: Defaults per vehicle class.  Aircraft: 0.25-5 g median load, 10-1000 m/s (JSBSim's F4N
+#: flies its identification manoeuvre at 470 m/s, M 1.6), below 25 km, up to 150 kPa.  Finned (seed-rlv class: missiles, re-entry and
+#: hypersonic vehicles): 2-1000 m/s^2 (a vehicle whose aerodynamic forces are measurable),
+#: 30-8000 m/s, up to 100 km, 10 Pa - 500 kPa.
+CLASS_DEFAULTS: dict[str, Plausibility] = {
+    "aircraft": Plausibility(rate_rad_s=2.0, specific_force_m_s2=(2.5, 50.0), V_m_s=(10.0, 1000.0),
+                             h_m=(-500.0, 25000.0), qbar_pa=(20.0, 150000.0), alpha_rad=(-0.35, 0.7)),
+    "finned": Plausibility(rate_rad_s=2.0, specific_force_m_s2=(2.0, 1000.0), V_m_s=(30.0, 8000.0),
+                           h_m=(-500.0, 100000.0), qbar_pa=(10.0, 500000.0), alpha_rad=(-0.6, 0.6)),
+}
+
+
+def plausibility_for(vehicle_class: str, table: dict | None = None) -> Plausibility:
+    """The class defaults with the vehicle file's [plausibility] values on top (already
+    checked for kind and range by aerosid.vehicles.keys)."""
+    base = CLASS_DEFAULTS[vehicle_class]
+    if not table:
+        return base
+    return replace(base, **{k: (tuple(float(x) for x in v) if isinstance(v, list) else float(v))
+                            for k, v in table.items()})

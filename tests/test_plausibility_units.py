@@ -1,0 +1,114 @@
+"""The unit check (aerosid/plausibility/units.py): no false alarm on the shipped flights
+(simulated seed-rlv, JSBSim's c172x, NASA's real Twin Otter data), and each unit mistake
+found, naming the column and the likely unit -- by magnitude against the vehicle's
+envelope and, separately, by kinematics alone."""
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from aerosid.effects import parse_effect_spec
+from aerosid.plausibility import units as U
+from aerosid.plausibility.units import check_units, unit_findings
+from aerosid.preprocess import TelemetryError
+from aerosid.simulation import load_case, simulate
+from aerosid.vehicle import load_vehicle
+from tests import twin_otter
+
+DEG = math.pi / 180
+
+# (label, column(s), factor applied to the SI values, likely unit)
+MISTAKES = [
+    ("q in deg/s", ["q_rad_s"], 1 / DEG, "deg/s"),
+    ("p in deg/s", ["p_rad_s"], 1 / DEG, "deg/s"),
+    ("h in km", ["h_m"], 1e-3, "km"),
+    ("h in ft", ["h_m"], 1 / 0.3048, "ft"),
+    ("accelerations in g", ["ax_m_s2", "ay_m_s2", "az_m_s2"], 1 / 9.80665, "g"),
+]
+SEED_ONLY = [("V in kt", ["V_m_s"], 1 / 0.514444, "kt")]  # the aircraft's 50-70 m/s is plausible in kt too
+
+
+def with_factor(frame: pd.DataFrame, columns, factor) -> pd.DataFrame:
+    out = frame.copy()
+    for c in columns:
+        out[c] = out[c] * factor
+    return out
+
+
+@pytest.fixture(scope="module")
+def flights(reference_flight):
+    """The shipped flights with their vehicles: seed-rlv (two seeds, one with a hidden
+    effect), JSBSim's c172x (if jsbsim is installed), the two Twin Otter manoeuvres (if
+    the data are on this machine)."""
+    seed = load_vehicle("seed-rlv")
+    damped = simulate(load_case("seed-rlv", duration_s=40.0), (parse_effect_spec("pitch_damping"),), seed=3)
+    out = [("seed-rlv seed 0", reference_flight.telemetry, seed),
+           ("seed-rlv seed 3, pitch damping", damped.telemetry, seed)]
+    try:
+        from aerosid.simulation.jsbsim_flight import simulate_jsbsim
+
+        out.append(("JSBSim c172x", simulate_jsbsim("c172x", "3211", seed=0).telemetry, load_vehicle("c172x")))
+    except Exception as exc:  # jsbsim is an optional extra
+        print(f"JSBSim flight skipped: {exc}")
+    if twin_otter.available():
+        import tempfile
+        from pathlib import Path
+
+        veh = load_vehicle(twin_otter.vehicle_file(Path(tempfile.mkdtemp())))
+        out += [(f"Twin Otter {n}", twin_otter.telemetry(n), veh) for n in twin_otter.FLIGHTS]
+    return out
+
+
+def test_no_false_alarm_on_the_shipped_flights(flights):
+    assert len(flights) >= 2
+    for label, frame, veh in flights:
+        assert unit_findings(frame, veh) == [], label
+        check_units(frame, veh, label)  # no error
+
+
+def test_each_unit_mistake_is_found_naming_column_and_unit(flights):
+    for label, frame, veh in flights:
+        cases = MISTAKES + (SEED_ONLY if veh.vehicle_class == "finned" else [])
+        for what, cols, factor, unit in cases:
+            if "Twin Otter" in label and what == "p in deg/s":
+                continue  # an elevator manoeuvre: |p| stays below 0.4 deg/s, plausible as rad/s (docs)
+            found = unit_findings(with_factor(frame, cols, factor), veh)
+            assert found, f"{label}: {what} not found"
+            assert found[0].columns[0] == cols[0] and found[0].likely.split()[0] == unit, (label, what, found)
+            with pytest.raises(TelemetryError) as ei:
+                check_units(with_factor(frame, cols, factor), veh, "flight.parquet")
+            assert ei.value.column == cols[0] and f"look like {unit}" in str(ei.value)
+
+
+def test_the_kinematic_tests_alone_find_deg_s_and_km(flights):
+    """With an envelope so wide that no magnitude is implausible, the kinematics still
+    tell: the pitch rate against the vanes / the alpha range, the altitude against the
+    doubly integrated vertical acceleration."""
+    for label, frame, veh in flights:
+        wide = dataclasses.replace(veh.envelope, rate_rad_s=100.0, h_m=(-1000.0, 1e6), qbar_pa=(0.0, 1e8),
+                                   V_m_s=(0.0, 20000.0))
+        wide_vehicle = dataclasses.replace(veh, plausibility=wide)
+        assert U._pitch_rate_kinematic(frame, wide_vehicle) is None, label
+        assert U._altitude_kinematic(frame) is None, label
+        q = U._pitch_rate_kinematic(with_factor(frame, ["q_rad_s"], 1 / DEG), wide_vehicle)
+        assert q is not None and q.likely == "deg/s", label
+        for factor, unit in ((1e-3, "km"), (1 / 0.3048, "ft")):
+            h = U._altitude_kinematic(with_factor(frame, ["h_m"], factor))
+            assert h is not None and h.likely == unit, (label, unit)
+
+
+def test_a_wider_envelope_in_the_vehicle_file_accepts_a_fast_vehicle(tmp_path, reference_flight):
+    """A vehicle that really turns fast says so in its file: no error then."""
+    src = load_vehicle("seed-rlv").source
+    text = open(src).read() + "\n[plausibility]\nrate_rad_s = 20.0\n"
+    path = tmp_path / "vehicle.toml"
+    path.write_text(text)
+    (tmp_path / "aerodb.csv").symlink_to(load_vehicle("seed-rlv").database_path)
+    fast = load_vehicle(path)
+    frame = reference_flight.telemetry.assign(p_rad_s=reference_flight.telemetry["p_rad_s"] * 20)
+    assert [f.columns for f in unit_findings(frame, load_vehicle("seed-rlv"))] == [("p_rad_s",)]
+    assert unit_findings(frame, fast) == []
