@@ -64,7 +64,7 @@ def test_non_finite_or_out_of_range_numbers_are_refused(tmp_path, old, new, key,
 
 
 @pytest.mark.parametrize("old, new, key, valid", [
-    ("q_chain_scale = [", "q_chain_scal = 2.0\nq_chain_scale = [", "[estimation.q_chain_scal]", "q_chain_scale"),
+    ("[aero]\n", "[estimation]\nq_chain_scal = 2.0\n\n[aero]\n", "[estimation.q_chain_scal]", "q_chain_scale"),
     ("[mass]\n", "[mass]\nmass_lb = 2425.0\n", "[mass.mass_lb]", "mass_kg, Ixx_kg_m2"),
     ("[aero]\n", "[aerodynamics]\nx = 1\n[aero]\n", "[aerodynamics]", "[aero]"),
     ('name = "seed-rlv"', 'name = "seed-rlv"\nclas = "finned"', "[clas]", "class"),
@@ -85,7 +85,7 @@ def test_the_estimation_keys_are_the_smoother_options():
 
 def test_a_new_table_is_one_entry(tmp_path, monkeypatch):
     """Extending the table: a [preprocess]-like table with its own keys."""
-    path = edited(tmp_path, "[aero]\n", "[preprocess.q_rad_s]\nspike_sigma = 8.0\n[aero]\n")
+    path = edited(tmp_path, "[aero]\n", "[preprocess.q_rad_s]\nfrozen_max_still_s = 8.0\n[aero]\n")
     load_vehicle(path)  # [preprocess] is checked by its owner (None: any key)
     from aerosid.vehicles import keys
 
