@@ -32,7 +32,7 @@ from aerosid.simulation import SimulatedFlight
 from aerosid.simulation.jsbsim_design import (DT_S, FT, INCH, LBF, PSF, SLUG, SLUG_FT2, SLUG_FT3, FlightDesign,
                                               UnsupportedAircraft, flight_design, symmetric_loading)
 from aerosid.simulation.jsbsim_linear import abs_beta_slope, mach_slopes, model_coefficients
-from aerosid.simulation.jsbsim_flight import (COMMON_PROPERTIES, _fly, _import_jsbsim, _schedule, _takeup_steps, _truth_check,
+from aerosid.simulation.jsbsim_flight import (COMMON_PROPERTIES, _fly, _import_jsbsim, flight_statistics, _schedule, _takeup_steps, _truth_check,
                                               make_telemetry, rates_at_the_moments)
 from aerosid.simulation.jsbsim_tables import DEG, AeroTables
 from aerosid.simulation.jsbsim_trim import initialise, open_fdm, start_engines
@@ -250,21 +250,7 @@ def simulate_aircraft(aircraft: str, seed: int = 0, *, faults: bool = True) -> S
     info = {
         "simulator": f"JSBSim {jsbsim.__version__}", "aircraft": aircraft, "manoeuvre": "3211",
         "aircraft_xml": str(design.xml_path), "generated": True,
-        "n_samples": int(n), "sample_rate_hz": 1.0 / dt, "duration_s": float(t[-1]),
-        "n_telemetry_rows": int(len(telemetry)), "n_dropout": int(masks["dropout"].sum()),
-        "n_outliers": int(sum(masks[f"outlier_{c}"].sum() for c in ("ax_m_s2", "ay_m_s2", "az_m_s2", "p_rad_s",
-                                                                     "q_rad_s", "r_rad_s"))),
-        "sync_gap_s": float(spec.sync_gap_s),
-        "mach_min": float(truth["mach"].min()), "mach_max": float(truth["mach"].max()),
-        "h_min_m": float(truth["h_m"].min()), "h_max_m": float(truth["h_m"].max()),
-        "qbar_min_pa": float(qbar_pa.min()), "qbar_max_pa": float(qbar_pa.max()),
-        "alpha_min_deg": float(alpha.min() * deg), "alpha_max_deg": float(alpha.max() * deg),
-        "beta_min_deg": float(beta.min() * deg), "beta_max_deg": float(beta.max() * deg),
-        "phi_min_deg": float(truth["phi_rad"].min() * deg), "phi_max_deg": float(truth["phi_rad"].max() * deg),
-        "V_min_m_s": float(V.min()), "V_max_m_s": float(V.max()),
-        "snr": {"az": float(truth["az_sensor_m_s2"].std() / sigma["az_m_s2"]),
-                "q": float(truth["q_rad_s"].std() / sigma["q_rad_s"]),
-                "ax": float(truth["ax_sensor_m_s2"].std() / sigma["ax_m_s2"])},
+        **flight_statistics(truth, telemetry, masks, spec, sigma, t, dt, qbar_pa, alpha, beta, V),
         "propulsion": design.propulsion, "engines": list(design.engines),
         "trim": {**tr.as_dict(), "condition": design.condition_note, "mach": trim["velocities/mach"],
                  "qbar_pa": trim["aero/qbar-psf"] * PSF, "alpha_rad": trim["aero/alpha-rad"],

@@ -607,23 +607,7 @@ def simulate_jsbsim(aircraft: str = "c172x", manoeuvre: str = "3211", seed: int 
     info = {
         "simulator": f"JSBSim {jsbsim.__version__}", "aircraft": model, "manoeuvre": manoeuvre,
         "aircraft_xml": str(xml_path),
-        "n_samples": int(n), "sample_rate_hz": 1.0 / dt, "duration_s": float(t[-1]),
-        "n_telemetry_rows": int(len(telemetry)),
-        "n_dropout": int(masks["dropout"].sum()),
-        "n_outliers": int(sum(masks[f"outlier_{c}"].sum() for c in IMU_COLUMNS)),
-        "sync_gap_s": float(spec.sync_gap_s),
-        "mach_min": float(truth["mach"].min()), "mach_max": float(truth["mach"].max()),
-        "h_min_m": float(truth["h_m"].min()), "h_max_m": float(truth["h_m"].max()),
-        "qbar_min_pa": float(qbar_pa.min()), "qbar_max_pa": float(qbar_pa.max()),
-        "alpha_min_deg": float(alpha.min() * deg), "alpha_max_deg": float(alpha.max() * deg),
-        "beta_min_deg": float(beta.min() * deg), "beta_max_deg": float(beta.max() * deg),
-        "phi_min_deg": float(truth["phi_rad"].min() * deg), "phi_max_deg": float(truth["phi_rad"].max() * deg),
-        "V_min_m_s": float(V.min()), "V_max_m_s": float(V.max()),
-        "snr": {
-            "az": float(truth["az_sensor_m_s2"].std() / sigma["az_m_s2"]),
-            "q": float(truth["q_rad_s"].std() / sigma["q_rad_s"]),
-            "ax": float(truth["ax_sensor_m_s2"].std() / sigma["ax_m_s2"]),
-        },
+        **flight_statistics(truth, telemetry, masks, spec, sigma, t, dt, qbar_pa, alpha, beta, V),
         "trim": {
             "h_m": trim["position/h-sl-ft"] * FT, "V_m_s": trim["velocities/vt-fps"] * FT,
             "mach": trim["velocities/mach"], "qbar_pa": trim["aero/qbar-psf"] * PSF,
@@ -675,3 +659,28 @@ def simulate_jsbsim(aircraft: str = "c172x", manoeuvre: str = "3211", seed: int 
     }
     return SimulatedFlight(case=aircraft, seed=int(seed), effects=(), telemetry=telemetry, truth=truth,
                            coefficients=coefficients, info=info)
+
+
+def flight_statistics(truth, telemetry, masks, spec, sigma, t, dt, qbar_pa, alpha, beta, V) -> dict:
+    """The part of a JSBSim flight's info every flight shares: sizes, faults, ranges of the
+    flight condition and the pitch-plane signal-to-noise ratios."""
+    deg = 1.0 / DEG
+    return {
+        "n_samples": int(len(t)), "sample_rate_hz": 1.0 / dt, "duration_s": float(t[-1]),
+        "n_telemetry_rows": int(len(telemetry)),
+        "n_dropout": int(masks["dropout"].sum()),
+        "n_outliers": int(sum(masks[f"outlier_{c}"].sum() for c in IMU_COLUMNS)),
+        "sync_gap_s": float(spec.sync_gap_s),
+        "mach_min": float(truth["mach"].min()), "mach_max": float(truth["mach"].max()),
+        "h_min_m": float(truth["h_m"].min()), "h_max_m": float(truth["h_m"].max()),
+        "qbar_min_pa": float(np.min(qbar_pa)), "qbar_max_pa": float(np.max(qbar_pa)),
+        "alpha_min_deg": float(np.min(alpha) * deg), "alpha_max_deg": float(np.max(alpha) * deg),
+        "beta_min_deg": float(np.min(beta) * deg), "beta_max_deg": float(np.max(beta) * deg),
+        "phi_min_deg": float(truth["phi_rad"].min() * deg), "phi_max_deg": float(truth["phi_rad"].max() * deg),
+        "V_min_m_s": float(np.min(V)), "V_max_m_s": float(np.max(V)),
+        "snr": {
+            "az": float(truth["az_sensor_m_s2"].std() / sigma["az_m_s2"]),
+            "q": float(truth["q_rad_s"].std() / sigma["q_rad_s"]),
+            "ax": float(truth["ax_sensor_m_s2"].std() / sigma["ax_m_s2"]),
+        },
+    }
