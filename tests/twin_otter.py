@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-DATA = Path("/work/shared/data/sidpac-twin-otter")
+DATA = Path(__file__).parent / "data" / "sidpac-twin-otter"  # public NASA data, copied with its README
 FLIGHTS = ("lon_020213f1_017.mat", "lon_020213f1_018.mat")
 
 VEHICLE_TOML = """

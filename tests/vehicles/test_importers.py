@@ -26,7 +26,8 @@ from tests.vehicles.twin_otter_csv import CSV_COLUMNS, write_twin_otter_csv
 
 ROOT = Path(__file__).parents[2]
 #: shared/ sits beside the checkout (CI, /work/main) or beside its parent (a worktree in /work/wt/NAME)
-DATA = next((d for d in (ROOT.parent / "shared" / "data" / "sidpac-twin-otter",
+DATA = next((d for d in (ROOT / "tests" / "data" / "sidpac-twin-otter",  # public NASA data, copied with its README
+                         ROOT.parent / "shared" / "data" / "sidpac-twin-otter",
                          ROOT.parents[1] / "shared" / "data" / "sidpac-twin-otter") if d.is_dir()),
             ROOT.parent / "shared" / "data" / "sidpac-twin-otter")
 F018, F017 = DATA / "lon_020213f1_018.mat", DATA / "lon_020213f1_017.mat"
