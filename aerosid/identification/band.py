@@ -11,7 +11,7 @@ process noise, which the gyro spectrum cannot tell (it is noise-dominated where
 it would matter), so a per-vehicle factor (``q_chain_scale``) had to be
 calibrated on the vehicle's own simulated truth -- and on a vehicle nobody
 calibrated, the smoothed q-dot had a gain of 0.88-0.95 and C_m_delta, C_m_q came
-out 10-20 % low (`/work/shared/notes/bandwidth-evidence.md`; docs/estimation.md).
+out 10-20 % low (docs/estimation.md has the measurements).
 
 What this module does instead (documented choice, measured in bench/):
 
