@@ -15,7 +15,7 @@ from aerosid.flight_coefficients import flight_coefficients
 from aerosid.derivatives import zero_phase_low_pass
 from aerosid.estimation.findings import DEPARTURE_MIN_S, DEPARTURE_SIGMA, Finding, dilate, span_findings
 from aerosid.identification.band import (accel_at_cg, band_limited_signals, band_noise_gain, bridge_spikes,
-                                         finite_runs, low_pass_runs, white_noise_sigma)
+                                         finite_runs, low_pass_runs)
 from aerosid.inversion import invert_alpha_beta, total_angles
 from aerosid.vehicle import Vehicle
 
@@ -219,13 +219,12 @@ def _band_signals(t, measured: pd.DataFrame, smoothed: pd.DataFrame, vehicle: Ve
                  ("X1_m_s2", bl.accel_cg_m_s2[:, 0]), ("Y1_m_s2", bl.accel_cg_m_s2[:, 1]),
                  ("Z1_m_s2", bl.accel_cg_m_s2[:, 2])]
         gain = band_noise_gain(fs, bl.band_hz)
-        noise = {"X1_m_s2": bl.accel_noise_m_s2[0], "Y1_m_s2": bl.accel_noise_m_s2[1],
-                 "Z1_m_s2": bl.accel_noise_m_s2[2]}
+        noise = dict(zip(("p_rad_s", "q_rad_s", "r_rad_s", "X1_m_s2", "Y1_m_s2", "Z1_m_s2"),
+                         (*bl.rate_noise_rad_s, *bl.accel_noise_m_s2)))
         gone = np.zeros(len(t), bool)
         for col, meas in pairs:
             sm = low_pass_runs(smoothed[col].to_numpy(float), fs, bl.band_hz, runs)
-            white = noise.get(col, white_noise_sigma(imu[:, 3 + ("p_rad_s", "q_rad_s", "r_rad_s").index(col)]
-                                                     if col.endswith("rad_s") else imu[:, 0], runs))
+            white = noise[col]
             sig_sm = smoothed[f"sigma_{col}"].to_numpy(float) if f"sigma_{col}" in smoothed else 0.0
             diff = meas - sm
             d = diff[np.isfinite(diff)]

@@ -43,6 +43,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.signal
 
+from aerosid.estimation.findings import true_runs
 from aerosid.rigid_body import inertia_constants
 
 #: Significance of a signal bin in noise-floor multiples (method.md §3's test; a noise
@@ -79,6 +80,7 @@ class BandLimitedSignals:
     used: np.ndarray
     band_source: str
     accel_noise_m_s2: tuple = (np.nan, np.nan, np.nan)  # white-noise 1-sigma of ax, ay, az [m/s^2]
+    rate_noise_rad_s: tuple = (np.nan, np.nan, np.nan)  # white-noise 1-sigma of p, q, r [rad/s]
     filter_runs: tuple = ()  # the (start, stop) runs the low-pass ran over (used is inside them)
 
     def low_pass(self, x: np.ndarray, fs_hz: float) -> np.ndarray:
@@ -153,8 +155,7 @@ def bridge_spikes(x: np.ndarray, residual: np.ndarray) -> np.ndarray:
             continue
         with np.errstate(invalid="ignore"):
             hit = ok & (np.abs(r - med) > SPIKE_SIGMA * scale)
-        d = np.diff(np.concatenate([[0], hit.astype(np.int8), [0]]))
-        for a, b in zip(np.nonzero(d == 1)[0], np.nonzero(d == -1)[0]):
+        for a, b in true_runs(hit):
             if b - a > SPIKE_MAX_RUN:
                 hit[a:b] = False
         good = np.isfinite(x2[:, j]) & ~hit
@@ -188,9 +189,7 @@ def white_noise_sigma(x: np.ndarray, runs: list[slice]) -> float:
 
 def finite_runs(ok: np.ndarray) -> list[slice]:
     """Contiguous runs of True in ok, as slices."""
-    ok = np.asarray(ok, bool)
-    d = np.diff(np.concatenate([[0], ok.astype(np.int8), [0]]))
-    return [slice(int(a), int(b)) for a, b in zip(np.nonzero(d == 1)[0], np.nonzero(d == -1)[0])]
+    return [slice(a, b) for a, b in true_runs(ok)]
 
 
 def low_pass_runs(x: np.ndarray, fs_hz: float, band_hz: float, runs: list[slice]) -> np.ndarray:
@@ -277,4 +276,5 @@ def band_limited_signals(t_s: np.ndarray, rates_rad_s: np.ndarray, accel_m_s2: n
         rates_rad_s=wf, ang_accel_rad_s2=ang, accel_cg_m_s2=acc,
         band_hz=float(band_hz), used=used, band_source=source,
         accel_noise_m_s2=tuple(white_noise_sigma(a[:, j], runs) for j in range(3)),
+        rate_noise_rad_s=tuple(white_noise_sigma(w[:, j], runs) for j in range(3)),
         filter_runs=tuple((r.start, r.stop) for r in runs))
