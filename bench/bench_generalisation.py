@@ -57,6 +57,7 @@ import numpy as np
 import pandas as pd
 
 sys.path.insert(0, str(Path(__file__).parent))
+from bench_accuracy import parse_seeds  # noqa: E402  (the seed-range syntax of the benches)
 from machine import cpu_model, loadavg  # noqa: E402  (bench/machine.py)
 
 COEFFICIENTS = {  # bench name -> truth / estimate name
@@ -73,14 +74,6 @@ def default_vehicles() -> list[str]:
     from aerosid.simulation.jsbsim_flight import GENERATED_AIRCRAFT
 
     return ["seed-rlv", "c172x", *GENERATED_AIRCRAFT]
-
-
-def parse_seeds(text: str) -> list[int]:
-    out = []
-    for part in text.split(","):
-        a, _, b = part.partition("-")
-        out.extend(range(int(a), int(b) + 1) if b else [int(a)])
-    return out
 
 
 def simulate(vehicle: str, seed: int, workdir: Path):
