@@ -406,7 +406,7 @@ def _preflight(telemetry: Path, vehicle: str | None, model_spec: str | None, pre
                                      f"({veh.source} [air_data]) but the telemetry has no such column",
                                      file=str(telemetry), column=c)
     if model_spec:
-        load_models(model_spec, base=default_models(veh))
+        load_models(model_spec, base=default_models(veh), mach_reference=veh.mach_reference)
     if windows:  # windows too short to smooth are refused now, naming the limit (gaps are seen later)
         from aerosid.preprocess import DEFAULT_MIN_SEGMENT_S
         from aerosid.segments import plan_segments

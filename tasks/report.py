@@ -8,7 +8,8 @@ from pathlib import Path
 from prefect import task
 
 from aerosid.models import load_models
-from aerosid.versions import run_default_models
+from aerosid.vehicle import load_vehicle
+from aerosid.versions import run_default_models, run_vehicle
 from aerosid.modelling_loop import refresh
 from aerosid.provenance import sha256_file
 from tasks import ledger
@@ -24,8 +25,10 @@ def report_task(run_dir: str, ctx: StageContext, inputs: list[str], model_spec: 
     base = base_record("report", ctx, files, [sha256_file(p) for p in files], params)
     started = time.perf_counter()
     try:
-        paths = refresh(run_dir, load_models(model_spec, base=run_default_models(run_dir)) if model_spec else None, truth=truth_path,
-                        mach_half_width=mach_half_width)
+        models = (load_models(model_spec, base=run_default_models(run_dir),
+                              mach_reference=load_vehicle(run_vehicle(run_dir)).mach_reference)
+                  if model_spec else None)
+        paths = refresh(run_dir, models, truth=truth_path, mach_half_width=mach_half_width)
     except Exception as exc:
         ledger.append(ctx.ledger_path, {**base, "status": "failed", "outputs": [], "error": f"{type(exc).__name__}: {exc}",
                                         "duration_s": time.perf_counter() - started})

@@ -165,7 +165,8 @@ def regression_task(flight_data_paths: list[str], run_dir: str, ctx: StageContex
     def produce() -> Produced:
         veh = load_vehicle(vehicle)
         fd = pd.concat([read_validated(p, FlightData) for p in flight_data_paths], ignore_index=True)
-        models = load_models(model_spec, base=default_models(veh)) if model_spec else None
+        models = load_models(model_spec, base=default_models(veh), mach_reference=veh.mach_reference) \
+            if model_spec else None
         ident = identify(fd, veh, models, mach_half_width)
         return Produced(ident.table(), {"aerosid.summary": ident.summary()}, rows_in=len(fd), note=ident.summary())
 
