@@ -60,6 +60,7 @@ from aerosid.diagnosis.candidates import Candidate, default_candidates, derived_
 from aerosid.expressions import evaluate
 from aerosid.identify import angle_cutoff_hz, mach_window_mask
 from aerosid.eiv import with_angle_noise
+from aerosid.model_specs import paste_lines
 from aerosid.models import ChannelModel, default_models, vehicle_signals
 from aerosid.regression import LinearFit, fit_linear, residual_autocovariance
 
@@ -347,7 +348,7 @@ class Diagnosis:
         where = self._where_text()
         if sig:
             e = sig[0]
-            add = (f"add `{e.spec_term}` to [{e.channel}] in the model spec, fit again "
+            add = ("add it with the lines below in a model spec file SPEC, fit again "
                    "(aerosid fit RUN_DIR --model SPEC) and diagnose again" if e.spec_term else
                    f"its term `{e.term}` needs a signal the model specs do not offer yet")
             others = [s.name for s in sig[1:]]
@@ -356,7 +357,8 @@ class Diagnosis:
             return (f"Most likely missing: {e.name} in {e.channel} ({e.meaning}). It explains "
                     f"{e.variance_share:.1%} of the {e.channel} residual variance (corrected partial F "
                     f"{e.partial_f_corrected:.3g}, p = {e.p_value:.2g}, held-out window consistency "
-                    f"{e.window_consistency:.0%}); {add}.{tail} {where}")
+                    f"{e.window_consistency:.0%}); {add}.{tail} {where}"
+                    + (f"\n\n{paste_lines(e.channel, e.spec_term)}" if e.spec_term else ""))
         ident = [e for e in self.effects if e.identifiable]
         best = max(ident, key=lambda e: e.score) if ident else None
         strongest = (f" Strongest candidate: {best.name} in {best.channel} (p = {best.p_value:.2g}, explains "
