@@ -79,7 +79,9 @@ class StageProgress:
                 else:
                     self._tasks[stage] = None
                     elapsed = time.monotonic() - self._started
-                    print(f"[{self.title} {elapsed:6.1f} s] {stage}", file=self.stream, flush=True)
+                    # written, not print()ed: a Prefect flow with log_prints would turn a print into a log record
+                    self.stream.write(f"[{self.title} {elapsed:6.1f} s] {stage}\n")
+                    self.stream.flush()
             if self._rich is not None and stage not in self._done:
                 self._rich.update(self._tasks[stage], completed=100 * fraction)
             if fraction >= 1.0:
@@ -98,3 +100,65 @@ def stage_progress(title: str, stream=None, live: bool | None = None) -> Iterato
     """``with stage_progress("simulate") as progress: core_function(..., progress=progress)``."""
     with StageProgress(title, stream, live) as p:
         yield p
+
+
+class RunProgress(StageProgress):
+    """StageProgress for `aerosid run` (events from tasks.progress): also an overall bar over
+    every stage execution expected, whose total grows as each flight's segments are planned
+    ("plan: <flight>, N segment(s)"), so that its ETA covers the whole run."""
+
+    #: stage executions of a flight besides its segments: preprocess, flight data, regression, report
+    FIXED_STAGES = 4
+
+    def __init__(self, title: str = "run", stream=None, live: bool | None = None):
+        super().__init__(title, stream, live)
+        self._total = self.FIXED_STAGES
+        self._finished: set[str] = set()
+        self._overall = None
+
+    def __enter__(self) -> "RunProgress":
+        super().__enter__()
+        if self._rich is not None:
+            self._overall = self._rich.add_task("all stages", total=self._total)
+        return self
+
+    def __call__(self, stage: str, fraction: float) -> None:
+        import re
+
+        if not self.enabled:
+            return
+        if stage.startswith("plan:"):
+            m = re.search(r"(\d+) segment", stage)
+            with self._lock:
+                self._total += int(m.group(1)) if m else 0
+                if self._overall is not None:
+                    self._rich.update(self._overall, total=self._total)
+        super().__call__(stage, fraction)
+        if fraction >= 1.0 and not stage.startswith("plan:") and ":" in stage:
+            with self._lock:
+                self._finished.add(stage)
+                if self._overall is not None:
+                    self._rich.update(self._overall, completed=len(self._finished),
+                                      description=f"all stages ({len(self._finished)} of {self._total})")
+
+    def __exit__(self, exc_type, exc, tb) -> None:
+        if exc_type is None and self._overall is not None:
+            with self._lock:
+                self._rich.update(self._overall, completed=self._total)
+        super().__exit__(exc_type, exc, tb)
+
+
+def quiet_console_logs() -> None:
+    """Prefect's console log handlers to WARNING while the progress display reports the stages
+    (INFO records still reach Prefect's API; the ledger records every stage).
+    AEROSID_PROGRESS=0 keeps Prefect's INFO lines instead of the display."""
+    import logging
+
+    if os.environ.get("AEROSID_PROGRESS", "1") in ("0", "false", "no"):
+        return
+    loggers = [logging.getLogger()] + [v for v in logging.root.manager.loggerDict.values()
+                                      if isinstance(v, logging.Logger)]
+    for logger in loggers:
+        for handler in logger.handlers:
+            if type(handler).__name__ == "PrefectConsoleHandler":
+                handler.setLevel(max(handler.level, logging.WARNING))

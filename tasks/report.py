@@ -12,7 +12,7 @@ from aerosid.vehicle import load_vehicle
 from aerosid.versions import run_default_models, run_vehicle
 from aerosid.modelling_loop import refresh
 from aerosid.provenance import sha256_file
-from tasks import ledger
+from tasks import ledger, progress
 from tasks.runner import StageContext, base_record
 from tasks.stages import IO_RETRIES
 
@@ -24,6 +24,8 @@ def report_task(run_dir: str, ctx: StageContext, inputs: list[str], model_spec: 
     files = [p for p in [*inputs, model_spec, truth_path] if p]
     base = base_record("report", ctx, files, [sha256_file(p) for p in files], params)
     started = time.perf_counter()
+    shown = progress.label("report", ctx.flight)
+    progress.emit(shown, 0.0)
     try:
         models = (load_models(model_spec, base=run_default_models(run_dir),
                               mach_reference=load_vehicle(run_vehicle(run_dir)).mach_reference)
@@ -33,6 +35,8 @@ def report_task(run_dir: str, ctx: StageContext, inputs: list[str], model_spec: 
         ledger.append(ctx.ledger_path, {**base, "status": "failed", "outputs": [], "error": f"{type(exc).__name__}: {exc}",
                                         "duration_s": time.perf_counter() - started})
         raise
+    finally:
+        progress.emit(shown, 1.0)
     outputs = [{"path": os.path.abspath(p), "sha256": sha256_file(p)} for p in paths.values()]
     ledger.append(ctx.ledger_path, {**base, "status": "ok", "outputs": outputs, "error": None,
                                     "duration_s": time.perf_counter() - started})

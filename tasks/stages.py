@@ -25,6 +25,7 @@ from schemas.coefficients import Coefficients
 from schemas.flight_data import FlightData
 from schemas.smoothed import SmoothedSegment
 from schemas.telemetry import PreprocessedTelemetry, RawTelemetry
+from tasks import progress
 from tasks.runner import Produced, StageContext, StageFailed, execute, read_validated
 
 
@@ -78,6 +79,7 @@ def plan_segments_task(pre_path: str, windows: list | None, min_duration_s: floa
     limit = json.loads(meta.get("aerosid.preprocess.params", "{}")).get("max_interp_gap_s")
     t = pd.read_parquet(pre_path, columns=["t_s"])["t_s"].to_numpy()
     plan = plan_segments(t, [tuple(g) for g in gaps], windows, min_duration_s, limit)
+    progress.emit(f"plan: {Path(pre_path).parent.name}, {len(plan.segments)} segment(s)", 1.0)
     return {"segments": [s.__dict__ for s in plan.segments], "dropped": [d.__dict__ for d in plan.dropped],
             "note": plan.dropped_note(), "refusal": plan.refusal() if not plan.segments else None}
 
