@@ -102,13 +102,18 @@ def simulate(case_name, effects, seed, out_dir, duration, rate, no_faults, list_
             raise click.UsageError("--effect, --duration and --rate apply to the built-in simulator, not --jsbsim")
         from aerosid.simulation.jsbsim_flight import JSBSimUnavailable, simulate_jsbsim
 
+        from aerosid.cli_progress import stage_progress
+
         try:
-            flight = simulate_jsbsim(jsbsim_aircraft, manoeuvre, seed=seed, faults=not no_faults)
+            with stage_progress("simulate") as progress:
+                flight = simulate_jsbsim(jsbsim_aircraft, manoeuvre, seed=seed, faults=not no_faults,
+                                         progress=progress)
+                progress("write", 0.0)
+                paths = flight.write(out_dir)
         except JSBSimUnavailable as exc:
             raise click.ClickException(str(exc)) from exc
         except ValueError as exc:
             raise click.BadParameter(str(exc)) from exc
-        paths = flight.write(out_dir)
         click.echo(flight.summary())
         for kind, path in paths.items():
             click.echo(f"  wrote {path}")
@@ -128,8 +133,12 @@ def simulate(case_name, effects, seed, out_dir, duration, rate, no_faults, list_
             case = replace(case, faults=case.faults.without_faults())
     except (KeyError, ValueError) as exc:
         raise click.BadParameter(str(exc.args[0] if exc.args else exc)) from exc
-    flight = run_simulation(case, parsed, seed=seed)
-    paths = flight.write(out_dir)
+    from aerosid.cli_progress import stage_progress
+
+    with stage_progress("simulate") as progress:
+        flight = run_simulation(case, parsed, seed=seed, progress=progress)
+        progress("sensors, faults and write", 0.0)
+        paths = flight.write(out_dir)
     click.echo(flight.summary())
     for kind, path in paths.items():
         click.echo(f"  wrote {path}")

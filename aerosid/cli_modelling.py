@@ -83,7 +83,11 @@ def diagnose(run_dir, model_spec, version_id, n_windows, mach_half_width, quiet)
     from aerosid.vehicle import load_vehicle
     from aerosid.versions import history, latest_models, models_from_spec, read_flight_data, run_vehicle
 
+    from aerosid.cli_progress import StageProgress
+
+    progress = StageProgress("diagnose").__enter__()
     try:
+        progress("read the flight data", 0.0)
         fd = read_flight_data(run_dir)
         vehicle = load_vehicle(run_vehicle(run_dir))
         if model_spec is not None:
@@ -96,17 +100,25 @@ def diagnose(run_dir, model_spec, version_id, n_windows, mach_half_width, quiet)
             h = history(run_dir)
             models = latest_models(run_dir)
             source = h.latest.id if h.latest else "default models"
-        diag = run_diagnosis(fd, vehicle, models, mach_half_width=mach_half_width, n_windows=n_windows)
+        diag = run_diagnosis(fd, vehicle, models, mach_half_width=mach_half_width, n_windows=n_windows,
+                             progress=progress)
     except _errors() as exc:
+        progress.close()
         raise click.ClickException(str(exc)) from exc
     except ValueError as exc:
+        progress.close()
         raise click.ClickException(f"{run_dir / 'flight_data.parquet'}: {exc}") from exc
+    except BaseException:
+        progress.close()
+        raise
     doc = diag.to_json()
     doc["model"] = source
     out = write_json_atomic(doc, run_dir / "diagnosis.json")
     from aerosid.report import write_report
 
-    report = write_report(run_dir, diagnosis=diag)
+    with progress:
+        progress("write report.html", 0.0)
+        report = write_report(run_dir, diagnosis=diag)
     if not quiet:
         click.echo(f"model: {source}")
         click.echo(diag.summary())

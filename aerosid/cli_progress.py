@@ -43,7 +43,7 @@ class StageProgress:
 
     # -- context
     def __enter__(self) -> "StageProgress":
-        if self.live:
+        if self.live and self._rich is None:
             from rich.console import Console
             from rich.progress import (BarColumn, Progress, SpinnerColumn, TaskProgressColumn, TextColumn,
                                        TimeElapsedColumn, TimeRemainingColumn)
@@ -63,6 +63,10 @@ class StageProgress:
                         self._rich.update(task, completed=100)
                 self._rich.stop()
                 self._rich = None
+
+    def close(self) -> None:
+        """End the display (as leaving the with block does)."""
+        self.__exit__(None, None, None)
 
     # -- the callback
     def __call__(self, stage: str, fraction: float) -> None:

@@ -48,7 +48,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Sequence
+from typing import Callable, Sequence
 
 import numpy as np
 import pandas as pd
@@ -589,7 +589,8 @@ def _already_in(model: ChannelModel, cand: Candidate) -> bool:
 def diagnose(flight_data: pd.DataFrame, vehicle, models: dict[str, ChannelModel] | None = None, *,
              mach_half_width: float | None = 0.5, n_windows: int = 8,
              candidates: Sequence[Candidate] | None = None, cov: str = "morelli_klein",
-             angle_sigma_rad: float | None = None) -> Diagnosis:
+             angle_sigma_rad: float | None = None,
+             progress: Callable[[str, float], None] | None = None) -> Diagnosis:
     """Diagnose `models` (default: the method.md §11 models) against the flight data.
 
     flight_data: a FlightData frame (schemas/flight_data.py); the samples with
@@ -600,6 +601,7 @@ def diagnose(flight_data: pd.DataFrame, vehicle, models: dict[str, ChannelModel]
     errors-in-variables (SIMEX) check.  Default: median(sigma_CN) / |CN_alpha|
     (alpha and beta come from inverting the force database, so a C_N error maps
     to an angle error through the normal-force slope); 0 switches the check off.
+    progress: an optional callback progress("candidates", fraction done) (the CLI's display).
     """
     models = dict(models or default_models(vehicle))
     if candidates is None:
@@ -630,7 +632,9 @@ def diagnose(flight_data: pd.DataFrame, vehicle, models: dict[str, ChannelModel]
     reports: dict[str, ChannelReport] = {}
     simex_cache: dict = {}
     evidence: list[EffectEvidence] = []
-    for ch, model in models.items():
+    for ch_i, (ch, model) in enumerate(models.items()):
+        if progress is not None:
+            progress("candidates", ch_i / len(models))
         y = fd[ch].to_numpy(float)
         Xb, notes = model.design(signals)
         base = fit_linear(y, Xb, names=model.names, channel=ch, cov=cov)
@@ -650,7 +654,9 @@ def diagnose(flight_data: pd.DataFrame, vehicle, models: dict[str, ChannelModel]
         cands = [c for c in candidates if c.channel == ch and not _already_in(model, c)]
         perp_cols: dict[str, np.ndarray] = {}
         chan_ev: list[dict] = []
-        for c in cands:
+        for c_i, c in enumerate(cands):
+            if progress is not None:
+                progress("candidates", (ch_i + c_i / len(cands)) / len(models))
             x = np.asarray(c.regressor(signals), float)
             if x.shape != y.shape or not np.all(np.isfinite(x)):
                 chan_ev.append(_not_testable(c, "the term is not finite on every sample", base))
