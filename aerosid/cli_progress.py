@@ -131,7 +131,7 @@ class RunProgress(StageProgress):
 
         if not self.enabled:
             return
-        if stage.startswith("plan:"):
+        if stage.startswith("plan:") and stage not in self._tasks:  # each flight's plan counted once
             m = re.search(r"(\d+) segment", stage)
             with self._lock:
                 self._total += int(m.group(1)) if m else 0
