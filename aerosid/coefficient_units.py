@@ -92,3 +92,12 @@ def unit_label(expression: str, per_degree: bool) -> str:
         return ""
     base = "/deg" if per_degree else "/rad"
     return base if k == 1 else f"{base}^{k:g}"
+
+
+def units_header(per_degree: bool) -> str:
+    """The one line that says which units a coefficient table is in."""
+    if per_degree:
+        return ("PER DEGREE (--per-degree): angle and control slopes per deg (a finned vehicle's fin slopes per "
+                "degree pair, i.e. of delta/2), rate derivatives per deg/s")
+    return ("SI per radian: angle and control slopes per rad (a finned vehicle's fin slopes per rad of delta/2), "
+            "rate derivatives per rad/s")

@@ -77,12 +77,9 @@ def format_table(table: pd.DataFrame, per_degree: bool = False) -> str:
     (corrected and plain OLS) vs F.  SI per radian for every coefficient (slopes and rate
     derivatives alike); per_degree: per degree instead (aerosid.coefficient_units), and
     the header says which."""
-    from aerosid.coefficient_units import per_degree_factor, unit_label
+    from aerosid.coefficient_units import per_degree_factor, unit_label, units_header
 
-    unit = ("PER DEGREE (--per-degree): angle slopes per deg, rate derivatives per deg/s, fin slopes per degree "
-            "pair (of delta/2)" if per_degree else
-            "SI per radian: angle slopes per rad, rate derivatives per rad/s, fin slopes per rad of delta/2")
-    lines = [f"moments about the CG; {unit}; unit = the coefficient's",
+    lines = [f"moments about the CG; {units_header(per_degree)}",
              f"{'coefficient':<20}{'preflight':>12}{'estimate':>12}{'sigma':>11}{'sigma OLS':>11}{'95% interval':>26}"
              "  unit"]
     for channel, rows in table.groupby("channel", sort=False):

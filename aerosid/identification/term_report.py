@@ -11,7 +11,7 @@ import math
 
 import pandas as pd
 
-from aerosid.coefficient_units import per_degree_factor, unit_label
+from aerosid.coefficient_units import per_degree_factor, unit_label, units_header
 
 #: Significance level of a term (the diagnosis's rule: corrected p < 0.001).
 P_MAX = 1e-3
@@ -26,10 +26,7 @@ def term_table(table: pd.DataFrame, per_degree: bool = False, new_terms: frozens
     """A coefficients table (coefficients.parquet rows) as one block per channel:
     coefficient, estimate, sigma, t, p, significant at p < p_max, unit.  new_terms: the
     coefficients added relative to the parent (marked +)."""
-    unit = ("PER DEGREE (--per-degree): angle slopes per deg, rate derivatives per deg/s, fin slopes per degree pair"
-            if per_degree else "SI per radian: angle slopes per rad, rate derivatives per rad/s, fin slopes per rad "
-                               "of delta/2")
-    lines = [f"fitted terms ({unit}); sigma corrected for coloured residuals, t = estimate/sigma, "
+    lines = [f"fitted terms ({units_header(per_degree)}); sigma corrected for coloured residuals, t = estimate/sigma, "
              f"p two-sided Student-t(N_eff - terms); significant: p < {p_max:g}; + = new vs the parent",
              f"  {'coefficient':<22}{'estimate':>13}{'sigma':>11}{'t':>9}{'p':>10}  {'signif.':<8}unit"]
     for channel, rows in table.groupby("channel", sort=False):
