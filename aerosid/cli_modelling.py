@@ -20,7 +20,7 @@ The modelling loop:
   aerosid diagnose runs/ref/result           # where does the model fail, what is missing?
   cat > cm.toml <<EOF
   [Cm]
-  terms = ["Cm_0 = 1", "Cm_alpha = alpha", "Cm_delta_p = delta_p/2", "control_alpha"]
+  add = ["control_alpha"]      # the lines the diagnosis prints; the other terms stay
   EOF
   aerosid fit runs/ref/result --model cm.toml --note "add control-alpha"
   aerosid diagnose runs/ref/result           # diagnoses the latest version
