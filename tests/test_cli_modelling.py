@@ -24,7 +24,8 @@ from aerosid.diagnosis.synthetic import MEASURED_NOISE, flight_data_from_truth
 from aerosid.effects import CATALOGUE
 from aerosid.identify import format_table
 from aerosid.model_specs import apply_spec, paste_lines, read_spec
-from aerosid.models import ModelSpecError, default_models, load_models, models_to_toml, signals_from_flight_data
+from aerosid.models import (ModelSpecError, default_models, load_models, models_to_toml, parse_term,
+                            signals_from_flight_data)
 from aerosid.versions import fit_version, history, models_from_spec
 
 MACH = ["--mach-half-width", "1.0"]  # the 20 s flight spans Mach 12.75..13.1
@@ -148,7 +149,7 @@ def test_bad_add_remove_is_refused_naming_file_channel_and_term(tmp_path, text, 
 
 def test_adding_a_term_the_parent_has_changes_nothing_and_says_so():
     base = default_models()
-    base["Cm"] = base["Cm"].with_term(load_models.__globals__["parse_term"]("control_alpha", "Cm"))
+    base["Cm"] = base["Cm"].with_term(parse_term("control_alpha", "Cm"))
     res = apply_spec({"Cm": {"add": ["control_alpha"]}}, base)
     assert res.models["Cm"] == base["Cm"]
     assert res.warnings() == ["note: [Cm] add: control_alpha already in the parent's model (nothing added)"]
@@ -313,3 +314,19 @@ def test_the_core_imports_no_cli_library():
             + "print(sorted(m for m in ('rich', 'click') if m in sys.modules))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "[]", out.stdout
+
+
+def test_the_readme_specs_apply_to_the_version_after_control_alpha():
+    import tomllib
+    from pathlib import Path
+
+    text = (Path(__file__).parents[1] / "README.md").read_text()
+    blocks = re.findall(r"```toml\n(.*?)```", text, re.S)
+    assert len(blocks) >= 2
+    parent = default_models()
+    parent["Cm"] = parent["Cm"].with_term(parse_term("control_alpha", "Cm"))
+    first = apply_spec(tomllib.loads(blocks[0]), default_models())
+    assert first.models["Cm"] == parent["Cm"] and not first.warnings()
+    second = apply_spec(tomllib.loads(blocks[1]), parent)
+    assert second.models["Cm"].names == ("Cm_0", "Cm_alpha", "Cm_delta_p", "Cm_a3", "Cm_q")
+    assert second.models["Cl"].names[-1] == "Cl_p" and "drops Cl_cos4phi" in second.warnings()[0]
