@@ -78,20 +78,21 @@ def diagnose(run_dir, model_spec, version_id, n_windows, mach_half_width, quiet)
     and diagnose again.
     """
     _check_run_dir(run_dir)
+    from aerosid.cli_progress import StageProgress
     from aerosid.diagnosis import diagnose as run_diagnosis
     from aerosid.io import write_json_atomic
     from aerosid.vehicle import load_vehicle
-    from aerosid.versions import history, latest_models, models_from_spec, read_flight_data, run_vehicle
+    from aerosid.versions import history, latest_models, read_flight_data, run_vehicle, spec_for_run
 
-    from aerosid.cli_progress import StageProgress
-
+    spec_warnings: list[str] = []
     progress = StageProgress("diagnose").__enter__()
     try:
         progress("read the flight data", 0.0)
         fd = read_flight_data(run_dir)
         vehicle = load_vehicle(run_vehicle(run_dir))
         if model_spec is not None:
-            models = models_from_spec(model_spec, run_dir, version_id)
+            spec = spec_for_run(model_spec, run_dir, version_id)
+            models, spec_warnings = spec.models, spec.warnings()
             source = str(model_spec)
         elif version_id is not None:
             models = dict(history(run_dir).get(version_id).models)
@@ -119,6 +120,8 @@ def diagnose(run_dir, model_spec, version_id, n_windows, mach_half_width, quiet)
     with progress:
         progress("write report.html", 0.0)
         report = write_report(run_dir, diagnosis=diag)
+    for line in spec_warnings:  # e.g. the parent's terms a terms = [...] list dropped
+        click.echo(line)
     if not quiet:
         click.echo(f"model: {source}")
         click.echo(diag.summary())
@@ -126,8 +129,8 @@ def diagnose(run_dir, model_spec, version_id, n_windows, mach_half_width, quiet)
 
 
 _PER_DEGREE = click.option("--per-degree", is_flag=True,
-                           help="Print coefficients per degree (angle slopes per deg, rate derivatives per deg/s, "
-                                "fin slopes per degree pair) instead of SI per radian.")
+                           help="Print coefficients per degree (angle and control slopes per deg, fin slopes per "
+                                "degree pair, rate derivatives per deg/s) instead of SI per radian.")
 
 
 @click.command(epilog=EPILOG_LOOP)

@@ -330,3 +330,13 @@ def test_the_readme_specs_apply_to_the_version_after_control_alpha():
     second = apply_spec(tomllib.loads(blocks[1]), parent)
     assert second.models["Cm"].names == ("Cm_0", "Cm_alpha", "Cm_delta_p", "Cm_a3", "Cm_q")
     assert second.models["Cl"].names[-1] == "Cl_p" and "drops Cl_cos4phi" in second.warnings()[0]
+
+
+def test_diagnose_with_a_replacing_spec_names_the_dropped_terms(run_dir, tmp_path):
+    from aerosid.cli_modelling import diagnose as diagnose_cmd
+
+    spec = _spec(tmp_path, '[Cl]\nterms = ["Cl_0 = 1", "Cl_delta_r = delta_r"]\n')
+    result = CliRunner().invoke(diagnose_cmd, [str(run_dir), "--model", str(spec), "--quiet", *MACH])
+    assert result.exit_code == 0, result.output
+    assert "warning: [Cl] terms = [...] replaces the parent's model and drops Cl_alpha_r, Cl_cos4phi" in result.output
+    assert json.loads((run_dir / "diagnosis.json").read_text())["channels"]["Cl"]["terms"] == ["Cl_0", "Cl_delta_r"]
