@@ -92,12 +92,24 @@ def _items(table: dict, key: str, channel: str, src: str) -> list[str] | None:
     return value
 
 
-def _matches(term: Term, item: str) -> bool:
+def _matches(term: Term, item: str, named: Term | None) -> bool:
+    """remove = [item]: a coefficient name, a candidate name (named: the term it stands for;
+    a version read back from disk keeps only the expression of a non-catalogue candidate)
+    or the term text."""
     item = item.strip()
-    if item in (term.coefficient, term.effect):
+    if item in (term.coefficient, term.effect) or (named is not None and named.coefficient == term.coefficient):
         return True
     name, eq, expr = item.partition("=")
     return bool(eq) and name.strip() == term.coefficient and expr.replace(" ", "") == term.expression.replace(" ", "")
+
+
+def _named(item: str, channel: str, mach_reference: float) -> Term | None:
+    if "=" in item:
+        return None
+    try:
+        return parse_terms([item], channel, "<remove>", mach_reference)[0]
+    except ModelSpecError:
+        return None
 
 
 def apply_channel(table: dict, channel: str, parent: ChannelModel | None, src: str,
@@ -127,7 +139,8 @@ def apply_channel(table: dict, channel: str, parent: ChannelModel | None, src: s
         current = list(parent.terms)
     removed = []
     for item in remove or ():
-        hit = [t for t in current if _matches(t, item)]
+        named = _named(item, channel, mach_reference)
+        hit = [t for t in current if _matches(t, item, named)]
         if not hit:
             have = ", ".join(term_label(t) for t in current)
             raise ModelSpecError(f"{src}: [{channel}] remove: {item!r} is not a term of the model (its terms: {have})")

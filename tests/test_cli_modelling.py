@@ -340,3 +340,12 @@ def test_diagnose_with_a_replacing_spec_names_the_dropped_terms(run_dir, tmp_pat
     assert result.exit_code == 0, result.output
     assert "warning: [Cl] terms = [...] replaces the parent's model and drops Cl_alpha_r, Cl_cos4phi" in result.output
     assert json.loads((run_dir / "diagnosis.json").read_text())["channels"]["Cl"]["terms"] == ["Cl_0", "Cl_delta_r"]
+
+
+def test_a_candidate_added_by_name_is_removed_by_name_after_a_round_trip_to_disk(tmp_path):
+    added = apply_spec({"Cm": {"add": ["mach_cm0"]}}, default_models()).models
+    path = tmp_path / "spec.toml"
+    path.write_text(models_to_toml(added))
+    stored = load_models(path, base={})
+    assert stored["Cm"].terms[-1].effect is None  # stored as its expression
+    assert apply_spec({"Cm": {"remove": ["mach_cm0"]}}, stored).models["Cm"] == default_models()["Cm"]
