@@ -102,13 +102,18 @@ def simulate(case_name, effects, seed, out_dir, duration, rate, no_faults, list_
             raise click.UsageError("--effect, --duration and --rate apply to the built-in simulator, not --jsbsim")
         from aerosid.simulation.jsbsim_flight import JSBSimUnavailable, simulate_jsbsim
 
+        from aerosid.cli_progress import stage_progress
+
         try:
-            flight = simulate_jsbsim(jsbsim_aircraft, manoeuvre, seed=seed, faults=not no_faults)
+            with stage_progress("simulate") as progress:
+                flight = simulate_jsbsim(jsbsim_aircraft, manoeuvre, seed=seed, faults=not no_faults,
+                                         progress=progress)
+                progress("write", 0.0)
+                paths = flight.write(out_dir)
         except JSBSimUnavailable as exc:
             raise click.ClickException(str(exc)) from exc
         except ValueError as exc:
             raise click.BadParameter(str(exc)) from exc
-        paths = flight.write(out_dir)
         click.echo(flight.summary())
         for kind, path in paths.items():
             click.echo(f"  wrote {path}")
@@ -128,8 +133,12 @@ def simulate(case_name, effects, seed, out_dir, duration, rate, no_faults, list_
             case = replace(case, faults=case.faults.without_faults())
     except (KeyError, ValueError) as exc:
         raise click.BadParameter(str(exc.args[0] if exc.args else exc)) from exc
-    flight = run_simulation(case, parsed, seed=seed)
-    paths = flight.write(out_dir)
+    from aerosid.cli_progress import stage_progress
+
+    with stage_progress("simulate") as progress:
+        flight = run_simulation(case, parsed, seed=seed, progress=progress)
+        progress("sensors, faults and write", 0.0)
+        paths = flight.write(out_dir)
     click.echo(flight.summary())
     for kind, path in paths.items():
         click.echo(f"  wrote {path}")
@@ -196,8 +205,11 @@ def _quiet_run_tracebacks() -> None:
 @click.option("--min-segment-s", type=float, default=None,
               help="Shortest piece of the flight that is smoothed [s] (default: the vehicle file's "
                    "[preprocess] min_segment_s, else 5).")
+@click.option("--per-degree", is_flag=True,
+              help="Print coefficients per degree (angle slopes per deg, rate derivatives per deg/s, fin slopes "
+                   "per degree pair) instead of SI per radian.")
 def run(telemetry, vehicle, out_dir, flight, windows, model_spec, mach_half_width, preprocess_settings,
-        min_segment_s):
+        min_segment_s, per_degree):
     """Run the whole pipeline on one telemetry file (Prefect flow process_flight), or
     identify one model from several manoeuvres of one aircraft (process_manoeuvres).
 
@@ -228,25 +240,30 @@ def run(telemetry, vehicle, out_dir, flight, windows, model_spec, mach_half_widt
 
             check_flight_id(flight)
         from aerosid.cli_prefect import PrefectServer
+        from aerosid.cli_progress import RunProgress, quiet_console_logs
+        from tasks.progress import listening
 
-        server = PrefectServer()  # starts up while the flows are imported
-        from flows.pipeline import pooled_vehicle, process_flight, process_manoeuvres
+        with RunProgress("run") as progress:  # stages, segments, ETA (one line per stage when not a TTY)
+            progress("start Prefect (local API server)", 0.0)
+            server = PrefectServer()  # starts up while the flows are imported
+            from flows.pipeline import pooled_vehicle, process_flight, process_manoeuvres
 
-        vehicle = pooled_vehicle([str(t) for t in telemetry], vehicle) if pooled else named[0]
-        _quiet_run_tracebacks()
-        server.wait()
-        with server.settings():
-            if pooled:
-                summary = process_manoeuvres([str(t) for t in telemetry], str(out_dir), vehicle=vehicle, name=flight,
+            vehicle = pooled_vehicle([str(t) for t in telemetry], vehicle) if pooled else named[0]
+            _quiet_run_tracebacks()
+            server.wait()
+            quiet_console_logs()
+            with server.settings(), listening(progress):
+                if pooled:
+                    summary = process_manoeuvres([str(t) for t in telemetry], str(out_dir), vehicle=vehicle,
+                                                 name=flight, model_spec=str(model_spec) if model_spec else None,
+                                                 mach_half_width=mach_half_width, preprocess_params=params,
+                                                 min_segment_s=min_segment_s)
+                else:
+                    summary = process_flight(str(telemetry[0]), str(out_dir), vehicle=vehicle, flight=flight,
+                                             windows=[list(w) for w in windows] or None,
                                              model_spec=str(model_spec) if model_spec else None,
                                              mach_half_width=mach_half_width, preprocess_params=params,
                                              min_segment_s=min_segment_s)
-            else:
-                summary = process_flight(str(telemetry[0]), str(out_dir), vehicle=vehicle, flight=flight,
-                                         windows=[list(w) for w in windows] or None,
-                                         model_spec=str(model_spec) if model_spec else None,
-                                         mach_half_width=mach_half_width, preprocess_params=params,
-                                         min_segment_s=min_segment_s)
     except (TelemetryError, VehicleError, ValueError, RuntimeError) as exc:  # RuntimeError: tasks' StageFailed
         raise click.ClickException(str(exc)) from exc
     except OSError as exc:  # read-only or full output folder, a vanished file
@@ -277,8 +294,12 @@ def run(telemetry, vehicle, out_dir, flight, windows, model_spec, mach_half_widt
 
         if pooled:
             click.echo(f"pooled {len(summary['flights'])} manoeuvres into one identification: {summary['status']}")
-        click.echo(format_table(pd.read_parquet(summary["coefficients"]["path"])))
+        click.echo(format_table(pd.read_parquet(summary["coefficients"]["path"]), per_degree=per_degree))
         click.echo(f"wrote {out_dir}/coefficients.parquet, report.html, diagnosis.json, run.json, ledger.jsonl")
+        from aerosid.cli_run_summary import run_outcome_lines
+
+        for line in run_outcome_lines(Path(out_dir), mach_half_width):
+            click.echo(line)
     if summary["status"] == "failed":
         reasons = "; ".join(f"{f['segment']}: {f['error']}" for fs in summary.get("flights", [summary])
                             for f in fs["segments_failed"])
@@ -406,7 +427,7 @@ def _preflight(telemetry: Path, vehicle: str | None, model_spec: str | None, pre
                                      f"({veh.source} [air_data]) but the telemetry has no such column",
                                      file=str(telemetry), column=c)
     if model_spec:
-        load_models(model_spec, base=default_models(veh))
+        load_models(model_spec, base=default_models(veh), mach_reference=veh.mach_reference)
     if windows:  # windows too short to smooth are refused now, naming the limit (gaps are seen later)
         from aerosid.preprocess import DEFAULT_MIN_SEGMENT_S
         from aerosid.segments import plan_segments

@@ -23,8 +23,19 @@ def import_group() -> None:
     radians) and DIR/vehicle.toml, which `aerosid run DIR/telemetry.parquet` finds."""
 
 
-def _write(imported, out_dir: Path) -> None:
-    paths = imported.write(out_dir)
+def _import(read, out_dir: Path) -> None:
+    """read() -> the imported flight; written to out_dir, with a stage display (aerosid.cli_progress)."""
+    from aerosid.cli_progress import stage_progress
+
+    with stage_progress("import") as progress:
+        progress("read, convert and check", 0.0)
+        imported = read()
+        progress("write", 0.0)
+        paths = imported.write(out_dir)
+    _echo_written(imported, paths, out_dir)
+
+
+def _echo_written(imported, paths: dict, out_dir: Path) -> None:
     click.echo(imported.summary())
     for path in paths.values():
         click.echo(f"  wrote {path}")
@@ -55,7 +66,7 @@ def sidpac(file, out_dir):
     from aerosid.vehicles.sidpac import import_sidpac
 
     try:
-        _write(import_sidpac(file), out_dir)
+        _import(lambda: import_sidpac(file), out_dir)
     except _errors() as exc:
         raise click.ClickException(str(exc)) from exc
     except OSError as exc:
@@ -76,7 +87,7 @@ def csv(file, map_file, out_dir):
     from aerosid.vehicles.csv_import import import_csv
 
     try:
-        _write(import_csv(file, map_file), out_dir)
+        _import(lambda: import_csv(file, map_file), out_dir)
     except _errors() as exc:
         raise click.ClickException(str(exc)) from exc
     except OSError as exc:

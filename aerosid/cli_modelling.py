@@ -20,7 +20,7 @@ The modelling loop:
   aerosid diagnose runs/ref/result           # where does the model fail, what is missing?
   cat > cm.toml <<EOF
   [Cm]
-  terms = ["Cm_0 = 1", "Cm_alpha = alpha", "Cm_delta_p = delta_p/2", "control_alpha"]
+  add = ["control_alpha"]      # the lines the diagnosis prints; the other terms stay
   EOF
   aerosid fit runs/ref/result --model cm.toml --note "add control-alpha"
   aerosid diagnose runs/ref/result           # diagnoses the latest version
@@ -78,16 +78,21 @@ def diagnose(run_dir, model_spec, version_id, n_windows, mach_half_width, quiet)
     and diagnose again.
     """
     _check_run_dir(run_dir)
+    from aerosid.cli_progress import StageProgress
     from aerosid.diagnosis import diagnose as run_diagnosis
     from aerosid.io import write_json_atomic
     from aerosid.vehicle import load_vehicle
-    from aerosid.versions import history, latest_models, models_from_spec, read_flight_data, run_vehicle
+    from aerosid.versions import history, latest_models, read_flight_data, run_vehicle, spec_for_run
 
+    spec_warnings: list[str] = []
+    progress = StageProgress("diagnose").__enter__()
     try:
+        progress("read the flight data", 0.0)
         fd = read_flight_data(run_dir)
         vehicle = load_vehicle(run_vehicle(run_dir))
         if model_spec is not None:
-            models = models_from_spec(model_spec, run_dir, version_id)
+            spec = spec_for_run(model_spec, run_dir, version_id)
+            models, spec_warnings = spec.models, spec.warnings()
             source = str(model_spec)
         elif version_id is not None:
             models = dict(history(run_dir).get(version_id).models)
@@ -96,34 +101,54 @@ def diagnose(run_dir, model_spec, version_id, n_windows, mach_half_width, quiet)
             h = history(run_dir)
             models = latest_models(run_dir)
             source = h.latest.id if h.latest else "default models"
-        diag = run_diagnosis(fd, vehicle, models, mach_half_width=mach_half_width, n_windows=n_windows)
+        diag = run_diagnosis(fd, vehicle, models, mach_half_width=mach_half_width, n_windows=n_windows,
+                             progress=progress)
     except _errors() as exc:
+        progress.close()
         raise click.ClickException(str(exc)) from exc
     except ValueError as exc:
+        progress.close()
         raise click.ClickException(f"{run_dir / 'flight_data.parquet'}: {exc}") from exc
+    except BaseException:
+        progress.close()
+        raise
     doc = diag.to_json()
     doc["model"] = source
     out = write_json_atomic(doc, run_dir / "diagnosis.json")
     from aerosid.report import write_report
 
-    report = write_report(run_dir, diagnosis=diag)
+    with progress:
+        progress("write report.html", 0.0)
+        report = write_report(run_dir, diagnosis=diag)
+    for line in spec_warnings:  # e.g. the parent's terms a terms = [...] list dropped
+        click.echo(line)
     if not quiet:
         click.echo(f"model: {source}")
         click.echo(diag.summary())
     click.echo(f"wrote {out} and {report}")
 
 
+_PER_DEGREE = click.option("--per-degree", is_flag=True,
+                           help="Print coefficients per degree (angle and control slopes per deg, fin slopes per "
+                                "degree pair, rate derivatives per deg/s) instead of SI per radian.")
+
+
 @click.command(epilog=EPILOG_LOOP)
 @_RUN_DIR
 @click.option("--model", "model_spec", type=click.Path(dir_okay=False, path_type=Path), default=None,
-              help="Model spec TOML: one table per channel, terms = [\"NAME = EXPRESSION\" or a catalogue effect "
-                   "name]. Channels it does not mention keep the parent's terms. Default: the default models.")
+              help="Model spec TOML, one table per channel: add = [...] / remove = [...] change the parent's "
+                   "terms; terms = [...] replaces them (and says which it drops). A term is \"NAME = EXPRESSION\" "
+                   "or a candidate's name (e.g. control_alpha, mach_cm0, roll_damping). Channels it does not "
+                   "mention keep the parent's terms. Default: the default models.")
 @click.option("--parent", default=None, metavar="vNNN", help="Parent version (default: the latest).")
 @click.option("--note", default="", help="A short note stored with the version (why this change).")
 @_MACH
-def fit(run_dir, model_spec, parent, note, mach_half_width):
+@_PER_DEGREE
+def fit(run_dir, model_spec, parent, note, mach_half_width, per_degree):
     """Fit a model spec to the run's flight data and keep it as a new version.
 
+    Prints every term's estimate, sigma (corrected for coloured residuals), t and
+    p per channel, and warns on terms that are not significant (p >= 0.001).
     Each version RUN_DIR/models/vNNN/ holds spec.toml, metrics.json (per
     channel: residual RMS, R^2, PSE, F, coefficients and their coloured-residual
     sigma), coefficients.parquet and its parent's id.  The first fit of a run
@@ -131,20 +156,31 @@ def fit(run_dir, model_spec, parent, note, mach_half_width):
     to compare with.  Versions are never overwritten.
 
     \b
+    A spec relative to the parent version (the latest, or --parent):
+      [Cm]
+      add = ["control_alpha", "Cm_a3 = alpha**3"]
+      remove = ["Cm_0"]
+
+    \b
     Term syntax (SI, radians): "Cm_q = q_hat", "Cm_aa = alpha*abs(alpha)",
-    "Cm_step = (sign(mach - 12.2) - sign(mach - 12.35))/2", or a catalogue name
-    such as "pitch_damping".  Signals: alpha beta alpha_r phi_r mach V qbar
-    delta_p delta_y delta_r p q r p_hat q_hat r_hat t; functions sin cos tan
-    arctan tanh exp log sqrt abs sign.
+    "Cm_step = (sign(mach - 12.2) - sign(mach - 12.35))/2", or a candidate
+    name such as "pitch_damping".  Signals: alpha beta alpha_r phi_r mach V qbar
+    delta_p delta_y delta_r p q r p_hat q_hat r_hat alpha_dot_hat beta_dot_hat t;
+    functions sin cos tan arctan tanh exp log sqrt abs sign.
     """
     _check_run_dir(run_dir)
-    from aerosid.versions import fit_version, history, models_from_spec
+    from aerosid.cli_progress import stage_progress
+    from aerosid.versions import fit_version, history, spec_for_run
 
     try:
-        models = models_from_spec(model_spec, run_dir, parent) if model_spec is not None else None
-        before = history(run_dir)
-        v = fit_version(run_dir, models, parent=parent, note=note, mach_half_width=mach_half_width)
-        h = history(run_dir)
+        with stage_progress("fit") as progress:
+            progress("read the model spec", 0.0)
+            spec = spec_for_run(model_spec, run_dir, parent) if model_spec is not None else None
+            before = history(run_dir)
+            progress("fit the model", 0.0)
+            v = fit_version(run_dir, spec.models if spec else None, parent=parent, note=note,
+                            mach_half_width=mach_half_width)
+            h = history(run_dir)
     except _errors() as exc:
         raise click.ClickException(str(exc)) from exc
     except ValueError as exc:
@@ -152,18 +188,44 @@ def fit(run_dir, model_spec, parent, note, mach_half_width):
     created = [x.id for x in h.versions if x.id not in {y.id for y in before.versions}]
     click.echo(f"created {', '.join(created)}")
     click.echo(v.summary())
+    p = h.get(v.parent) if v.parent else None
+    _echo_terms(v, p, per_degree)
     for line in _loud_warnings(v.path / "coefficients.parquet"):
         click.echo(line)
-    if v.parent:
-        p = h.get(v.parent)
+    if p is not None:
         click.echo(f"changes vs {p.id}: {h.changes(v)}")
         for ch in v.metrics["channels"]:
             a, b = p.channel_metric(ch, "rms_residual"), v.channel_metric(ch, "rms_residual")
             if a > 0:
                 click.echo(f"  {ch:<4} residual RMS {a:.4g} -> {b:.4g} ({100 * (b / a - 1):+.1f} %)")
+    for line in spec.warnings() if spec else ():  # e.g. the parent's terms a terms = [...] list dropped
+        click.echo(line)
     from aerosid.report import write_report
 
-    click.echo(f"wrote {write_report(run_dir)} (run `aerosid diagnose` to re-diagnose this version)")
+    with stage_progress("report") as progress:
+        progress("write report.html", 0.0)
+        report = write_report(run_dir)
+    click.echo(f"wrote {report} (run `aerosid diagnose` to re-diagnose this version)")
+
+
+def _echo_terms(v, parent, per_degree: bool) -> None:
+    """Every term's estimate, sigma, t, p and significance, then a warning per term that is not significant."""
+    import pandas as pd
+
+    from aerosid.identification.term_report import significance_warnings, term_table
+
+    path = v.path / "coefficients.parquet"
+    if not path.is_file():
+        return
+    table = pd.read_parquet(path)
+    new = frozenset()
+    if parent is not None:
+        old = {(ch, t.coefficient, t.expression) for ch, m in parent.models.items() for t in m.terms}
+        new = frozenset(t.coefficient for ch, m in v.models.items() for t in m.terms
+                        if (ch, t.coefficient, t.expression) not in old)
+    click.echo(term_table(table, per_degree=per_degree, new_terms=new))
+    for line in significance_warnings(table):
+        click.echo(f"warning: {line}")
 
 
 def _loud_warnings(coefficients: Path) -> list[str]:

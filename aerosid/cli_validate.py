@@ -66,9 +66,12 @@ def validate(run_dir, other_telemetry, vehicle, out_dir, version_id, bias, axes,
     if not run_dir.is_dir():
         raise click.ClickException(f"{run_dir}: no such run folder (make one with `aerosid run TELEMETRY --out "
                                    f"{run_dir}`)")
+    from aerosid.cli_progress import stage_progress
+
     try:
-        result = run_validation(run_dir, other_telemetry, vehicle=vehicle, version=version_id, bias=bias, axes=axes,
-                                windows=[tuple(w) for w in windows] or None)
+        with stage_progress("validate") as progress:
+            result = run_validation(run_dir, other_telemetry, vehicle=vehicle, version=version_id, bias=bias,
+                                    axes=axes, windows=[tuple(w) for w in windows] or None, progress=progress)
     except (ModelSourceError, VehicleError, TelemetryError) as exc:
         raise click.ClickException(str(exc)) from exc
     except ValueError as exc:

@@ -77,16 +77,23 @@ def preprocess_and_plan(raw: pd.DataFrame, vehicle: Vehicle, *, windows=None, pr
 def estimate_flight_data(raw: pd.DataFrame, vehicle: Vehicle, *, flight: str = "flight", windows=None,
                          preprocess_params: dict | None = None, smoothing_options: dict | None = None,
                          min_segment_s: float | None = None, source: str = "<memory>",
-                         skip_failed: bool = False) -> EBMFlightData:
+                         skip_failed: bool = False, progress=None) -> EBMFlightData:
     """Raw telemetry -> flight data (preprocess, segments, EKF + MBF smoother, air data,
     coefficients, alpha/beta).  A segment that loses more than half its samples to
     findings is left out and recorded, as the flow does; with skip_failed, so is one whose
-    smoothing fails; if none is left, ValueError."""
+    smoothing fails; if none is left, ValueError.  progress: an optional callback
+    progress(stage, fraction) (the CLI's display; the smoothing's fraction counts samples)."""
+    report = progress or (lambda stage, fraction: None)
+    report("preprocess", 0.0)
     pre, segments = preprocess_and_plan(raw, vehicle, windows=windows, preprocess_params=preprocess_params,
                                         min_segment_s=min_segment_s, source=source)
     db = load_database(vehicle)
     smoothed, failed = [], []
+    total, done = max(sum(seg.stop - seg.start for seg in segments), 1), 0
+    stage = f"smooth {len(segments)} segment(s)"
     for seg in segments:
+        report(stage, done / total)
+        done += seg.stop - seg.start
         rows = pre.frame.iloc[seg.start:seg.stop].reset_index(drop=True)
         try:
             sm = smooth_segment_frame(rows, vehicle, smoothing_options, seg.segment_id)
@@ -102,6 +109,7 @@ def estimate_flight_data(raw: pd.DataFrame, vehicle: Vehicle, *, flight: str = "
     if not smoothed:
         why = "; ".join(f"{s}: {w}" for s, w in failed) or "no segment"
         raise ValueError(f"{source}: no segment could be smoothed ({why})")
+    report("flight data", 0.0)
     fd = build_flight_data_segments(pre.frame, [s.frame for s in smoothed], vehicle, db, flight)
     return EBMFlightData(pre, tuple(smoothed), fd, tuple(failed))
 

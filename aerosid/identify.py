@@ -6,7 +6,6 @@ plain least squares) vs F, printed per degree as the seed does.
 """
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -19,7 +18,7 @@ from aerosid.plausibility.estimates import preflight_departure
 from aerosid.regression import LinearFit, fit_linear, with_corrected_estimate
 from aerosid.vehicle import Vehicle
 
-#: Coefficients that are slopes per radian (printed per degree); the rest are per unit term.
+#: Coefficients that are slopes per radian (the report prints them per degree); the rest are per unit term.
 ANGLE_TERMS = ("alpha", "beta", "alpha_r", "delta_p/2", "delta_y/2", "delta_r", "delta_p", "delta_y")
 
 
@@ -73,18 +72,24 @@ class Identification:
         return head + "\n" + format_table(self.table())
 
 
-def format_table(table: pd.DataFrame) -> str:
+def format_table(table: pd.DataFrame, per_degree: bool = False) -> str:
     """Seed Table 3 style text of a coefficients table: preflight vs estimate vs sigma
-    (corrected and plain OLS) vs F; angle slopes per degree (fins per degree pair)."""
-    lines = ["moments about the CG; angle slopes per degree (fin slopes per degree pair)",
-             f"{'coefficient':<20}{'preflight':>12}{'estimate':>12}{'sigma':>11}{'sigma OLS':>11}{'95% interval':>26}"]
+    (corrected and plain OLS) vs F.  SI per radian for every coefficient (slopes and rate
+    derivatives alike); per_degree: per degree instead (aerosid.coefficient_units), and
+    the header says which."""
+    from aerosid.coefficient_units import per_degree_factor, unit_label, units_header
+
+    lines = [f"moments about the CG; {units_header(per_degree)}",
+             f"{'coefficient':<20}{'preflight':>12}{'estimate':>12}{'sigma':>11}{'sigma OLS':>11}{'95% interval':>26}"
+             "  unit"]
     for channel, rows in table.groupby("channel", sort=False):
         first = rows.iloc[0]
         lines.append(f"[{channel}]  F = {first['f_stat']:,.0f} (corrected {first['f_stat_corrected']:,.1f}), "
                      f"R^2 = {first['r2']:.4f}, PSE = {first['pse']:.3g}, condition number "
                      f"{first['condition_number']:.1f}, N = {first['n_obs']} (effective {first['n_eff']:.0f})")
         for _, row in rows.iterrows():
-            k = math.pi / 180 if row["expression"].replace(" ", "") in ANGLE_TERMS else 1.0
+            k = per_degree_factor(row["expression"]) if per_degree else 1.0
+            u = unit_label(row["expression"], per_degree) or "-"
             ref = f"{row['reference'] * k:>12.5g}" if np.isfinite(row["reference"]) else f"{'-':>12}"
             if not np.isfinite(row["estimate"]):  # no number is printed for what the data cannot tell
                 why = row.get("note") or f"no excitation in {row['expression']}"
@@ -92,7 +97,8 @@ def format_table(table: pd.DataFrame) -> str:
                 continue
             lines.append(f"  {row['coefficient']:<18}{ref}{row['estimate'] * k:>12.5g}"
                          f"{row['std_error'] * k:>11.2g}{row['std_error_ols'] * k:>11.2g}"
-                         f"   [{row['ci_low'] * k:.5g}, {row['ci_high'] * k:.5g}]")
+                         f"{'[' + format(row['ci_low'] * k, '.5g') + ', ' + format(row['ci_high'] * k, '.5g') + ']':>26}"
+                         f"  {u}")
         for i, w in enumerate(w for w in first["warnings"].split(" | ") if w):
             lines.append(f"  warning [{i + 1}] {w}")
     if "preflight_warning" in table.columns:

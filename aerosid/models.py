@@ -8,6 +8,9 @@ Spec files are TOML, one table per channel::
 
     [Cm]
     terms = ["Cm_0 = 1", "Cm_alpha = alpha", "Cm_delta_p = delta_p/2", "pitch_damping"]
+
+or relative to the parent model, ``add = ["pitch_damping"]`` / ``remove = ["Cm_0"]``
+(aerosid.model_specs).
 """
 from __future__ import annotations
 
@@ -117,17 +120,29 @@ DEFAULT_TERMS = {
 }
 
 
-def parse_term(text: str, channel: str, source: str = "<memory>") -> Term:
-    """``NAME = EXPR`` or a catalogue effect name (its channel must match)."""
+def parse_term(text: str, channel: str, source: str = "<memory>", mach_reference: float = 12.4) -> Term:
+    """``NAME = EXPR`` or the name of a candidate the diagnosis can report: a catalogue
+    effect (``pitch_damping``) or an extra candidate (``mach_cm0``, ``roll_damping``, ...;
+    Mach terms about `mach_reference`).  The candidate's channel must match."""
     text = text.strip()
     if "=" not in text:
         effect = CATALOGUE.get(text)
-        if effect is None:
-            raise ModelSpecError(f"{source}: [{channel}] term {text!r} is neither 'NAME = EXPRESSION' nor a "
-                                 f"catalogue effect ({', '.join(CATALOGUE)})")
-        if effect.channel != channel:
-            raise ModelSpecError(f"{source}: [{channel}] effect {text!r} belongs to channel {effect.channel}")
-        return Term(effect.coefficient, effect.term, effect.name)
+        if effect is not None:
+            if effect.channel != channel:
+                raise ModelSpecError(f"{source}: [{channel}] effect {text!r} belongs to channel {effect.channel}")
+            # Mach terms about the vehicle's reference Mach, as the diagnosis tests them
+            return Term(effect.coefficient, effect.term.replace("(mach - 12.4)", f"(mach - {mach_reference:g})"),
+                        effect.name)
+        from aerosid.diagnosis.candidates import extra_candidates  # (aerosid.diagnosis imports this module)
+
+        named = {c.name: c for c in extra_candidates(mach_reference)}
+        cand = named.get(text)
+        if cand is None:
+            raise ModelSpecError(f"{source}: [{channel}] term {text!r} is neither 'NAME = EXPRESSION' nor the name "
+                                 f"of a candidate effect ({', '.join([*CATALOGUE, *named])})")
+        if cand.channel != channel:
+            raise ModelSpecError(f"{source}: [{channel}] effect {text!r} belongs to channel {cand.channel}")
+        return Term(cand.coefficient, cand.term, cand.name)
     name, _, expr = text.partition("=")
     name, expr = name.strip(), expr.strip()
     if not name.isidentifier():
@@ -147,11 +162,12 @@ def default_models(vehicle=None) -> dict[str, ChannelModel]:
     return {ch: ChannelModel(ch, parse_terms(terms, ch, where)) for ch, terms in table.items()}
 
 
-def parse_terms(terms: list, channel: str, source: str = "<memory>") -> tuple[Term, ...]:
+def parse_terms(terms: list, channel: str, source: str = "<memory>", mach_reference: float = 12.4
+                ) -> tuple[Term, ...]:
     """A channel's term list: at most MAX_TERMS terms, each parsed, no coefficient twice."""
     if len(terms) > MAX_TERMS:
         raise ModelSpecError(f"{source}: [{channel}] {len(terms)} terms: at most {MAX_TERMS} per channel")
-    parsed = tuple(parse_term(t, channel, source) for t in terms)
+    parsed = tuple(parse_term(t, channel, source, mach_reference) for t in terms)
     names = [t.coefficient for t in parsed]
     dup = {n for n in names if names.count(n) > 1}
     if dup:
@@ -159,29 +175,24 @@ def parse_terms(terms: list, channel: str, source: str = "<memory>") -> tuple[Te
     return parsed
 
 
-def load_models(path: str | Path, base: dict[str, ChannelModel] | None = None) -> dict[str, ChannelModel]:
-    """Read a TOML spec; channels it does not mention keep `base` (default: the defaults)."""
-    from aerosid.vehicle import read_toml_file
+def load_models(path: str | Path, base: dict[str, ChannelModel] | None = None,
+                mach_reference: float = 12.4) -> dict[str, ChannelModel]:
+    """Read a TOML spec; channels it does not mention keep `base` (default: the defaults).
+    A channel table replaces (``terms``) or changes (``add``, ``remove``) base's model
+    (aerosid.model_specs, which also says what changed)."""
+    from aerosid.model_specs import read_spec
 
-    src = str(path)
-    if not Path(path).exists():
-        raise ModelSpecError(f"{src}: no such model specification file")
-    doc = read_toml_file(Path(path), MAX_SPEC_BYTES, lambda msg: ModelSpecError(f"{src}: {msg}"))
-    models = dict(base or default_models())
-    for channel, table in doc.items():
-        if channel not in CHANNELS:
-            raise ModelSpecError(f"{src}: unknown channel [{channel}]; channels: {', '.join(CHANNELS)}")
-        terms = table.get("terms") if isinstance(table, dict) else None
-        if not isinstance(terms, list) or not terms or not all(isinstance(t, str) for t in terms):
-            raise ModelSpecError(f"{src}: [{channel}] needs terms = [\"NAME = EXPRESSION\", ...]")
-        models[channel] = ChannelModel(channel, parse_terms(terms, channel, src))
-    return models
+    return read_spec(path, base, mach_reference).models
 
 
 def models_to_toml(models: dict[str, ChannelModel]) -> str:
     lines = []
     for ch, m in models.items():
-        terms = ", ".join(f'"{t.effect}"' if t.effect else f'"{t.coefficient} = {t.expression}"' for t in m.terms)
+        # catalogue effects by name; a Mach term about another reference Mach than the
+        # catalogue's 12.4, and every extra candidate, as its expression (read back the same)
+        terms = ", ".join(f'"{t.effect}"' if t.effect in CATALOGUE and CATALOGUE[t.effect].term == t.expression
+                          else f'"{t.coefficient} = {t.expression}"'
+                          for t in m.terms)
         lines.append(f"[{ch}]\nterms = [{terms}]\n")
     return "\n".join(lines)
 

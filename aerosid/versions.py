@@ -31,7 +31,7 @@ from aerosid.io import write_json_atomic, write_parquet_atomic, write_text_atomi
 from aerosid.models import CHANNELS, ChannelModel, ModelSpecError, default_models, load_models, models_to_toml
 
 __all__ = ["ModelVersion", "VersionHistory", "fit_version", "history", "load_version", "latest_models",
-           "read_flight_data", "run_vehicle", "models_from_spec", "MODELS_DIR", "VersionError"]
+           "read_flight_data", "run_vehicle", "models_from_spec", "spec_for_run", "MODELS_DIR", "VersionError"]
 
 MODELS_DIR = "models"
 _ID = re.compile(r"^v(\d{3,})$")
@@ -340,6 +340,16 @@ def fit_version(run_dir: str | Path, models: dict[str, ChannelModel] | None = No
 def models_from_spec(spec: str | Path, run_dir: str | Path, parent: str | None = None) -> dict[str, ChannelModel]:
     """Read a spec file; channels it does not mention keep the parent version's terms
     (the latest version's, or the defaults when there is none)."""
+    return spec_for_run(spec, run_dir, parent).models
+
+
+def spec_for_run(spec: str | Path, run_dir: str | Path, parent: str | None = None):
+    """A spec file applied to the run's parent version (`parent`, else the latest, else the
+    defaults): an aerosid.model_specs.SpecResult (the models and what changed, with a
+    warning for every term a ``terms = [...]`` replacement dropped)."""
+    from aerosid.model_specs import read_spec
+    from aerosid.vehicle import load_vehicle
+
     h = history(run_dir)
     base = h.get(parent).models if parent else (h.latest.models if h.latest else run_default_models(run_dir))
-    return load_models(spec, base=dict(base))
+    return read_spec(spec, dict(base), load_vehicle(run_vehicle(run_dir)).mach_reference)

@@ -8,10 +8,11 @@ from pathlib import Path
 from prefect import task
 
 from aerosid.models import load_models
-from aerosid.versions import run_default_models
+from aerosid.vehicle import load_vehicle
+from aerosid.versions import run_default_models, run_vehicle
 from aerosid.modelling_loop import refresh
 from aerosid.provenance import sha256_file
-from tasks import ledger
+from tasks import ledger, progress
 from tasks.runner import StageContext, base_record
 from tasks.stages import IO_RETRIES
 
@@ -23,13 +24,19 @@ def report_task(run_dir: str, ctx: StageContext, inputs: list[str], model_spec: 
     files = [p for p in [*inputs, model_spec, truth_path] if p]
     base = base_record("report", ctx, files, [sha256_file(p) for p in files], params)
     started = time.perf_counter()
+    shown = progress.label("report", ctx.flight)
+    progress.emit(shown, 0.0)
     try:
-        paths = refresh(run_dir, load_models(model_spec, base=run_default_models(run_dir)) if model_spec else None, truth=truth_path,
-                        mach_half_width=mach_half_width)
+        models = (load_models(model_spec, base=run_default_models(run_dir),
+                              mach_reference=load_vehicle(run_vehicle(run_dir)).mach_reference)
+                  if model_spec else None)
+        paths = refresh(run_dir, models, truth=truth_path, mach_half_width=mach_half_width)
     except Exception as exc:
         ledger.append(ctx.ledger_path, {**base, "status": "failed", "outputs": [], "error": f"{type(exc).__name__}: {exc}",
                                         "duration_s": time.perf_counter() - started})
         raise
+    finally:
+        progress.emit(shown, 1.0)
     outputs = [{"path": os.path.abspath(p), "sha256": sha256_file(p)} for p in paths.values()]
     ledger.append(ctx.ledger_path, {**base, "status": "ok", "outputs": outputs, "error": None,
                                     "duration_s": time.perf_counter() - started})

@@ -27,7 +27,7 @@ from aerosid.io import read_parquet_metadata, write_parquet_atomic
 from aerosid.preprocess.errors import TelemetryError
 from aerosid.provenance import code_version, params_hash, sha256_file
 from schemas.telemetry import validate
-from tasks import ledger
+from tasks import ledger, progress
 
 
 class StageFailed(RuntimeError):
@@ -98,6 +98,16 @@ def execute(stage: str, ctx: StageContext, inputs: list[str | Path], output: str
             schema: type[pa.DataFrameModel], produce: Callable[[], Produced]) -> dict:
     """Run one stage execution; returns a small JSON-able dict (path, sha256, status, rows)."""
     output = Path(output)
+    shown = progress.label(stage, ctx.flight, ctx.segment)
+    progress.emit(shown, 0.0)
+    try:
+        return _execute(stage, ctx, inputs, output, params, schema, produce)
+    finally:
+        progress.emit(shown, 1.0)
+
+
+def _execute(stage: str, ctx: StageContext, inputs: list[str | Path], output: Path, params: dict,
+             schema: type[pa.DataFrameModel], produce: Callable[[], Produced]) -> dict:
     in_hashes = [sha256_file(p) for p in inputs]
     key = cache_key(stage, in_hashes, params)
     base = {**base_record(stage, ctx, inputs, in_hashes, params), "cache_key": key}

@@ -25,6 +25,7 @@ from schemas.coefficients import Coefficients
 from schemas.flight_data import FlightData
 from schemas.smoothed import SmoothedSegment
 from schemas.telemetry import PreprocessedTelemetry, RawTelemetry
+from tasks import progress
 from tasks.runner import Produced, StageContext, StageFailed, execute, read_validated
 
 
@@ -78,6 +79,7 @@ def plan_segments_task(pre_path: str, windows: list | None, min_duration_s: floa
     limit = json.loads(meta.get("aerosid.preprocess.params", "{}")).get("max_interp_gap_s")
     t = pd.read_parquet(pre_path, columns=["t_s"])["t_s"].to_numpy()
     plan = plan_segments(t, [tuple(g) for g in gaps], windows, min_duration_s, limit)
+    progress.emit(f"plan: {Path(pre_path).parent.name}, {len(plan.segments)} segment(s)", 1.0)
     return {"segments": [s.__dict__ for s in plan.segments], "dropped": [d.__dict__ for d in plan.dropped],
             "note": plan.dropped_note(), "refusal": plan.refusal() if not plan.segments else None}
 
@@ -165,7 +167,8 @@ def regression_task(flight_data_paths: list[str], run_dir: str, ctx: StageContex
     def produce() -> Produced:
         veh = load_vehicle(vehicle)
         fd = pd.concat([read_validated(p, FlightData) for p in flight_data_paths], ignore_index=True)
-        models = load_models(model_spec, base=default_models(veh)) if model_spec else None
+        models = load_models(model_spec, base=default_models(veh), mach_reference=veh.mach_reference) \
+            if model_spec else None
         ident = identify(fd, veh, models, mach_half_width)
         return Produced(ident.table(), {"aerosid.summary": ident.summary()}, rows_in=len(fd), note=ident.summary())
 

@@ -41,7 +41,9 @@ class Candidate:
         """What to put in a model spec file to add it (None when not addable)."""
         if not self.addable:
             return None
-        return self.name if self.catalogue else f"{self.coefficient} = {self.term}"
+        if self.catalogue or _EXTRA_NAMES.get(self.name) == (self.channel, self.coefficient):
+            return self.name  # a model spec takes every default candidate by name (aerosid.models.parse_term)
+        return f"{self.coefficient} = {self.term}"
 
     def regressor(self, signals: dict[str, np.ndarray]) -> np.ndarray:
         n = len(signals["alpha"])
@@ -88,6 +90,10 @@ def extra_candidates(mach_reference: float = 12.4) -> tuple[Candidate, ...]:
         Candidate("cy_beta_nonlinearity", "CY", "CY_beta_abs_beta", "beta*abs(beta)",
                   "non-linear side force: cross-flow force grows as beta|beta|"),
     )
+
+
+#: name -> (channel, coefficient) of the extra candidates: a model spec accepts them by name
+_EXTRA_NAMES = {c.name: (c.channel, c.coefficient) for c in extra_candidates()}
 
 
 def default_candidates(mach_reference: float = 12.4, vehicle_class: str = "finned") -> tuple[Candidate, ...]:

@@ -48,7 +48,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Sequence
+from typing import Callable, Sequence
 
 import numpy as np
 import pandas as pd
@@ -60,6 +60,7 @@ from aerosid.diagnosis.candidates import Candidate, default_candidates, derived_
 from aerosid.expressions import evaluate
 from aerosid.identify import angle_cutoff_hz, mach_window_mask
 from aerosid.eiv import with_angle_noise
+from aerosid.model_specs import paste_lines
 from aerosid.models import ChannelModel, default_models, vehicle_signals
 from aerosid.regression import LinearFit, fit_linear, residual_autocovariance
 
@@ -347,7 +348,7 @@ class Diagnosis:
         where = self._where_text()
         if sig:
             e = sig[0]
-            add = (f"add `{e.spec_term}` to [{e.channel}] in the model spec, fit again "
+            add = ("add it with the lines below in a model spec file SPEC, fit again "
                    "(aerosid fit RUN_DIR --model SPEC) and diagnose again" if e.spec_term else
                    f"its term `{e.term}` needs a signal the model specs do not offer yet")
             others = [s.name for s in sig[1:]]
@@ -356,7 +357,8 @@ class Diagnosis:
             return (f"Most likely missing: {e.name} in {e.channel} ({e.meaning}). It explains "
                     f"{e.variance_share:.1%} of the {e.channel} residual variance (corrected partial F "
                     f"{e.partial_f_corrected:.3g}, p = {e.p_value:.2g}, held-out window consistency "
-                    f"{e.window_consistency:.0%}); {add}.{tail} {where}")
+                    f"{e.window_consistency:.0%}); {add}.{tail} {where}"
+                    + (f"\n\n{paste_lines(e.channel, e.spec_term)}" if e.spec_term else ""))
         ident = [e for e in self.effects if e.identifiable]
         best = max(ident, key=lambda e: e.score) if ident else None
         strongest = (f" Strongest candidate: {best.name} in {best.channel} (p = {best.p_value:.2g}, explains "
@@ -587,7 +589,8 @@ def _already_in(model: ChannelModel, cand: Candidate) -> bool:
 def diagnose(flight_data: pd.DataFrame, vehicle, models: dict[str, ChannelModel] | None = None, *,
              mach_half_width: float | None = 0.5, n_windows: int = 8,
              candidates: Sequence[Candidate] | None = None, cov: str = "morelli_klein",
-             angle_sigma_rad: float | None = None) -> Diagnosis:
+             angle_sigma_rad: float | None = None,
+             progress: Callable[[str, float], None] | None = None) -> Diagnosis:
     """Diagnose `models` (default: the method.md §11 models) against the flight data.
 
     flight_data: a FlightData frame (schemas/flight_data.py); the samples with
@@ -598,6 +601,7 @@ def diagnose(flight_data: pd.DataFrame, vehicle, models: dict[str, ChannelModel]
     errors-in-variables (SIMEX) check.  Default: median(sigma_CN) / |CN_alpha|
     (alpha and beta come from inverting the force database, so a C_N error maps
     to an angle error through the normal-force slope); 0 switches the check off.
+    progress: an optional callback progress("candidates", fraction done) (the CLI's display).
     """
     models = dict(models or default_models(vehicle))
     if candidates is None:
@@ -628,7 +632,9 @@ def diagnose(flight_data: pd.DataFrame, vehicle, models: dict[str, ChannelModel]
     reports: dict[str, ChannelReport] = {}
     simex_cache: dict = {}
     evidence: list[EffectEvidence] = []
-    for ch, model in models.items():
+    for ch_i, (ch, model) in enumerate(models.items()):
+        if progress is not None:
+            progress("candidates", ch_i / len(models))
         y = fd[ch].to_numpy(float)
         Xb, notes = model.design(signals)
         base = fit_linear(y, Xb, names=model.names, channel=ch, cov=cov)
@@ -648,7 +654,9 @@ def diagnose(flight_data: pd.DataFrame, vehicle, models: dict[str, ChannelModel]
         cands = [c for c in candidates if c.channel == ch and not _already_in(model, c)]
         perp_cols: dict[str, np.ndarray] = {}
         chan_ev: list[dict] = []
-        for c in cands:
+        for c_i, c in enumerate(cands):
+            if progress is not None:
+                progress("candidates", (ch_i + c_i / len(cands)) / len(models))
             x = np.asarray(c.regressor(signals), float)
             if x.shape != y.shape or not np.all(np.isfinite(x)):
                 chan_ev.append(_not_testable(c, "the term is not finite on every sample", base))

@@ -284,10 +284,11 @@ def choose_axes(model: IdentifiedModel, axes: str) -> tuple[tuple[str, ...], lis
 
 # --------------------------------------------------------------------------- the whole check
 def validate(run_dir: str | Path, telemetry: str | Path, *, vehicle: str | None = None, version: str | None = None,
-             bias: str = "offsets", axes: str = "auto", windows=None) -> ValidationResult:
+             bias: str = "offsets", axes: str = "auto", windows=None, progress=None) -> ValidationResult:
     """Predict the manoeuvre in `telemetry` with RUN_DIR's identified model (the latest
     model version, or `version`).  vehicle: the other manoeuvre's vehicle file (default:
-    the run's); windows: time windows [s] of the other telemetry, as `aerosid run --window`."""
+    the run's); windows: time windows [s] of the other telemetry, as `aerosid run --window`;
+    progress: an optional callback progress(stage, fraction) (the CLI's display)."""
     from aerosid.ebm import estimate_flight_data
     from aerosid.preprocess.io import read_raw_parquet
     from aerosid.vehicle import load_vehicle
@@ -305,7 +306,9 @@ def validate(run_dir: str | Path, telemetry: str | Path, *, vehicle: str | None 
                                preprocess_params=job.get("preprocess_params") or None,
                                smoothing_options=job.get("smoothing_options") or None,
                                min_segment_s=job.get("min_segment_s"), source=str(telemetry),
-                               skip_failed=True)
+                               skip_failed=True, progress=progress)
+    if progress is not None:
+        progress("predict", 0.0)
     notes += [f"segment {s} of {telemetry} left out: {why}" for s, why in est.failed]
     fd = est.flight_data.sort_values(["flight", "t_s"], kind="stable").reset_index(drop=True)
     keep = mach_window_mask(fd["mach"].to_numpy(), veh.mach_reference, model.mach_half_width)

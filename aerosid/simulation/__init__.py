@@ -138,8 +138,9 @@ def _controller(case: SimulationCase):
 
 
 def simulate(case: SimulationCase | str = "seed-rlv", effects: tuple[tuple[Effect, float], ...] = (),
-             seed: int = 0) -> SimulatedFlight:
-    """Fly the case with the given hidden effects; noise and faults from `seed`."""
+             seed: int = 0, progress=None) -> SimulatedFlight:
+    """Fly the case with the given hidden effects; noise and faults from `seed`.
+    progress: an optional callback progress(stage, fraction) (the CLI's display)."""
     if isinstance(case, str):
         case = load_case(case)
     veh = case.vehicle
@@ -147,7 +148,7 @@ def simulate(case: SimulationCase | str = "seed-rlv", effects: tuple[tuple[Effec
     plant = Plant(veh, model)
     n = int(round(case.duration_s * case.sample_rate_hz)) + 1
     t = np.arange(n) / case.sample_rate_hz
-    states, controls = integrate(plant, _initial_state(case, model), t, _controller(case))
+    states, controls = integrate(plant, _initial_state(case, model), t, _controller(case), progress)
 
     truth = truth_frame(plant, t, states, controls)
     clean = {"t_s": t}

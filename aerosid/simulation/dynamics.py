@@ -11,6 +11,8 @@ running at the telemetry rate).
 from __future__ import annotations
 
 import math
+from typing import Callable
+
 import numpy as np
 
 from aerosid.aeromodel import AeroModel
@@ -122,10 +124,13 @@ class Plant:
         ])
 
 
-def integrate(plant: Plant, x0: np.ndarray, t: np.ndarray, controller) -> tuple[np.ndarray, np.ndarray]:
+def integrate(plant: Plant, x0: np.ndarray, t: np.ndarray, controller,
+              progress: Callable[[str, float], None] | None = None) -> tuple[np.ndarray, np.ndarray]:
     """RK4 over the sample grid t [s]; controller(t, state) -> (delta_p, delta_y, delta_r)
-    held over each step.  Returns states (N,13) and controls (N,3) at the samples."""
+    held over each step.  Returns states (N,13) and controls (N,3) at the samples.
+    progress: called as progress("integrate", fraction done) about 200 times."""
     n = len(t)
+    every = max(1, n // 200)
     states = np.empty((n, 13))
     controls = np.empty((n, 3))
     x = np.asarray(x0, dtype=float)
@@ -135,6 +140,8 @@ def integrate(plant: Plant, x0: np.ndarray, t: np.ndarray, controller) -> tuple[
         controls[k] = u
         if k == n - 1:
             break
+        if progress is not None and k % every == 0:
+            progress("integrate", k / (n - 1))
         dt_total = t[k + 1] - t[k]
         sub = max(1, int(math.ceil(dt_total / 0.01 - 1e-9)))
         h = dt_total / sub

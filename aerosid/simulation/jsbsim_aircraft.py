@@ -108,8 +108,11 @@ def _xml_check(tables: AeroTables, rec: dict, truth: pd.DataFrame) -> dict:
     return out
 
 
-def simulate_aircraft(aircraft: str, seed: int = 0, *, faults: bool = True) -> SimulatedFlight:
-    """Fly JSBSim's `aircraft` through the generated flight design; noise and faults from `seed`."""
+def simulate_aircraft(aircraft: str, seed: int = 0, *, faults: bool = True, progress=None) -> SimulatedFlight:
+    """Fly JSBSim's `aircraft` through the generated flight design; noise and faults from `seed`.
+    progress: an optional callback progress(stage, fraction)."""
+    if progress is not None:
+        progress("design and trim the flight", 0.0)
     jsbsim = _import_jsbsim()
     design = flight_design(jsbsim, aircraft)
     inst = instrumentation()
@@ -138,7 +141,7 @@ def simulate_aircraft(aircraft: str, seed: int = 0, *, faults: bool = True) -> S
         except (StopIteration, AttributeError, TypeError, ValueError):
             takeup[name] = []  # hysteresis not modelled the way c172x does it: no take-up
     inputs, windows = _schedule(t, m, takeup)
-    rec = _fly(fdm, t, inputs, record)
+    rec = _fly(fdm, t, inputs, record, progress=progress)
     for prop in _STANDARD:  # an aircraft without propulsion (a glider) has no forces/*-prop-* properties
         if prop not in rec and "-prop-" in prop:
             rec[prop] = np.zeros(len(t))

@@ -230,14 +230,18 @@ def _trimmed_fdm(jsbsim, sim_cfg: dict):
     return fdm
 
 
-def _fly(fdm, t: np.ndarray, inputs: dict[str, np.ndarray], record: list[str] = _RECORD) -> dict[str, np.ndarray]:
+def _fly(fdm, t: np.ndarray, inputs: dict[str, np.ndarray], record: list[str] = _RECORD,
+         progress=None) -> dict[str, np.ndarray]:
     """Fly the input increments on top of the current (trimmed) commands; the properties
-    `record` at every sample."""
+    `record` at every sample.  progress: optional callback progress("fly", fraction)."""
+    every = max(1, len(t) // 200)
     trim_cmd = {"elevator": fdm["fcs/elevator-cmd-norm"], "aileron": fdm["fcs/aileron-cmd-norm"],
                 "rudder": fdm["fcs/rudder-cmd-norm"]}
     out = np.empty((len(t), len(record)))
     get = fdm.get_property_value
     for k in range(len(t)):
+        if progress is not None and k % every == 0:
+            progress("fly", k / max(len(t) - 1, 1))
         if k > 0:
             # the command for t_k; the FCS, the aerodynamics and the forces of the
             # frame that ends at t_k see it (JSBSim propagates first, then runs the
@@ -440,18 +444,19 @@ def rates_at_the_moments(x: np.ndarray, x_dot: np.ndarray, dt: float) -> np.ndar
 # --------------------------------------------------------------------------------------
 
 def simulate_jsbsim(aircraft: str = "c172x", manoeuvre: str = "3211", seed: int = 0, *,
-                    faults: bool = True) -> SimulatedFlight:
+                    faults: bool = True, progress=None) -> SimulatedFlight:
     """Fly JSBSim's `aircraft` through `manoeuvre`; noise and faults from `seed`.
 
     c172x flies its hand-written simulation.toml; any other aircraft of the jsbsim
     package a generated design, with its vehicle file in ``flight.files`` (raises
-    aerosid.simulation.jsbsim_design.UnsupportedAircraft, a ValueError, when it cannot)."""
+    aerosid.simulation.jsbsim_design.UnsupportedAircraft, a ValueError, when it cannot).
+    progress: an optional callback progress(stage, fraction) (the CLI's display)."""
     if manoeuvre not in MANOEUVRES:
         raise ValueError(f"unknown manoeuvre {manoeuvre!r}; choices: {', '.join(MANOEUVRES)}")
     if aircraft not in SUPPORTED_AIRCRAFT:
         from aerosid.simulation.jsbsim_aircraft import simulate_aircraft
 
-        return simulate_aircraft(aircraft, seed, faults=faults)
+        return simulate_aircraft(aircraft, seed, faults=faults, progress=progress)
     _check_names(aircraft, manoeuvre)
     jsbsim = _import_jsbsim()
     sim_cfg, veh_cfg = load_jsbsim_config(aircraft)
@@ -483,7 +488,7 @@ def simulate_jsbsim(aircraft: str = "c172x", manoeuvre: str = "3211", seed: int 
     }
     inputs, windows = _schedule(t, m, takeup)
 
-    rec = _fly(fdm, t, inputs)
+    rec = _fly(fdm, t, inputs, progress=progress)
 
     # ---- geometry and mass (SI) ----
     S_ft2, cbar_ft, b_ft = trim["metrics/Sw-sqft"], trim["metrics/cbarw-ft"], trim["metrics/bw-ft"]

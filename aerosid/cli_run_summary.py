@@ -1,0 +1,70 @@
+"""What `aerosid run` says at its end: the samples and Mach window the regression used,
+and the diagnosis verdict with the spec lines to paste.  Reads the run folder only
+(flight_data.parquet, diagnosis.json, run.json); returns text lines, prints nothing."""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+
+def _count(n: int) -> str:
+    return f"{n:,}".replace(",", " ")
+
+
+def regression_window_line(run_dir: Path, mach_half_width: float | None) -> str | None:
+    """'regressed 7 633 of 60 001 samples, Mach 11.90–12.90 (|M − 12.4| ≤ 0.5)', as identify() selects them."""
+    from aerosid.identify import mach_window_mask
+    from aerosid.vehicle import load_vehicle
+    from aerosid.versions import run_vehicle
+
+    path = run_dir / "flight_data.parquet"
+    if not path.is_file():
+        return None
+    mach = pd.read_parquet(path, columns=["mach"])["mach"].to_numpy(float)
+    veh = load_vehicle(run_vehicle(run_dir))
+    mask = mach_window_mask(mach, veh.mach_reference, mach_half_width)
+    used = mach[mask]
+    rule = ("the whole flight" if mach_half_width is None else
+            f"|M − {veh.mach_reference:g}| ≤ {mach_half_width:g}, --mach-half-width")
+    span = f", Mach {np.nanmin(used):.2f}–{np.nanmax(used):.2f}" if used.size else ""
+    return f"regressed {_count(int(mask.sum()))} of {_count(len(mach))} samples{span} ({rule})"
+
+
+def first_sentence(text: str) -> str:
+    """Up to the first '. ' followed by a capital letter: the verdict of a diagnosis message."""
+    import re
+
+    return re.split(r"(?<=\.)\s+(?=[A-Z])", text.strip(), maxsplit=1)[0]
+
+
+def verdict_lines(run_dir: Path) -> list[str]:
+    """The first line of diagnosis.json's message (the recommendation, or that nothing
+    significant is missing) and, for a recommendation, the spec lines that add it."""
+    from aerosid.model_specs import paste_lines
+
+    path = run_dir / "diagnosis.json"
+    if not path.is_file():
+        return [f"diagnosis: none written (see {run_dir / 'ledger.jsonl'})"]
+    try:
+        doc = json.loads(path.read_text())
+    except (OSError, json.JSONDecodeError) as exc:
+        return [f"diagnosis: {path} cannot be read ({exc})"]
+    message = str(doc.get("message") or "").strip()
+    lines = [f"diagnosis: {first_sentence(message.splitlines()[0]) if message else '(no message)'}"]
+    effects = doc.get("effects") or []
+    name = doc.get("recommended")
+    top = (next((e for e in effects if e.get("name") == name), None) if name else
+           next((e for e in effects if e.get("significant")), None) if "recommended" not in doc else None)
+    if top and top.get("spec_term"):
+        lines += [f"to add it, put these lines in a model spec file SPEC and run `aerosid fit {run_dir} --model SPEC`:",
+                  *("  " + li for li in paste_lines(top["channel"], top["spec_term"]).splitlines())]
+    lines.append(f"details: `aerosid diagnose {run_dir}`, {run_dir / 'report.html'}")
+    return lines
+
+
+def run_outcome_lines(run_dir: Path, mach_half_width: float | None) -> list[str]:
+    window = regression_window_line(run_dir, mach_half_width)
+    return ([window] if window else []) + verdict_lines(run_dir)

@@ -1,0 +1,76 @@
+"""The fitted terms of a model version as text: estimate, sigma, t and p per term.
+
+Sigma is the coloured-residual (Morelli–Klein) standard error of the coefficients
+table, t = estimate / sigma and p its two-sided Student-t(dof_eff) probability, the
+same statistics the diagnosis judges a candidate by (``aerosid.diagnosis.P_MAX``).
+A non-constant term with p >= P_MAX gets a warning suggesting its removal.
+"""
+from __future__ import annotations
+
+import math
+
+import pandas as pd
+
+from aerosid.coefficient_units import per_degree_factor, unit_label, units_header
+
+#: Significance level of a term (the diagnosis's rule: corrected p < 0.001).
+P_MAX = 1e-3
+
+
+def _num(x, spec: str) -> str:
+    return "nan" if x is None or not math.isfinite(float(x)) else format(float(x), spec)
+
+
+def term_table(table: pd.DataFrame, per_degree: bool = False, new_terms: frozenset[str] = frozenset(),
+               p_max: float = P_MAX) -> str:
+    """A coefficients table (coefficients.parquet rows) as one block per channel:
+    coefficient, estimate, sigma, t, p, significant at p < p_max, unit.  new_terms: the
+    coefficients added relative to the parent (marked +)."""
+    lines = [f"fitted terms ({units_header(per_degree)}); sigma corrected for coloured residuals, t = estimate/sigma, "
+             f"p two-sided Student-t(N_eff - terms); significant: p < {p_max:g}; + = new vs the parent",
+             f"  {'coefficient':<22}{'estimate':>13}{'sigma':>11}{'t':>9}{'p':>10}  {'signif.':<8}unit"]
+    for channel, rows in table.groupby("channel", sort=False):
+        first = rows.iloc[0]
+        identity = not rows["identifiable"].any() and bool(str(first.get("note", "")))
+        lines.append(f"[{channel}] N = {int(first['n_obs'])} (effective {_num(first['n_eff'], '.0f')}), "
+                     f"residual RMS {_num(first['rms_residual'], '.4g')}, R^2 {_num(first['r2'], '.4f')}"
+                     + ("; an identity: alpha/beta are inverted from this channel, no estimates" if identity else ""))
+        if identity:
+            continue
+        for _, row in rows.iterrows():
+            k = per_degree_factor(row["expression"]) if per_degree else 1.0
+            mark = "+" if row["coefficient"] in new_terms else " "
+            name = f"{mark}{row['coefficient']}"
+            if not math.isfinite(float(row["estimate"])):
+                lines.append(f"  {name:<22}{'-':>13}{'-':>11}{'-':>9}{'-':>10}  not identifiable")
+                continue
+            sig = "yes" if float(row["p_value"]) < p_max else "NO"
+            lines.append(f"  {name:<22}{_num(row['estimate'] * k, '.5g'):>13}{_num(row['std_error'] * k, '.3g'):>11}"
+                         f"{_num(row['t_value'], '.3g'):>9}{_num(row['p_value'], '.2g'):>10}  {sig:<8}"
+                         f"{unit_label(row['expression'], per_degree) or '-'}")
+    return "\n".join(lines)
+
+
+def significance_warnings(table: pd.DataFrame, p_max: float = P_MAX) -> list[str]:
+    """One warning per non-constant term whose p >= p_max (an intercept is kept whatever its p):
+    'Cm_a3: t = 0.8, not significant at p < 0.001 — consider removing it'."""
+    out = []
+    for _, row in table.iterrows():
+        est, p = float(row["estimate"]), float(row["p_value"])
+        if not math.isfinite(est) or not math.isfinite(p) or p < p_max:
+            continue
+        if per_degree_factor(row["expression"]) == 1.0 and _is_constant(row["expression"]):
+            continue
+        out.append(f"{row['coefficient']}: t = {float(row['t_value']):.2g}, not significant at p < {p_max:g} "
+                   f"(p = {p:.2g}) — consider removing it ([{row['channel']}] remove = [\"{row['coefficient']}\"])")
+    return out
+
+
+def _is_constant(expression: str) -> bool:
+    from aerosid.expressions import parse
+
+    try:
+        parse(expression, frozenset())
+    except ValueError:
+        return False  # it reads a signal
+    return True
