@@ -104,9 +104,10 @@ def diagnose(run_dir, model_spec, version_id, n_windows, mach_half_width, quiet)
     doc = diag.to_json()
     doc["model"] = source
     out = write_json_atomic(doc, run_dir / "diagnosis.json")
+    from aerosid.modelling_loop import run_truth
     from aerosid.report import write_report
 
-    report = write_report(run_dir, diagnosis=diag)
+    report = write_report(run_dir, diagnosis=out, version=version_id, truth=run_truth(run_dir))  # chosen, else latest
     if not quiet:
         click.echo(f"model: {source}")
         click.echo(diag.summary())
@@ -161,9 +162,22 @@ def fit(run_dir, model_spec, parent, note, mach_half_width):
             a, b = p.channel_metric(ch, "rms_residual"), v.channel_metric(ch, "rms_residual")
             if a > 0:
                 click.echo(f"  {ch:<4} residual RMS {a:.4g} -> {b:.4g} ({100 * (b / a - 1):+.1f} %)")
+    _diagnose_and_report(run_dir, v.id, mach_half_width)
+
+
+def _diagnose_and_report(run_dir: Path, version: str, mach_half_width) -> None:
+    """After a fit: diagnose the new version and write diagnosis.json and report.html for it."""
+    from aerosid.modelling_loop import diagnose_and_report
     from aerosid.report import write_report
 
-    click.echo(f"wrote {write_report(run_dir)} (run `aerosid diagnose` to re-diagnose this version)")
+    try:
+        paths = diagnose_and_report(run_dir, version, mach_half_width=mach_half_width)
+    except _errors() + (ValueError,) as exc:  # e.g. too few samples to diagnose: the fit itself stands
+        click.echo(f"could not diagnose {version}: {exc}")
+        click.echo(f"wrote {write_report(run_dir, version=version)} (its diagnosis section is of an older model)")
+        return
+    click.echo(f"wrote {paths['diagnosis']} (diagnosis of {version}: `aerosid diagnose {run_dir}` prints it) and "
+               f"{paths['report']}")
 
 
 def _loud_warnings(coefficients: Path) -> list[str]:
