@@ -173,10 +173,15 @@ def _s_comparison(run: _Run, shown: Shown, series: dict, doc: dict | None, diag)
         c = series["channels"][ch]
         out.append(f'<h3 id={_q("cmp-" + ch)}>{_e(ch)}</h3>')
         if ch in identities:
-            out.append(_note(f"{ch} is an identity by construction ({IDENTITY_TEXT}); its residual is numerical "
-                             "and says nothing about the model. It is left out of the residual plots and of where "
-                             "the model fails."))
-        out.append(_p(f"Residual RMS {_num(c['rms'], '.3g')}, R² {_num(c['r2'], '.5f')}, {len(series['t'])} samples."))
+            out.append(_note(f"{ch} is an identity by construction ({IDENTITY_TEXT}): its model reproduces the "
+                             "measurement to rounding (least-squares residual RMS " + _num(c["rms"], ".2g") +
+                             ") and says nothing about the model. Not plotted; left out of the residual plots and of "
+                             "where the model fails."))
+            continue
+        plotted = float(np.sqrt(np.mean(np.square(c["residual"])))) if c["residual"].size else float("nan")
+        out.append(_p(f"Residual RMS of the plotted model {_num(plotted, '.3g')} (of the plain least-squares fit "
+                      f"{_num(c['rms'], '.3g')}; the two differ when the estimates were corrected for the noise in "
+                      f"the angles), R² {_num(c['r2'], '.5f')}, {len(series['t'])} samples."))
         fig, (a1, a2) = _figure((9, 4.2), 2, [2, 1])
         th = _thin(len(series["t"]))
         t, y, m, res = _gaps(series["t"][th], c["measured"][th], c["model"][th], c["residual"][th])
