@@ -115,11 +115,12 @@ def diagnose(run_dir, model_spec, version_id, n_windows, mach_half_width, quiet)
     doc = diag.to_json()
     doc["model"] = source
     out = write_json_atomic(doc, run_dir / "diagnosis.json")
+    from aerosid.modelling_loop import run_truth
     from aerosid.report import write_report
 
     with progress:
         progress("write report.html", 0.0)
-        report = write_report(run_dir, diagnosis=diag)
+        report = write_report(run_dir, diagnosis=out, version=version_id, truth=run_truth(run_dir))  # chosen, else latest
     for line in spec_warnings:  # e.g. the parent's terms a terms = [...] list dropped
         click.echo(line)
     if not quiet:
@@ -200,12 +201,24 @@ def fit(run_dir, model_spec, parent, note, mach_half_width, per_degree):
                 click.echo(f"  {ch:<4} residual RMS {a:.4g} -> {b:.4g} ({100 * (b / a - 1):+.1f} %)")
     for line in spec.warnings() if spec else ():  # e.g. the parent's terms a terms = [...] list dropped
         click.echo(line)
+    with stage_progress("report") as progress:
+        progress("diagnose and write report.html", 0.0)
+        _diagnose_and_report(run_dir, v.id, mach_half_width)
+
+
+def _diagnose_and_report(run_dir: Path, version: str, mach_half_width) -> None:
+    """After a fit: diagnose the new version and write diagnosis.json and report.html for it."""
+    from aerosid.modelling_loop import diagnose_and_report
     from aerosid.report import write_report
 
-    with stage_progress("report") as progress:
-        progress("write report.html", 0.0)
-        report = write_report(run_dir)
-    click.echo(f"wrote {report} (run `aerosid diagnose` to re-diagnose this version)")
+    try:
+        paths = diagnose_and_report(run_dir, version, mach_half_width=mach_half_width)
+    except _errors() + (ValueError,) as exc:  # e.g. too few samples to diagnose: the fit itself stands
+        click.echo(f"could not diagnose {version}: {exc}")
+        click.echo(f"wrote {write_report(run_dir, version=version)} (its diagnosis section is of an older model)")
+        return
+    click.echo(f"wrote {paths['diagnosis']} (diagnosis of {version}: `aerosid diagnose {run_dir}` prints it) and "
+               f"{paths['report']}")
 
 
 def _echo_terms(v, parent, per_degree: bool) -> None:

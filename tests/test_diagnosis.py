@@ -358,8 +358,17 @@ def test_diagnosis_json_structure(injected, vehicle):
     assert f == sorted(f, reverse=True)
     names = {e["name"] for e in doc["effects"]}
     assert set(CATALOGUE) <= names
-    assert len(doc["time_windows"]) == 8 * 5
-    assert sum(w["worst"] for w in doc["time_windows"]) == 5
+    # C_N and C_Y are identities by construction (alpha, beta are inverted from them for seed-rlv):
+    # marked, and left out of "where it fails" (windows, regimes, the message and the summary)
+    assert doc["identities"] == ["CN", "CY"] and d.identities == ("CN", "CY")
+    where = {"CN", "CY"} & {r["channel"] for r in doc["time_windows"] + doc["regimes"] + doc["regime_map"]}
+    assert where == set()
+    assert len(doc["time_windows"]) == 8 * 3
+    assert sum(w["worst"] for w in doc["time_windows"]) == 3
+    assert "CN:" not in d._where_text() and "CY:" not in d._where_text()
+    # the whole regime map is stored (not only the 3 worst bins): Mach varies, so Cm has its Mach bins
+    cm_mach = [r for r in doc["regime_map"] if r["channel"] == "Cm" and r["variable"] == "mach"]
+    assert len(cm_mach) == len([b for b in d.channels["Cm"].regimes if b.variable == "mach"]) >= 4
     assert set(doc["whiteness"]) == {"CN", "Cm", "CY", "Cn", "Cl"}
     assert "ljung_box_p" in doc["whiteness"]["Cm"] and "spectrum_band_share" in doc["whiteness"]["Cm"]
     # comparison time histories for plots
@@ -368,6 +377,7 @@ def test_diagnosis_json_structure(injected, vehicle):
     assert np.allclose(cmp["measured"] - cmp["model"], cmp["residual"])
     summary = d.summary()
     assert "control_alpha" in summary and "Where it fails" in summary
+    assert "CN   identity by construction" in summary
 
 
 def test_diagnose_rejects_too_few_samples(reference_flight, vehicle):

@@ -20,7 +20,10 @@ import pytest
 pytestmark = pytest.mark.prefect
 
 CHANNELS = ("CN", "Cm", "CY", "Cn", "Cl")
-SECTIONS = ("run", "preprocessing", "segments", "coefficients", "comparison", "diagnosis", "versions", "audit")
+#: C_N and C_Y are identities by construction for seed-rlv (alpha, beta inverted from them)
+MODELLED = ("Cm", "Cn", "Cl")
+SECTIONS = ("run", "preprocessing", "segments", "coefficients", "comparison", "residuals", "diagnosis", "versions",
+            "audit")
 _CACHE: dict = {}
 
 
@@ -37,10 +40,10 @@ def _make_run(root: Path):
     run_dir = root / "run"
     summary = process_flight(str(root / "flight" / "telemetry.parquet"), str(run_dir))
     assert summary["status"] in ("ok", "ok with findings", "partial"), summary["segments_failed"]
-    fit_version(run_dir)  # v001, the default models
+    assert [p.name for p in (run_dir / "models").iterdir()] == ["v001"]  # the run stores the default models
     models = default_models()
     models["Cm"] = models["Cm"].with_term(parse_term("pitch_damping", "Cm"))
-    fit_version(run_dir, models, note="add pitch damping <b>")
+    assert fit_version(run_dir, models, note="add pitch damping <b>").id == "v002"
     diag = diagnose(read_flight_data(run_dir), load_vehicle("seed-rlv"), latest_models(run_dir))
     doc = diag.to_json()
     doc["model"] = "v002"
@@ -67,6 +70,13 @@ def run_copy(report_run, tmp_path):
 
 def ok_segments(run_dir: Path) -> list[str]:
     return sorted(p.parent.name for p in (run_dir / "segments").glob("*/smoothed.parquet"))
+
+
+def n_plots(run_dir: Path, *, segments: int | None = None, regimes: bool = True, versions: bool = True) -> int:
+    """Plots in a report: one per smoothed segment, per modelled channel a measured-vs-model and a
+    residuals figure (the identities C_N, C_Y have neither), the regime map, the version tree."""
+    segs = len(ok_segments(run_dir)) if segments is None else segments
+    return segs + 2 * len(MODELLED) + int(regimes) + int(versions)
 
 
 def assert_self_contained(doc: str) -> None:
@@ -128,10 +138,10 @@ def test_full_report_is_self_contained_and_complete(run_copy):
     assert "could not be rendered" not in doc
     for sid in SECTIONS:
         assert f'<section id="{sid}">' in doc
-    # plots: one per smoothed segment, one per channel, the version history
+    # plots: one per smoothed segment, two per modelled channel, the regime map, the version tree
     segs = ok_segments(run_dir)
     assert segs
-    assert doc.count("<svg") == doc.count("</svg>") == len(segs) + len(CHANNELS) + 1
+    assert doc.count("<svg") == doc.count("</svg>") == n_plots(run_dir)
     assert "<text" not in doc  # text drawn as paths: no font needed
     # run facts: telemetry SHA-256 from the ledger, code version
     ledger = [json.loads(x) for x in (run_dir / "ledger.jsonl").read_text().splitlines()]
@@ -141,8 +151,10 @@ def test_full_report_is_self_contained_and_complete(run_copy):
     assert 'id="preprocess-flags"' in doc and "MISSING_ROW" in doc and "Longest all-channel gap" in doc
     # NIS table per segment, seed Table 2 style
     assert doc.count("seed Table 2 style") == len(segs) and "NIS smoother" in doc
-    # the coefficients table: every coefficient, per degree for angle slopes, truth and error
-    table = pd.read_parquet(run_dir / "coefficients.parquet")
+    # the coefficients table of the latest version (v002): every coefficient, per degree for angle
+    # slopes, truth and error
+    table = pd.read_parquet(run_dir / "models" / "v002" / "coefficients.parquet")
+    assert "Cm_q" in set(table["coefficient"]) and "Model shown: model version v002 (the latest)" in doc
     coef_html = doc[doc.index('<table id="coefficients"'):]
     coef_html = coef_html[:coef_html.index("</table>")]
     for name in table["coefficient"]:
@@ -157,7 +169,10 @@ def test_full_report_is_self_contained_and_complete(run_copy):
     assert 'id="diagnosis-message"' in doc and 'id="effects-table"' in doc
     assert doc.count("<tr class=\"why\">") == len(diag.effects)
     assert 'id="windows-heat"' in doc and 'id="whiteness-table"' in doc and "Ljung–Box" in doc
-    assert doc.count("residual RMS ratio by regime bin") == len(CHANNELS)
+    assert doc.count('aria-label="Residual RMS ratio by regime bin') == 1
+    heat = doc[doc.index('id="windows-heat"'):].split("</table>")[0]
+    assert "<th>Cm</th>" in heat and "<th>CN</th>" not in heat and "<th>CY</th>" not in heat  # identities left out
+    assert "model diagnosed: <b id=\"diagnosed-model\">v002</b>" in doc and 'id="diagnosis-stale"' not in doc
     # model versions, the note escaped
     assert 'id="versions-table"' in doc and "v002" in doc and "Cm: +pitch_damping" in doc
     assert "add pitch damping &lt;b&gt;" in doc and "pitch damping <b>" not in doc
@@ -172,9 +187,10 @@ def test_report_reads_diagnosis_json_when_no_diagnosis_is_given(report_run):
     assert_self_contained(doc)
     assert_well_formed(doc)
     assert "could not be rendered" not in doc
-    assert "diagnosis.json" in doc and "model diagnosed: v002" in doc
-    assert 'id="effects-table"' in doc and 'id="regimes-worst"' in doc and 'id="whiteness-table"' in doc
-    assert doc.count("<svg") == len(ok_segments(run_dir)) + len(CHANNELS) + 1
+    assert "diagnosis.json" in doc and 'model diagnosed: <b id="diagnosed-model">v002</b>' in doc
+    assert 'id="effects-table"' in doc and 'id="whiteness-table"' in doc
+    assert 'aria-label="Residual RMS ratio by regime bin' in doc  # diagnosis.json keeps the whole regime map
+    assert doc.count("<svg") == n_plots(run_dir)
     assert "truth" not in doc[doc.index('<table id="coefficients"'):].split("</table>")[0]
     # the path of a diagnosis.json works as well (a dict takes the same route)
     assert 'id="effects-table"' in build_report(run_dir, diagnosis=run_dir / "diagnosis.json")
@@ -193,7 +209,7 @@ def test_report_survives_missing_diagnosis_and_versions(run_copy):
     assert "No diagnosis yet" in doc and "aerosid diagnose" in doc
     assert "No model versions yet" in doc
     # the comparison plots still come from coefficients.parquet
-    assert doc.count("<svg") == len(ok_segments(run_dir)) + len(CHANNELS)
+    assert doc.count("<svg") == n_plots(run_dir, regimes=False, versions=False)
     assert "coefficients.parquet (Mach window of the fit)" in doc
 
 
@@ -222,7 +238,7 @@ def test_failed_and_missing_segments_are_reported(run_copy):
     doc = build_report(run_dir)
     assert "could not be rendered" not in doc
     assert f"Segment {segs[0]}" in doc and "No smoothed data for this segment" in doc
-    assert doc.count("<svg") == len(segs) - 1 + len(CHANNELS) + 1
+    assert doc.count("<svg") == n_plots(run_dir, segments=len(segs) - 1)
     state = json.loads((run_dir / "run.json").read_text())
     for failed in state["segments_failed"]:  # a segment whose filter diverged says why
         assert failed["segment"] in doc
@@ -241,7 +257,8 @@ def test_minimal_and_empty_folders(report_run, tmp_path):
     assert_self_contained(doc)
     assert_well_formed(doc)
     assert "could not be rendered" not in doc
-    assert doc.count("<svg") == len(CHANNELS) and 'id="coefficients"' in doc
+    assert doc.count("<svg") == n_plots(minimal, segments=0, regimes=False, versions=False)
+    assert 'id="coefficients"' in doc
     assert "No preprocessed.parquet" in doc and "No ledger.jsonl" in doc and "No segments" in doc
     # an empty folder: every section says it has nothing, nothing crashes
     empty = tmp_path / "empty"
@@ -264,7 +281,7 @@ def test_broken_inputs_are_reported_not_fatal(run_copy):
 
     run_dir, _, _ = run_copy
     (run_dir / "diagnosis.json").write_text("{not json")
-    (run_dir / "coefficients.parquet").write_bytes(b"not parquet")
+    (run_dir / "models" / "v002" / "coefficients.parquet").write_bytes(b"not parquet")  # the version shown
     doc = build_report(run_dir)
     assert_well_formed(doc)
     assert "not valid JSON" in doc and "cannot read" in doc

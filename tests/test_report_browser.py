@@ -226,3 +226,57 @@ def test_minimal_report_opens_without_errors(report_run, tmp_path):
     finally:
         if browser is not None:
             browser.close()
+
+
+def test_report_after_two_fits_shows_the_latest_version(report_run, tmp_path):
+    """run -> fit (v002) -> fit (v003) with the CLI: the report the second fit writes shows
+    v003's coefficients, its measured-vs-model and residual plots, and its diagnosis."""
+    import math
+
+    import pandas as pd
+    from click.testing import CliRunner
+
+    from aerosid.cli import main
+
+    run_dir, _, _ = report_run
+    work = tmp_path / "run"  # as `aerosid run` left it: v001 (the default models) and its diagnosis
+    shutil.copytree(run_dir, work, ignore=shutil.ignore_patterns("v002", "report.html"))
+    base = '"Cm_0 = 1", "Cm_alpha = alpha", "Cm_delta_p = delta_p/2", "pitch_damping"'
+    specs = {"v002": f"[Cm]\nterms = [{base}]\n", "v003": f'[Cm]\nterms = [{base}, "Cm_a3 = alpha**3"]\n'}
+    for version, text in specs.items():
+        spec = tmp_path / f"{version}.toml"
+        spec.write_text(text)
+        result = CliRunner().invoke(main, ["fit", str(work), "--model", str(spec), "--note", version])
+        assert result.exit_code == 0, result.output
+        assert f"created {version}" in result.output and f"diagnosis of {version}" in result.output
+    assert json.loads((work / "diagnosis.json").read_text())["model"] == "v003"
+    table = pd.read_parquet(work / "models" / "v003" / "coefficients.parquet").set_index("coefficient")
+    cm_alpha = format(table.loc["Cm_alpha", "estimate"] * math.pi / 180, ".5g")
+    old_alpha = pd.read_parquet(work / "models" / "v001" / "coefficients.parquet").set_index("coefficient")
+    assert format(old_alpha.loc["Cm_alpha", "estimate"] * math.pi / 180, ".5g") != cm_alpha
+    report = work / "report.html"
+    browser = None
+    try:
+        browser, found = load_report(tmp_path, report)
+        assert found == [], "\n".join(found)
+        text = browser.evaluate("document.body.innerText")
+        assert "Model shown: model version v003 (the latest)" in text
+        assert browser.evaluate("document.querySelector('#diagnosed-model').innerText") == "v003"
+        assert not browser.evaluate("!!document.querySelector('#diagnosis-stale')")
+        coef = browser.evaluate("document.querySelector('#coefficients').innerText")
+        assert "Cm_a3" in coef and "Cm_q" in coef and cm_alpha in coef
+        labels = browser.evaluate("Array.from(document.querySelectorAll('svg')).map(s => s.getAttribute('aria-label'))")
+        for ch in ("Cm", "Cn", "Cl"):
+            assert f"{ch}: measured vs model v003 (top) and residual (bottom) against time" in labels
+            assert any(lab.startswith(f"{ch}, model v003: partial residuals") for lab in labels)
+        assert not any("v001" in lab or "v002" in lab for lab in labels if "model v" in lab)
+        boxes = browser.evaluate("Array.from(document.querySelectorAll('svg')).map(s => {"
+                                 "const r = s.getBoundingClientRect(); return [r.width, r.height]; })")
+        assert all(w > 50 and h > 50 for w, h in boxes), boxes
+        rows = browser.evaluate("Array.from(document.querySelectorAll('#versions-table tbody tr'))"
+                                ".map(r => r.cells[0].innerText)")
+        assert [r.replace("└─", "").replace("◀ shown", "").strip() for r in rows] == ["v001", "v002", "v003"]
+        assert "shown" in rows[-1]
+    finally:
+        if browser is not None:
+            browser.close()

@@ -134,6 +134,12 @@ def test_cli_loop_diagnose_fit_history(run_dir, tmp_path):
     r = runner.invoke(fit_cmd, [str(run_dir), "--model", str(spec), "--note", "add control-alpha"])
     assert r.exit_code == 0, r.output
     assert "created v001, v002" in r.output and "Cm   residual RMS" in r.output
+    # the fit diagnoses the version it made, and its report shows that version
+    assert "diagnosis of v002" in r.output
+    doc = json.loads((run_dir / "diagnosis.json").read_text())
+    assert doc["model"] == "v002" and not [e for e in doc["effects"] if e["channel"] == "Cm" and e["significant"]]
+    html = (run_dir / "report.html").read_text()
+    assert 'model diagnosed: <b id="diagnosed-model">v002</b>' in html and "model version v002 (the latest)" in html
 
     r = runner.invoke(diagnose_cmd, [str(run_dir), "--quiet"])
     assert r.exit_code == 0, r.output

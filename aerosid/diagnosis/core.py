@@ -307,6 +307,9 @@ class Diagnosis:
     n_samples: int
     mach_window: tuple[float, float]
     n_windows: int
+    #: channels that are identities by construction (alpha, beta inverted from them): their
+    #: residual is numerical, so they are left out of "where it fails"
+    identities: tuple[str, ...] = ()
 
     @property
     def significant(self) -> tuple[EffectEvidence, ...]:
@@ -378,6 +381,8 @@ class Diagnosis:
     def _where_text(self) -> str:
         parts = []
         for ch, rep in self.channels.items():
+            if ch in self.identities:
+                continue
             flagged_w = [w for w in rep.windows if w.flagged]
             flagged_r = [b for b in rep.worst_regimes(3) if b.flagged]
             if flagged_w or flagged_r:
@@ -390,10 +395,13 @@ class Diagnosis:
 
     # ---- output
     def to_json(self) -> dict:
-        regimes, windows = [], []
-        for rep in self.channels.values():
+        regimes, windows, regime_map = [], [], []
+        for ch, rep in self.channels.items():
+            if ch in self.identities:  # not "where it fails": the residual is numerical
+                continue
             regimes += [b.to_dict() for b in rep.worst_regimes(3)]
             windows += [w.to_dict() for w in rep.windows]
+            regime_map += [b.to_dict() for b in rep.regimes]
         return {
             "schema": "aerosid.diagnosis/1",
             "nothing_significant": self.nothing_significant,
@@ -404,7 +412,9 @@ class Diagnosis:
             "n_samples": self.n_samples,
             "mach_window": [_f(self.mach_window[0]), _f(self.mach_window[1])],
             "effects": [e.to_dict() for e in self.effects],
+            "identities": list(self.identities),
             "regimes": regimes,
+            "regime_map": regime_map,
             "time_windows": windows,
             "whiteness": {ch: rep.whiteness.to_dict() for ch, rep in self.channels.items()},
             "channels": {ch: {"terms": list(self.models[ch].names), "rms_residual": _f(rep.fit.rms_residual),
@@ -430,6 +440,9 @@ class Diagnosis:
         lines += ["", "Where it fails (residual RMS relative to the channel's; * = flagged >= "
                   f"{FLAG_RATIO:g}x):"]
         for ch, rep in self.channels.items():
+            if ch in self.identities:
+                lines.append(f"  {ch:<4} identity by construction (alpha, beta are inverted from it): left out")
+                continue
             ww = rep.worst_window
             regs = ", ".join(f"{b.variable} {b.lo:.4g}..{b.hi:.4g} x{b.rms_ratio:.2f}{'*' if b.flagged else ''}"
                              for b in rep.worst_regimes(2))
@@ -729,7 +742,17 @@ def diagnose(flight_data: pd.DataFrame, vehicle, models: dict[str, ChannelModel]
 
     ranked = sorted(evidence, key=lambda e: (not e.significant, not e.identifiable, -e.score))
     window = (float(fd["mach"].min()), float(fd["mach"].max()))
-    return Diagnosis(tuple(ranked), reports, models, n, window, int(win.max()) + 1)
+    return Diagnosis(tuple(ranked), reports, models, n, window, int(win.max()) + 1, identity_channels(vehicle, models))
+
+
+def identity_channels(vehicle, channels) -> tuple[str, ...]:
+    """The channels that are identities by construction: C_N and C_Y when alpha and beta
+    are inverted from them (no vanes), as aerosid.identify reports them."""
+    from aerosid.identify import INVERSION_CHANNELS
+
+    if getattr(vehicle, "air_data_source", None) == "vanes":
+        return ()
+    return tuple(ch for ch in INVERSION_CHANNELS if ch in channels)
 
 
 def _simex_signals(fd: pd.DataFrame, vehicle, groups: np.ndarray, sigma: float) -> dict:
