@@ -79,8 +79,11 @@ def main() -> None:
                    "design and DIR/vehicle.toml generated). Needs the extra: pip install 'aerosid[jsbsim]'.")
 @click.option("--manoeuvre", default="3211", show_default=True,
               help="JSBSim input sequence: 3211 = elevator 3-2-1-1, then aileron and rudder doublets.")
+@click.option("--input", "input_file", type=click.Path(exists=True, dir_okay=False, path_type=Path), default=None,
+              help="Fly a designed input (DIR/input.parquet or .csv of `aerosid design`): t_s plus control "
+                   "columns in radians; it replaces the manoeuvres of its axes.")
 def simulate(case_name, effects, seed, out_dir, duration, rate, no_faults, list_effects, jsbsim_aircraft,
-             manoeuvre):
+             manoeuvre, input_file):
     """Simulate a flight whose truth is known and write its telemetry.
 
     Writes DIR/telemetry.parquet (raw, as a flight delivers it: dropouts as
@@ -102,8 +105,9 @@ def simulate(case_name, effects, seed, out_dir, duration, rate, no_faults, list_
             raise click.UsageError("--effect, --duration and --rate apply to the built-in simulator, not --jsbsim")
         from aerosid.simulation.jsbsim_flight import JSBSimUnavailable, simulate_jsbsim
 
+        table = _input_table(input_file, jsbsim=True)
         try:
-            flight = simulate_jsbsim(jsbsim_aircraft, manoeuvre, seed=seed, faults=not no_faults)
+            flight = simulate_jsbsim(jsbsim_aircraft, manoeuvre, seed=seed, faults=not no_faults, input_table=table)
         except JSBSimUnavailable as exc:
             raise click.ClickException(str(exc)) from exc
         except ValueError as exc:
@@ -123,6 +127,12 @@ def simulate(case_name, effects, seed, out_dir, duration, rate, no_faults, list_
             overrides["duration_s"] = duration
         if rate is not None:
             overrides["sample_rate_hz"] = rate
+        table = _input_table(input_file, jsbsim=False)
+        if table is not None:
+            from aerosid.design.io import as_case_inputs
+
+            overrides["inputs"] = as_case_inputs(table)
+            overrides.setdefault("duration_s", float(table["t_s"].iloc[-1]))
         case = load_case(case_name, **overrides)
         if no_faults:
             case = replace(case, faults=case.faults.without_faults())
@@ -133,6 +143,18 @@ def simulate(case_name, effects, seed, out_dir, duration, rate, no_faults, list_
     click.echo(flight.summary())
     for kind, path in paths.items():
         click.echo(f"  wrote {path}")
+
+
+def _input_table(path, jsbsim: bool):
+    """The designed input of `simulate --input` (None without one); a bad file -> a clear error."""
+    if path is None:
+        return None
+    from aerosid.design.io import JSBSIM_COLUMNS, RLV_COLUMNS, InputFileError, read_input
+
+    try:
+        return read_input(path, JSBSIM_COLUMNS if jsbsim else RLV_COLUMNS)
+    except InputFileError as exc:
+        raise click.ClickException(str(exc)) from exc
 
 
 #: How long `aerosid run` waits for Prefect's ephemeral API server to answer [s].  The
