@@ -471,6 +471,9 @@ from aerosid.cli_import import import_group  # noqa: E402  (aerosid import sidpa
 main.add_command(import_group)
 from aerosid.cli_validate import validate  # noqa: E402  (aerosid validate: predict another manoeuvre)
 main.add_command(validate)
+from aerosid.cli_design import design as _design  # noqa: E402
+
+main.add_command(_design)
 
 if __name__ == "__main__":  # pragma: no cover
     sys.exit(main())

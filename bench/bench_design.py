@@ -1,0 +1,153 @@
+"""Proof by simulation of `aerosid design` (issue 20): fly each designed manoeuvre over
+seeds through the whole pipeline and check what the design promised.
+
+* seed-rlv, Table 2 noise, one hidden effect (pitch_damping at Cm_q = -30 =
+  the catalogue size; alpha_nonlinearity at its catalogue size): the design computed
+  from ONE run of the reference flight (`aerosid design RUN --effect NAME --out DIR`)
+  is flown with `simulate(case with inputs=DIR/input.parquet)` for every seed
+  (noise, dropouts, outliers, sync gap), preprocess -> EKF/MBF -> flight data ->
+  `diagnose`: is the effect ranked first and significant?  Its estimate, reported
+  sigma and detectable size against the design's prediction.
+* c172x (JSBSim): the design `--effect Cm_q --versus Cm_alpha_dot` flown for every
+  seed (noise and faults), the pipeline's identification with the vehicle's default
+  model (both terms): error of each against JSBSim's truth.
+
+    python bench/bench_design.py rlv DESIGN_DIR --effect pitch_damping --seeds 0-9 --jobs 2
+    python bench/bench_design.py c172x DESIGN_DIR --seeds 0-9 --jobs 2
+    -> bench/results/design_runs_<tag>.csv; bench/results/design.md is written by hand from them
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import time
+import warnings
+from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+RESULTS = Path(__file__).parent / "results"
+
+
+def one_rlv(job: tuple) -> dict:
+    from dataclasses import replace
+
+    from aerosid.design.io import as_case_inputs, read_input
+    from aerosid.diagnosis import diagnose
+    from aerosid.ebm import process_telemetry
+    from aerosid.effects import CATALOGUE
+    from aerosid.simulation import load_case, simulate
+
+    design_dir, effect, scale, seed = job
+    t0 = time.perf_counter()
+    case = load_case("seed-rlv")
+    if design_dir:
+        table = read_input(Path(design_dir) / "input.parquet")
+        case = replace(case, inputs=as_case_inputs(table), duration_s=float(table["t_s"].iloc[-1]))
+    eff = CATALOGUE[effect]
+    flight = simulate(case, ((eff, scale),), seed=seed)
+    row = {"design": str(design_dir or "reference"), "effect": effect, "scale": scale, "seed": seed,
+           "truth": eff.value * scale}
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            run = process_telemetry(flight.telemetry, case.vehicle)
+            fd = run.flight_data.sort_values(["flight", "t_s"], kind="stable").reset_index(drop=True)
+            d = diagnose(fd, case.vehicle)
+    except Exception as exc:  # a failed run counts as a miss
+        row["failed"] = f"{type(exc).__name__}: {exc}"
+        return row
+    e = d.effect(effect)
+    tr = flight.truth
+    row.update(top=d.top.name if d.effects else "", rank=d.rank_of(effect), significant=bool(e.significant),
+               first_and_significant=bool(d.rank_of(effect) == 1 and e.significant), estimate=e.estimate,
+               std_error=e.std_error, detectable_size=e.detectable_size, p_value=e.p_value,
+               window_consistency=e.window_consistency, eiv_fraction=e.eiv_fraction,
+               reasons="; ".join(e.reasons), n_significant=sum(x.significant for x in d.effects),
+               fin_max_rad=float(np.max(np.abs(flight.telemetry[[f"d{i}_rad" for i in range(1, 5)]].to_numpy()))),
+               alpha_min_deg=float(np.degrees(tr["alpha_rad"].min())),
+               alpha_max_deg=float(np.degrees(tr["alpha_rad"].max())),
+               seconds=time.perf_counter() - t0)
+    return row
+
+
+def one_c172x(job: tuple) -> dict:
+    from aerosid.design.io import read_input
+    from aerosid.ebm import process_telemetry
+    from aerosid.simulation.jsbsim_flight import simulate_jsbsim
+    from aerosid.vehicle import load_vehicle
+
+    design_dir, seed = job
+    t0 = time.perf_counter()
+    table = read_input(Path(design_dir) / "input.parquet") if design_dir else None
+    flight = simulate_jsbsim("c172x", "3211", seed=seed, input_table=table)
+    row = {"design": str(design_dir or "reference"), "seed": seed}
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            run = process_telemetry(flight.telemetry, load_vehicle("c172x"), mach_half_width=None)
+    except Exception as exc:
+        row["failed"] = f"{type(exc).__name__}: {exc}"
+        return row
+    tab = run.identification.table().set_index("coefficient")
+    for k in ("Cm_q", "Cm_alpha_dot", "Cm_alpha", "Cm_delta_p"):
+        truth = flight.coefficients[k]
+        est, se = float(tab.loc[k, "estimate"]), float(tab.loc[k, "std_error"])
+        row.update({f"{k}_truth": truth, f"{k}_estimate": est, f"{k}_std_error": se,
+                    f"{k}_err_pct": 100.0 * (est / truth - 1.0)})
+    s = run.identification.fits["Cm"].combination({"Cm_q": 1.0, "Cm_alpha_dot": 1.0})
+    truth = flight.coefficients["Cm_q"] + flight.coefficients["Cm_alpha_dot"]
+    row["damping_err_pct"] = 100.0 * (s[0] / truth - 1.0)
+    row["elevator_max_rad"] = float(np.max(np.abs(flight.truth["d1_rad"] - flight.truth["d1_rad"].iloc[0])))
+    row["alpha_min_deg"] = float(np.degrees(flight.truth["alpha_rad"].min()))
+    row["alpha_max_deg"] = float(np.degrees(flight.truth["alpha_rad"].max()))
+    row["seconds"] = time.perf_counter() - t0
+    return row
+
+
+def _seeds(text: str) -> list[int]:
+    out = []
+    for part in text.split(","):
+        a, _, b = part.partition("-")
+        out += list(range(int(a), int(b) + 1)) if b else [int(a)]
+    return out
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("kind", choices=("rlv", "c172x"))
+    ap.add_argument("design_dir", help="a directory written by `aerosid design`, or 'reference'")
+    ap.add_argument("--effect", default="pitch_damping")
+    ap.add_argument("--scale", type=float, default=1.0)
+    ap.add_argument("--seeds", default="0-1")
+    ap.add_argument("--jobs", type=int, default=1)
+    ap.add_argument("--tag", default=None)
+    args = ap.parse_args()
+    ddir = None if args.design_dir == "reference" else args.design_dir
+    seeds = _seeds(args.seeds)
+    if args.kind == "rlv":
+        jobs, fn = [(ddir, args.effect, args.scale, s) for s in seeds], one_rlv
+    else:
+        jobs, fn = [(ddir, s) for s in seeds], one_c172x
+    t0 = time.perf_counter()
+    if args.jobs > 1:
+        with ProcessPoolExecutor(args.jobs) as ex:
+            rows = list(ex.map(fn, jobs))
+    else:
+        rows = [fn(j) for j in jobs]
+    df = pd.DataFrame(rows)
+    tag = args.tag or (f"{args.kind}_{args.effect}" if args.kind == "rlv" else "c172x")
+    RESULTS.mkdir(exist_ok=True)
+    out = RESULTS / f"design_runs_{tag}.csv"
+    df.to_csv(out, index=False, float_format="%.6g")
+    if ddir:
+        (RESULTS / f"design_{tag}.json").write_text(json.dumps(json.loads((Path(ddir) / "design.json").read_text()),
+                                                               indent=1))
+    print(df.drop(columns=[c for c in ("reasons",) if c in df]).to_string())
+    print(f"wall {time.perf_counter() - t0:.0f} s -> {out}")
+
+
+if __name__ == "__main__":
+    main()
