@@ -19,8 +19,11 @@ import click
               help="Writes DIR/input.parquet, DIR/input.csv and DIR/design.json.")
 @click.option("--mach-half-width", type=float, default=0.5, show_default=True,
               help="Regression window |M - M_ref| <= this, as the fit uses.")
+@click.option("--no-refine", is_flag=True,
+              help="Predict with the run's residual only (skip the one noisy simulated flight of the design "
+                   "through the pipeline that measures how the manoeuvre changes the estimation error).")
 @click.option("--quiet", is_flag=True, help="No progress lines.")
-def design(run_dir, effect, size, versus, out_dir, mach_half_width, quiet):
+def design(run_dir, effect, size, versus, out_dir, mach_half_width, no_refine, quiet):
     """Propose a manoeuvre that makes an effect detectable (or separates two terms).
 
     Uses the run's identified model and residual and the vehicle file's limits
@@ -38,7 +41,8 @@ def design(run_dir, effect, size, versus, out_dir, mach_half_width, quiet):
 
     say = (lambda msg: None) if quiet else (lambda msg: click.echo(f"  .. {msg}", err=True))
     try:
-        d = run_design(run_dir, effect, size, versus, mach_half_width=mach_half_width, progress=say)
+        d = run_design(run_dir, effect, size, versus, mach_half_width=mach_half_width, refine=not no_refine,
+                       progress=say)
     except (DesignError, VersionError, VehicleError) as exc:
         raise click.ClickException(str(exc)) from exc
     except ImportError as exc:

@@ -181,7 +181,7 @@ def _use(truth: pd.DataFrame, limits: Limits, dt: float, mask: np.ndarray | None
 # ----------------------------------------------------------------------------- design
 def design(run_dir: str | Path, effect: str, size: float | None = None, versus: str | None = None, *,
            mach_half_width: float = 0.5, kinds: tuple[str, ...] = ("3211", "doublet", "multisine"),
-           progress=None) -> Design:
+           refine: bool = True, progress=None, flyer_factory=None) -> Design:
     from aerosid.diagnosis.candidates import derived_signals
     from aerosid.identify import mach_window_mask
     from aerosid.models import vehicle_signals
@@ -255,36 +255,14 @@ def design(run_dir: str | Path, effect: str, size: float | None = None, versus: 
 
     # ---- the flyer
     notes = list(limits.assumed and [f"assumed limit: {a}" for a in limits.assumed])
-    if vehicle.name == "seed-rlv":
-        from aerosid.design.flyers import RLVFlyer
-
-        coefs = dict(zip(fit.names, np.asarray(fit.estimate, float))) if ch == "Cm" else {}
-        flyer = RLVFlyer(coefs, terms[0].effect, sizes[0])
-        say("flying the baseline and the impulse response (built-in simulator, identified pitch model)")
-        base = flyer.baseline()
-        in_win = mach_window_mask(base["mach"].to_numpy(float), vehicle.mach_reference, mach_half_width)
-        t_win = base["t_s"].to_numpy(float)[in_win]
-        start, end = float(t_win.min()) + 0.5, min(float(t_win.max()), float(t_win.min()) + limits.duration_max_s)
-        linear = True
-    else:
-        from aerosid.simulation.jsbsim_flight import SUPPORTED_AIRCRAFT
-
-        if vehicle.name not in SUPPORTED_AIRCRAFT:
-            raise DesignError(f"no simulator for vehicle {vehicle.name!r}: the design flies candidates in the "
-                              "built-in simulator (seed-rlv) or JSBSim (c172x)")
-        from aerosid.design.flyers import JSBSimFlyer
-
-        duration = min(limits.duration_max_s, 90.0)
-        start, end = 3.0, duration - 16.0
-        extra = _lateral_doublets(np.arange(int(round(duration / 0.01)) + 1) * 0.01, end)
-        flyer = JSBSimFlyer(vehicle.name, duration, extra=extra)
-        say(f"flying the baseline in JSBSim ({duration:g} s)")
-        base = flyer.fly(np.zeros_like(flyer.t))
-        in_win = mach_window_mask(base["mach"].to_numpy(float), vehicle.mach_reference, mach_half_width)
-        linear = False
+    coefs = dict(zip(fit.names, np.asarray(fit.estimate, float))) if ch == "Cm" else {}
+    flyer, base, start, end, linear = (flyer_factory or default_flyer)(vehicle, limits, coefs, terms[0].effect,
+                                                                        sizes[0], say)
+    in_win = mach_window_mask(base["mach"].to_numpy(float), vehicle.mach_reference, mach_half_width)
     dt = flyer.dt
     t = flyer.t
-    ramp = max(0.2, 2.0 * limits.surface_rad[0][1] / limits.surface_rate_rad_s * 0.25)
+    # input ramps: a full-travel step would take max_surface / rate; at least 0.2 s, at most 0.6 s
+    ramp = float(np.clip(max(hi for _, hi in limits.surface_rad) / limits.surface_rate_rad_s, 0.2, 0.6))
     cands = [w for w in candidate_waveforms(t, start, end, ramp) if w.kind in kinds]
     cols = [c for c in base.columns if c not in ("t_s",) and base[c].dtype.kind == "f"]
     evals: list[Evaluation] = []
@@ -320,8 +298,22 @@ def design(run_dir: str | Path, effect: str, size: float | None = None, versus: 
     in_win_full = mach_window_mask(tr["mach"].to_numpy(float), vehicle.mach_reference, mach_half_width)
     s = _signals_from_truth(tr, vehicle)
     Xf, _ = model.design({kk: np.asarray(v)[in_win_full] if np.ndim(v) else v for kk, v in s.items()})
-    after_pred = predict_covariance(Xf.to_numpy(float), model.names, resid)
+    after_run = predict_covariance(Xf.to_numpy(float), model.names, resid)
+    after_pred = after_run
+    if refine:
+        # the estimation error itself depends on the manoeuvre (the smoother's process noise
+        # follows the flight's spectrum): fly the design once with the sensors' noise and
+        # faults through the pipeline and take that flight's residual instead of the run's
+        say("flying the design once with sensor noise through the pipeline (the new flight's residual)")
+        resid_new, X_new = _pipeline_residual(flyer.noisy(a * best.waveform.values, REFINE_SEED), vehicle, model,
+                                              ch, mach_half_width)
+        after_pred = predict_covariance(X_new, model.names, resid_new)
+        notes.append(f"sigma after = the pipeline's on one noisy simulated flight of the design (seed "
+                     f"{REFINE_SEED}: its estimated regressors and its residual, rms {math.sqrt(resid_new.variance):.3g}"
+                     f" vs the run's {math.sqrt(resid.variance):.3g}); the noise-free regressors with the run's "
+                     "residual predict " + ", ".join(f"{t} {after_run.sigma(t):.3g}" for t in targets))
     after = summarise(after_pred)
+    after["noise_free_run_residual"] = summarise(after_run)
 
     ok = all(after[t]["reliable_size"] <= abs(sz) for t, sz in zip(targets, sizes))
     if len(targets) == 1:
@@ -348,7 +340,7 @@ def design(run_dir: str | Path, effect: str, size: float | None = None, versus: 
                    "the aim is 2 sigma <= 10 % of each.")
     u = np.asarray(a * best.waveform.values)
     table = pd.DataFrame({"t_s": t, flyer.column: u})
-    if not linear and flyer.extra is not None:
+    if getattr(flyer, "extra", None) is not None:
         for c in flyer.extra.columns:
             if c != "t_s":
                 table[c] = flyer.extra[c].to_numpy(float)
@@ -363,10 +355,70 @@ def design(run_dir: str | Path, effect: str, size: float | None = None, versus: 
     if linear:
         notes.append("candidates ranked on the simulator linearised about a flight without pitch manoeuvres; the "
                      "chosen one flown in full (the 'after' numbers)")
-    notes.append("sigma assumes the run's residual (estimation error) carries over to the new flight; larger "
-                 "manoeuvres can raise it (the smoother's band follows the flight's spectrum)")
+    if not refine:
+        notes.append("sigma assumes the run's residual (estimation error) carries over to the new flight; larger "
+                     "manoeuvres can raise it (the smoother's band follows the flight's spectrum)")
     return Design(str(run_dir), ch, targets, sizes, model.names, before, after, wave, limits.to_dict(), use, ok,
                   verdict, cand_rows, table, tuple(notes))
+
+
+REFINE_SEED = 987654
+
+
+def default_flyer(vehicle, limits: Limits, coefs: dict, effect: str | None, size: float, say):
+    """(flyer, baseline truth, input start [s], input end [s], linearised?) for the run's vehicle."""
+    if vehicle.name == "seed-rlv":
+        from aerosid.design.flyers import RLVFlyer
+        from aerosid.identify import mach_window_mask
+
+        flyer = RLVFlyer(coefs, effect, size)
+        say("flying the baseline and the impulse response (built-in simulator, identified pitch model)")
+        base = flyer.baseline()
+        in_win = mach_window_mask(base["mach"].to_numpy(float), vehicle.mach_reference, 0.5)
+        t_win = base["t_s"].to_numpy(float)[in_win]
+        start = float(t_win.min()) + 0.5
+        return flyer, base, start, min(float(t_win.max()), start + limits.duration_max_s), True
+    from aerosid.simulation.jsbsim_flight import SUPPORTED_AIRCRAFT
+
+    if vehicle.name not in SUPPORTED_AIRCRAFT:
+        raise DesignError(f"no simulator for vehicle {vehicle.name!r}: the design flies candidates in the "
+                          "built-in simulator (seed-rlv) or JSBSim (c172x)")
+    from aerosid.design.flyers import JSBSimFlyer
+
+    duration = limits.duration_max_s
+    end = duration - 16.0
+    extra = _lateral_doublets(np.arange(int(round(duration / 0.01)) + 1) * 0.01, end)
+    flyer = JSBSimFlyer(vehicle.name, duration, extra=extra)
+    say(f"flying the baseline in JSBSim ({duration:g} s)")
+    return flyer, flyer.fly(np.zeros_like(flyer.t)), 3.0, end, False
+
+
+def _pipeline_residual(telemetry: pd.DataFrame, vehicle, model, ch: str, mach_half_width: float) -> ResidualModel:
+    """The channel residual of the pipeline on a simulated noisy flight (process_telemetry)."""
+    import warnings
+
+    from aerosid.diagnosis.candidates import derived_signals
+    from aerosid.ebm import process_telemetry
+    from aerosid.identify import mach_window_mask
+    from aerosid.models import vehicle_signals
+    from aerosid.regression import fit_linear
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        run = process_telemetry(telemetry, vehicle, mach_half_width=mach_half_width)
+    fd = run.flight_data.sort_values(["flight", "t_s"], kind="stable").reset_index(drop=True)
+    fd = fd.loc[mach_window_mask(fd["mach"].to_numpy(float), vehicle.mach_reference, mach_half_width)]
+    fd = fd.reset_index(drop=True)
+    groups = (fd["flight"].astype(str) + "/" + fd["segment"].astype(str)).to_numpy()
+    sig = derived_signals(vehicle_signals(fd, vehicle), vehicle.length_pitch_m, vehicle.length_lateral_m)
+    X, _ = model.design(sig)
+    y = fd[ch].to_numpy(float)
+    ok = np.isfinite(y) & np.all(np.isfinite(X.to_numpy(float)), axis=1)
+    X, y, groups = X.loc[ok], y[ok], groups[ok]
+    fit = fit_linear(y, X, names=model.names, channel=ch, groups=groups)
+    fs = 1.0 / float(np.median(np.diff(fd["t_s"].to_numpy(float))))
+    return (ResidualModel.from_residual(np.asarray(fit.residuals), fs, groups=groups, max_lag=fit.max_lag),
+            X.to_numpy(float))
 
 
 def _lateral_doublets(t: np.ndarray, after_s: float) -> pd.DataFrame:

@@ -71,6 +71,14 @@ class RLVFlyer:
             truth[f"d{i + 1}_rad"] = fins[:, i]
         return truth
 
+    def noisy(self, u: np.ndarray, seed: int) -> pd.DataFrame:
+        """Raw telemetry of u flown with the case's sensor noise and faults (seed)."""
+        from aerosid.simulation import load_case, simulate
+
+        case = replace(self.case, faults=load_case(self.case.name).faults,
+                       inputs={self.column: (self.t, np.asarray(u, float))})
+        return simulate(case, self.effects, seed=seed).telemetry
+
     def _linear(self):
         if self._baseline is None:
             self._baseline = self.fly(None)
@@ -122,3 +130,9 @@ class JSBSimFlyer:
         from aerosid.simulation.jsbsim_flight import simulate_jsbsim
 
         return simulate_jsbsim(self.aircraft, "3211", seed=0, faults=False, input_table=self.table(u)).truth
+
+    def noisy(self, u: np.ndarray, seed: int) -> pd.DataFrame:
+        """Raw telemetry of u flown with the aircraft's sensor noise and faults (seed)."""
+        from aerosid.simulation.jsbsim_flight import simulate_jsbsim
+
+        return simulate_jsbsim(self.aircraft, "3211", seed=seed, faults=True, input_table=self.table(u)).telemetry
