@@ -115,16 +115,96 @@ def _seeds(text: str) -> list[int]:
     return out
 
 
+def _pct(x: float) -> str:
+    return f"{x:+.1f}"
+
+
+def report() -> str:
+    """bench/results/design.md from the recorded runs and designs."""
+    lines = ["# Designed manoeuvres flown in simulation (issue 20)", "",
+             "`python bench/bench_design.py rlv DES --effect NAME --seeds 1-10` and `... c172x DES --seeds 1-10`; "
+             "each design computed once by `aerosid design` from one run of the reference flight (seed 0), then "
+             "flown with noise, dropouts, outliers (and the sync gap on seed-rlv) for seeds 1-10 through the whole "
+             "pipeline. Per-run rows: `design_runs_*.csv`; the designs: `design_*.json`.", ""]
+    for eff in ("pitch_damping", "alpha_nonlinearity"):
+        f = RESULTS / f"design_runs_rlv_{eff}.csv"
+        if not f.is_file():
+            continue
+        df = pd.read_csv(f)
+        des = json.loads((RESULTS / f"design_rlv_{eff}.json").read_text())
+        tgt = des["targets"][0]
+        ok = df[df.get("failed", pd.Series([np.nan] * len(df))).isna()] if "failed" in df else df
+        m = des["manoeuvre"]
+        lines += [f"## seed-rlv, {eff} (truth {df['truth'].iloc[0]:g}), Table 2 noise", "",
+                  f"Design: {m['label']}, amplitude {m['amplitude_rad']:.3f} rad of delta_p command "
+                  f"({np.degrees(m['amplitude_rad'] / 2):.1f} deg of delta_p/2), {m['start_s']:.1f}-{m['end_s']:.1f} s; "
+                  f"limits used (noise-free flight): surface {100 * des['limit_use']['surface']:.0f} %, rate "
+                  f"{100 * des['limit_use']['surface_rate']:.0f} %, alpha {100 * des['limit_use']['alpha']:.0f} %, "
+                  f"load factor {100 * des['limit_use']['load_factor']:.0f} %.", "",
+                  "| | sigma | detectable size |", "|---|---|---|",
+                  f"| run (reference flight, seed 0) | {des['before'][tgt]['sigma']:.3g} | "
+                  f"{des['before'][tgt]['detectable_size']:.3g} |",
+                  f"| design, predicted (one noisy simulated flight) | {des['after'][tgt]['sigma']:.3g} | "
+                  f"{des['after'][tgt]['detectable_size']:.3g} |",
+                  f"| design, predicted (noise-free regressors, run's residual) | "
+                  f"{des['after']['noise_free_run_residual'][tgt]['sigma']:.3g} | "
+                  f"{des['after']['noise_free_run_residual'][tgt]['detectable_size']:.3g} |",
+                  f"| design flown, seeds 1-10 (median; range) | {ok['std_error'].median():.3g} "
+                  f"({ok['std_error'].min():.3g}-{ok['std_error'].max():.3g}) | {ok['detectable_size'].median():.3g} "
+                  f"({ok['detectable_size'].min():.3g}-{ok['detectable_size'].max():.3g}) |", "",
+                  f"**First and significant: {int(ok['first_and_significant'].sum())}/{len(df)}** "
+                  f"(significant {int(ok['significant'].sum())}/{len(df)}; failed runs {len(df) - len(ok)}); estimate "
+                  f"{ok['estimate'].mean():.4g} +- {ok['estimate'].std():.3g} (truth {df['truth'].iloc[0]:g}); "
+                  f"alpha {ok['alpha_min_deg'].min():.1f}..{ok['alpha_max_deg'].max():.1f} deg.", "",
+                  "| seed | rank | top | significant | estimate | sigma | detectable | p | consistency |",
+                  "|---|---|---|---|---|---|---|---|---|"]
+        for _, r in ok.iterrows():
+            lines.append(f"| {r['seed']} | {r['rank']} | {r['top']} | {r['significant']} | {r['estimate']:.4g} | "
+                         f"{r['std_error']:.3g} | {r['detectable_size']:.3g} | {r['p_value']:.2g} | "
+                         f"{r['window_consistency']:.2f} |")
+        lines.append("")
+    f = RESULTS / "design_runs_c172x.csv"
+    if f.is_file():
+        df = pd.read_csv(f)
+        des = json.loads((RESULTS / "design_c172x.json").read_text())
+        m = des["manoeuvre"]
+        lines += ["## c172x (JSBSim): separating Cm_q and Cm_alpha_dot", "",
+                  f"Design: {m['label']}, amplitude {m['amplitude_rad']:.3f} rad of elevator command, "
+                  f"{m['start_s']:.0f}-{m['end_s']:.0f} s, then an aileron and a rudder doublet; "
+                  f"{m['duration_s']:.0f} s. Predicted (one noisy flight): "
+                  + ", ".join(f"sigma({t}) {des['after'][t]['sigma']:.3g} (run: {des['before'][t]['sigma']:.3g})"
+                              for t in des["targets"]) + ".", "",
+                  "| coefficient | mean error % | RMS error % | max abs error % | seeds within 10 % | mean sigma % |",
+                  "|---|---|---|---|---|---|"]
+        for k in ("Cm_q", "Cm_alpha_dot", "Cm_alpha", "Cm_delta_p"):
+            e = df[f"{k}_err_pct"]
+            sg = 100 * df[f"{k}_std_error"] / df[f"{k}_truth"].abs()
+            lines.append(f"| {k} | {e.mean():+.1f} | {np.sqrt((e ** 2).mean()):.1f} | {e.abs().max():.1f} | "
+                         f"{int((e.abs() <= 10).sum())} / {len(df)} | {sg.mean():.1f} |")
+        e = df["damping_err_pct"]
+        lines.append(f"| Cm_q + Cm_alpha_dot | {e.mean():+.1f} | {np.sqrt((e ** 2).mean()):.1f} | {e.abs().max():.1f} | "
+                     f"{int((e.abs() <= 10).sum())} / {len(df)} | |")
+        both = int(((df["Cm_q_err_pct"].abs() <= 10) & (df["Cm_alpha_dot_err_pct"].abs() <= 10)).sum())
+        lines += ["", f"**Both within 10 %: {both}/{len(df)}** (reference 3-2-1-1 flight, bench/results/jsbsim.md: "
+                  "Cm_q +10.4 % mean, Cm_alpha_dot -14.7 % mean).", ""]
+    return "\n".join(lines) + "\n"
+
+
 def main() -> None:
     ap = argparse.ArgumentParser()
-    ap.add_argument("kind", choices=("rlv", "c172x"))
-    ap.add_argument("design_dir", help="a directory written by `aerosid design`, or 'reference'")
+    ap.add_argument("kind", choices=("rlv", "c172x", "report"))
+    ap.add_argument("design_dir", nargs="?", default="reference",
+                    help="a directory written by `aerosid design`, or 'reference'")
     ap.add_argument("--effect", default="pitch_damping")
     ap.add_argument("--scale", type=float, default=1.0)
     ap.add_argument("--seeds", default="0-1")
     ap.add_argument("--jobs", type=int, default=1)
     ap.add_argument("--tag", default=None)
     args = ap.parse_args()
+    if args.kind == "report":
+        (RESULTS / "design.md").write_text(report())
+        print((RESULTS / "design.md").read_text())
+        return
     ddir = None if args.design_dir == "reference" else args.design_dir
     seeds = _seeds(args.seeds)
     if args.kind == "rlv":
