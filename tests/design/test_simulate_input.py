@@ -38,3 +38,19 @@ def test_simulate_refuses_an_input_with_unknown_columns_or_bad_rows(tmp_path):
     pd.DataFrame({"t_s": [0.0, 0.02, 0.01], "delta_p_cmd_rad": [0.0, 0.1, np.nan]}).to_csv(bad2, index=False)
     r = CliRunner().invoke(main, ["simulate", "--input", str(bad2), "--out", str(tmp_path / "o")])
     assert r.exit_code != 0 and "bad2.csv" in r.output and "rows 2" in r.output
+
+
+def test_jsbsim_flies_the_elevator_command_in_radians_through_the_aircraft_scaling():
+    import pytest
+
+    pytest.importorskip("jsbsim")
+    from aerosid.simulation.jsbsim_flight import simulate_jsbsim
+
+    t = np.arange(0, 3.0001, 0.01)
+    table = pd.DataFrame({"t_s": t, "elevator_cmd_rad": np.where(t >= 1.0, 0.1, 0.0)})
+    truth = simulate_jsbsim("c172x", "3211", seed=0, faults=False, input_table=table).truth
+    assert len(truth) == t.size
+    d = truth["d1_rad"].to_numpy()
+    # c172x's elevator actuator: hysteresis 0.05 rad wide, so a 0.1 rad command step from trim
+    # moves the surface by 0.1 - 0.025 (lag 60/s: settled well within the 2 s)
+    assert abs((d[-1] - d[50]) - 0.075) < 2e-3
