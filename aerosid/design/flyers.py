@@ -129,7 +129,9 @@ class JSBSimFlyer:
     def fly(self, u: np.ndarray) -> pd.DataFrame:
         from aerosid.simulation.jsbsim_flight import simulate_jsbsim
 
-        return simulate_jsbsim(self.aircraft, "3211", seed=0, faults=False, input_table=self.table(u)).truth
+        flight = simulate_jsbsim(self.aircraft, "3211", seed=0, faults=False, input_table=self.table(u))
+        self.coefficients = dict(flight.coefficients)  # the simulator's own linear truth at trim
+        return flight.truth
 
     def noisy(self, u: np.ndarray, seed: int) -> pd.DataFrame:
         """Raw telemetry of u flown with the aircraft's sensor noise and faults (seed)."""
