@@ -44,6 +44,7 @@ class Evaluation:
     prediction: Prediction
     limit_use: dict
     score: float
+    model_error_pct: dict = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
@@ -250,8 +251,11 @@ def design(run_dir: str | Path, effect: str, size: float | None = None, versus: 
         before[t]["sigma_reported"] = float(fit.std_error[j])
         before[t]["estimate"] = float(fit.estimate[j])
 
-    def score(pred: Prediction) -> float:
-        return max(pred.sigma(t) / abs(s) for t, s in zip(targets, sizes))
+    def score(pred: Prediction, bias: dict | None = None) -> float:
+        """max over the targets of 2 sigma / |size| + |model error| (the model structure's own error on
+        the shape, when the simulator states its truth: a separation that the model cannot fit is none)."""
+        bias = bias or {}
+        return max(2.0 * pred.sigma(t) / abs(s) + abs(bias.get(t, 0.0)) / 100.0 for t, s in zip(targets, sizes))
 
     # ---- the flyer
     notes = list(limits.assumed and [f"assumed limit: {a}" for a in limits.assumed])
@@ -270,7 +274,11 @@ def design(run_dir: str | Path, effect: str, size: float | None = None, versus: 
     for k, w in enumerate(cands):
         say(f"candidate {k + 1}/{len(cands)}: {w.label()}")
         unit = flyer.linear_response(w.values) if linear else flyer.fly(a_ref * w.values)
-        if not linear:  # per unit amplitude
+        bias = {}
+        if not linear:  # the model's own error on this shape (at a_ref), then per unit amplitude
+            mk = mach_window_mask(unit["mach"].to_numpy(float), vehicle.mach_reference, mach_half_width)
+            bias = _oracle(unit, _signals_from_truth(unit, vehicle), mk, model, ch, targets,
+                           getattr(flyer, "coefficients", None))
             unit = _scaled(base, unit, 1.0 / a_ref, cols)
         a = _limit_amplitude(base, unit, limits, dt)
         if not np.isfinite(a) or a <= 0:
@@ -279,7 +287,7 @@ def design(run_dir: str | Path, effect: str, size: float | None = None, versus: 
         s = _signals_from_truth(tr, vehicle)
         Xc, _ = model.design({kk: np.asarray(v)[in_win] if np.ndim(v) else v for kk, v in s.items()})
         pred = predict_covariance(Xc.to_numpy(float), model.names, resid)
-        evals.append(Evaluation(w, a, pred, _use(tr, limits, dt), score(pred)))
+        evals.append(Evaluation(w, a, pred, _use(tr, limits, dt), score(pred, bias), bias))
     if not evals:
         raise DesignError("no candidate input moves the vehicle within its limits")
     evals.sort(key=lambda e: e.score)
@@ -357,6 +365,7 @@ def design(run_dir: str | Path, effect: str, size: float | None = None, versus: 
             "ramp_s": ramp, "column": flyer.column}
     cand_rows = tuple({"label": e.waveform.label(), "amplitude_rad": e.amplitude_rad,
                        **{f"sigma_{tt}": e.prediction.sigma(tt) for tt in targets},
+                       **{f"model_error_pct_{tt}": v for tt, v in e.model_error_pct.items()},
                        "binding_limit": max(("surface", "surface_rate", "alpha", "load_factor"),
                                             key=lambda kk: e.limit_use[kk])} for e in evals[:12])
     if linear:
