@@ -79,8 +79,11 @@ def main() -> None:
                    "design and DIR/vehicle.toml generated). Needs the extra: pip install 'aerosid[jsbsim]'.")
 @click.option("--manoeuvre", default="3211", show_default=True,
               help="JSBSim input sequence: 3211 = elevator 3-2-1-1, then aileron and rudder doublets.")
+@click.option("--input", "input_file", type=click.Path(exists=True, dir_okay=False, path_type=Path), default=None,
+              help="Fly a designed input (DIR/input.parquet or .csv of `aerosid design`): t_s plus control "
+                   "columns in radians; it replaces the manoeuvres of its axes.")
 def simulate(case_name, effects, seed, out_dir, duration, rate, no_faults, list_effects, jsbsim_aircraft,
-             manoeuvre):
+             manoeuvre, input_file):
     """Simulate a flight whose truth is known and write its telemetry.
 
     Writes DIR/telemetry.parquet (raw, as a flight delivers it: dropouts as
@@ -104,10 +107,11 @@ def simulate(case_name, effects, seed, out_dir, duration, rate, no_faults, list_
 
         from aerosid.cli_progress import stage_progress
 
+        table = _input_table(input_file, jsbsim=True)
         try:
             with stage_progress("simulate") as progress:
                 flight = simulate_jsbsim(jsbsim_aircraft, manoeuvre, seed=seed, faults=not no_faults,
-                                         progress=progress)
+                                         progress=progress, input_table=table)
                 progress("write", 0.0)
                 paths = flight.write(out_dir)
         except JSBSimUnavailable as exc:
@@ -128,6 +132,12 @@ def simulate(case_name, effects, seed, out_dir, duration, rate, no_faults, list_
             overrides["duration_s"] = duration
         if rate is not None:
             overrides["sample_rate_hz"] = rate
+        table = _input_table(input_file, jsbsim=False)
+        if table is not None:
+            from aerosid.design.io import as_case_inputs
+
+            overrides["inputs"] = as_case_inputs(table)
+            overrides.setdefault("duration_s", float(table["t_s"].iloc[-1]))
         case = load_case(case_name, **overrides)
         if no_faults:
             case = replace(case, faults=case.faults.without_faults())
@@ -142,6 +152,18 @@ def simulate(case_name, effects, seed, out_dir, duration, rate, no_faults, list_
     click.echo(flight.summary())
     for kind, path in paths.items():
         click.echo(f"  wrote {path}")
+
+
+def _input_table(path, jsbsim: bool):
+    """The designed input of `simulate --input` (None without one); a bad file -> a clear error."""
+    if path is None:
+        return None
+    from aerosid.design.io import JSBSIM_COLUMNS, RLV_COLUMNS, InputFileError, read_input
+
+    try:
+        return read_input(path, JSBSIM_COLUMNS if jsbsim else RLV_COLUMNS)
+    except InputFileError as exc:
+        raise click.ClickException(str(exc)) from exc
 
 
 #: How long `aerosid run` waits for Prefect's ephemeral API server to answer [s].  The
@@ -470,6 +492,9 @@ from aerosid.cli_import import import_group  # noqa: E402  (aerosid import sidpa
 main.add_command(import_group)
 from aerosid.cli_validate import validate  # noqa: E402  (aerosid validate: predict another manoeuvre)
 main.add_command(validate)
+from aerosid.cli_design import design as _design  # noqa: E402
+
+main.add_command(_design)
 
 if __name__ == "__main__":  # pragma: no cover
     sys.exit(main())

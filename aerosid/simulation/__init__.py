@@ -112,6 +112,15 @@ def _controller(case: SimulationCase):
     limit = veh.fin_limit_rad
 
     gamma_integral = [0.0, 0.0]  # integral of the flight-path error [rad s], time of the last call [s]
+    # a designed input (aerosid design, `simulate --input`) replaces the plan of its axis
+    # (zero outside the input's time span); the autopilot and guidance stay in the loop
+    tables = {k: (np.asarray(v[0], float), np.asarray(v[1], float)) for k, v in case.inputs.items()}
+
+    def plan(t: float, key: str, plan, factor: float) -> float:
+        if key in tables:
+            ti, vi = tables[key]
+            return factor * float(np.interp(t, ti, vi, left=0.0, right=0.0))
+        return schedule(t, plan, case.period_s, case.ramp_s)
 
     def control(t: float, x: np.ndarray):
         q0, q1, q2, q3 = x[6:10]
@@ -125,11 +134,11 @@ def _controller(case: SimulationCase):
         gamma_integral[0] += err * (t - gamma_integral[1])
         gamma_integral[1] = t
         guidance = ap["kgamma"] * err + ap["kgamma_i"] * gamma_integral[0]
-        dp_half = (ap["delta_p_half_trim_rad"] + guidance + schedule(t, case.pitch_plan, case.period_s, case.ramp_s)
+        dp_half = (ap["delta_p_half_trim_rad"] + guidance + plan(t, "delta_p_cmd_rad", case.pitch_plan, 0.5)
                    - ap["kq"] * q)
-        phi_cmd = schedule(t, case.roll_plan, case.period_s, case.ramp_s)
+        phi_cmd = plan(t, "phi_cmd_rad", case.roll_plan, 1.0)
         dr = ap["kphi"] * (phi - phi_cmd) + ap["kp"] * p
-        dy_half = schedule(t, case.yaw_plan, case.period_s, case.ramp_s) - ap["kr"] * r
+        dy_half = plan(t, "delta_y_cmd_rad", case.yaw_plan, 0.5) - ap["kr"] * r
         fins = np.clip(veh.unmix(dr, 2.0 * dp_half, 2.0 * dy_half), -limit, limit)
         delta_r, delta_p, delta_y = veh.mix(*fins)
         return delta_p, delta_y, delta_r

@@ -62,6 +62,9 @@ class SimulationCase:
     yaw_plan: tuple = ()  # (start_s, duration_s, delta_y/2 [rad])
     sensors: SensorSpec = SensorSpec()
     faults: FaultSpec = FaultSpec()
+    #: designed input time histories replacing the plans (aerosid.design.io.INPUT_COLUMNS):
+    #: column -> (t_s, values) arrays, e.g. "delta_p_cmd_rad" replaces pitch_plan
+    inputs: dict = field(default_factory=dict)
 
 
 def _is_jsbsim(path: Path) -> bool:

@@ -108,8 +108,10 @@ def _xml_check(tables: AeroTables, rec: dict, truth: pd.DataFrame) -> dict:
     return out
 
 
-def simulate_aircraft(aircraft: str, seed: int = 0, *, faults: bool = True, progress=None) -> SimulatedFlight:
-    """Fly JSBSim's `aircraft` through the generated flight design; noise and faults from `seed`.
+def simulate_aircraft(aircraft: str, seed: int = 0, *, faults: bool = True, progress=None,
+                      input_table: pd.DataFrame | None = None) -> SimulatedFlight:
+    """Fly JSBSim's `aircraft` through the generated flight design (or a designed input,
+    ``input_table``: aerosid.simulation.jsbsim_input); noise and faults from `seed`.
     progress: an optional callback progress(stage, fraction)."""
     if progress is not None:
         progress("design and trim the flight", 0.0)
@@ -132,6 +134,10 @@ def simulate_aircraft(aircraft: str, seed: int = 0, *, faults: bool = True, prog
     dt = DT_S
     n = int(round(design.duration_s / dt)) + 1
     t = np.arange(n) * dt
+    if input_table is not None:  # a designed input (aerosid.simulation.jsbsim_input) sets the duration
+        from aerosid.simulation.jsbsim_input import input_time
+
+        t = input_time(input_table, dt)
     m = design.manoeuvre
     takeup = {}
     for name, prop, cmd in (("elevator", ctl.pitch, design.trim.elevator_cmd),
@@ -141,6 +147,10 @@ def simulate_aircraft(aircraft: str, seed: int = 0, *, faults: bool = True, prog
         except (StopIteration, AttributeError, TypeError, ValueError):
             takeup[name] = []  # hysteresis not modelled the way c172x does it: no take-up
     inputs, windows = _schedule(t, m, takeup)
+    if input_table is not None:
+        from aerosid.simulation.jsbsim_input import gain_inputs
+
+        inputs, windows = gain_inputs(input_table, t, design.gains), {"designed_input": [0.0, float(t[-1])]}
     rec = _fly(fdm, t, inputs, record, progress=progress)
     for prop in _STANDARD:  # an aircraft without propulsion (a glider) has no forces/*-prop-* properties
         if prop not in rec and "-prop-" in prop:

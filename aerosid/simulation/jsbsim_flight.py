@@ -444,7 +444,7 @@ def rates_at_the_moments(x: np.ndarray, x_dot: np.ndarray, dt: float) -> np.ndar
 # --------------------------------------------------------------------------------------
 
 def simulate_jsbsim(aircraft: str = "c172x", manoeuvre: str = "3211", seed: int = 0, *,
-                    faults: bool = True, progress=None) -> SimulatedFlight:
+                    faults: bool = True, progress=None, input_table: pd.DataFrame | None = None) -> SimulatedFlight:
     """Fly JSBSim's `aircraft` through `manoeuvre`; noise and faults from `seed`.
 
     c172x flies its hand-written simulation.toml; any other aircraft of the jsbsim
@@ -456,7 +456,7 @@ def simulate_jsbsim(aircraft: str = "c172x", manoeuvre: str = "3211", seed: int 
     if aircraft not in SUPPORTED_AIRCRAFT:
         from aerosid.simulation.jsbsim_aircraft import simulate_aircraft
 
-        return simulate_aircraft(aircraft, seed, faults=faults, progress=progress)
+        return simulate_aircraft(aircraft, seed, faults=faults, progress=progress, input_table=input_table)
     _check_names(aircraft, manoeuvre)
     jsbsim = _import_jsbsim()
     sim_cfg, veh_cfg = load_jsbsim_config(aircraft)
@@ -469,6 +469,10 @@ def simulate_jsbsim(aircraft: str = "c172x", manoeuvre: str = "3211", seed: int 
     dt = float(sim_cfg["jsbsim"]["dt_s"])
     n = int(round(float(sim_cfg["flight"]["duration_s"]) / dt)) + 1
     t = np.arange(n) * dt
+    if input_table is not None:  # a designed input (aerosid.simulation.jsbsim_input) sets the duration
+        from aerosid.simulation.jsbsim_input import input_time
+
+        t = input_time(input_table, dt)
 
     # trim state
     trim = {p: fdm[p] for p in _RECORD}
@@ -487,6 +491,10 @@ def simulate_jsbsim(aircraft: str = "c172x", manoeuvre: str = "3211", seed: int 
                                  trim["fcs/roll-trim-sum"]),
     }
     inputs, windows = _schedule(t, m, takeup)
+    if input_table is not None:
+        from aerosid.simulation.jsbsim_input import c172x_inputs
+
+        inputs, windows = c172x_inputs(input_table, t, xml_root, trim), {"designed_input": [0.0, float(t[-1])]}
 
     rec = _fly(fdm, t, inputs, progress=progress)
 

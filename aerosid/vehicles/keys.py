@@ -146,6 +146,14 @@ TABLES: dict[str, dict[str, Key] | None] = {
         "preflight_factor": Key("number", 1.0, 1e6, positive=True,
                                 doc="warn when an estimate differs from its preflight value by more than this factor"),
     },
+    # the vehicle's flight-test limits, read by the experiment design (aerosid/design/limits.py)
+    "limits": {
+        "surface_rate_limit_rad_s": pos(1e3, "largest surface (fin) rate [rad/s]"),
+        "alpha_rad": rng(-ANGLE_MAX_RAD, ANGLE_MAX_RAD, "angle of attack a manoeuvre may reach [rad]"),
+        "load_factor": rng(-100.0, 100.0, "normal load factor n = -az/g a manoeuvre may reach [-]"),
+        "duration_max_s": pos(1e5, "longest manoeuvre on condition [s]"),
+        "surface_margin": Key("number", 0.0, 0.9, doc="share of each surface limit kept in reserve [-]"),
+    },
     # per-sensor preprocessing thresholds: owned by aerosid/preprocess, which checks its keys
     # (None: any key accepted here; replace with its key table when it has one)
     "preprocess": None,
