@@ -6,8 +6,6 @@ control mixing, and alpha/beta, either inverted from the force database (the fin
 class) or read from air-data vanes (a vehicle file with ``[air_data] source = "vanes"``)."""
 from __future__ import annotations
 
-from dataclasses import replace
-
 import numpy as np
 import pandas as pd
 
@@ -15,21 +13,15 @@ from aerosid.aerodb import AeroDatabase
 from aerosid.atmosphere import MEASURED, H_MAX_M, H_MIN_M, AirDataError, air_data, air_data_sources
 from aerosid.flight_coefficients import flight_coefficients
 from aerosid.derivatives import zero_phase_low_pass
-from aerosid.estimation.findings import DEPARTURE_MIN_S, DEPARTURE_SIGMA, Finding, dilate, span_findings, true_runs
+from aerosid.estimation.findings import DEPARTURE_MIN_S, DEPARTURE_SIGMA, Finding, dilate, span_findings
 from aerosid.identification.band import (accel_at_cg, band_limited_signals, band_noise_gain, bridge_spikes,
                                          finite_runs, low_pass_runs)
 from aerosid.inversion import invert_alpha_beta, total_angles
-from aerosid.preprocess.flags import FAULT
 from aerosid.vehicle import Vehicle
 
 FIN_COLUMNS = ("d1_rad", "d2_rad", "d3_rad", "d4_rad")
 #: The margin cut around a condemned span: one band period, at most this [s].
 MAX_MARGIN_S = 1.0
-#: Rows within this many band periods (at most GAP_MAX_MARGIN_S) of a bridged gap are not regressed.
-GAP_MARGIN_CYCLES = 0.5
-GAP_MAX_MARGIN_S = 0.5
-#: A filled run this long [s] (and at least 3 samples) is a gap; shorter ones are spikes.
-GAP_MIN_S = 0.02
 BAND_IMU = ("ax_m_s2", "ay_m_s2", "az_m_s2", "p_rad_s", "q_rad_s", "r_rad_s")
 
 
@@ -200,13 +192,12 @@ def _band_signals(t, measured: pd.DataFrame, smoothed: pd.DataFrame, vehicle: Ve
     # spikes the preprocessing left (it leaves 5-7 sigma ones to the filter) would go through
     # the derivative and the band into a band period of C_m: bridge them as the preprocessing
     # does its own outliers (aerosid.identification.band.bridge_spikes), against the smoother
+    inertia0 = (vehicle.Ixx_kg_m2, vehicle.Iyy_kg_m2, vehicle.Izz_kg_m2, vehicle.Ixz_kg_m2)
     ws = smoothed[["p_rad_s", "q_rad_s", "r_rad_s"]].to_numpy(float)
-    wd = np.gradient(ws, t, axis=0) if len(t) > 2 else np.zeros_like(ws)
-    has_forces = {"X1_m_s2", "Y1_m_s2", "Z1_m_s2"} <= set(smoothed.columns)
-    ref = (np.column_stack([smoothed[c].to_numpy(float) for c in ("X1_m_s2", "Y1_m_s2", "Z1_m_s2")])
-           if has_forces else None)
-    if ref is not None:
+    if {"X1_m_s2", "Y1_m_s2", "Z1_m_s2"} <= set(smoothed.columns):
+        wd = np.gradient(ws, t, axis=0) if len(t) > 2 else np.zeros_like(ws)
         a_cg_meas = accel_at_cg(imu[:, :3], ws, wd, vehicle.accel_offset_m)
+        ref = np.column_stack([smoothed[c].to_numpy(float) for c in ("X1_m_s2", "Y1_m_s2", "Z1_m_s2")])
         imu[:, :3] = bridge_spikes(imu[:, :3], a_cg_meas - ref)
     imu[:, 3:] = bridge_spikes(imu[:, 3:], imu[:, 3:] - ws)
     inertia = (vehicle.Ixx_kg_m2, vehicle.Iyy_kg_m2, vehicle.Izz_kg_m2, vehicle.Ixz_kg_m2)
@@ -251,37 +242,11 @@ def _band_signals(t, measured: pd.DataFrame, smoothed: pd.DataFrame, vehicle: Ve
         if gone.any():
             keep &= ~dilate(gone, margin)
             bl = signals(keep)
-    gaps = bridged_gaps(measured, fs)
-    if gaps.any():
-        # rows within half a band period of a gap the preprocessing bridged with a straight
-        # line are left out of the regression (not out of the filter: the runs stay whole):
-        # a line across a 0.1-0.3 s dropout cuts the peaks of the manoeuvre, and the low-pass
-        # spreads that over the neighbours (within 0.5 s of the gaps, q and C_m came out 5 %
-        # low on pa28; docs/estimation.md "Gaps")
-        reach = int(np.ceil(min(GAP_MARGIN_CYCLES / bl.band_hz, GAP_MAX_MARGIN_S) * fs))
-        bl = replace(bl, used=bl.used & ~dilate(gaps, reach))
     if not bl.used.any():
         raise SegmentUnusable(f"segment {segment}: no run of {int(np.ceil(0.5 * fs / bl.band_hz))} consecutive samples "
                          f"with every IMU channel, control, V and h available and not condemned (t = {_span(t)}): "
                          "nothing to low-pass for the regression")
     return bl, bl.used, findings
-
-
-def bridged_gaps(measured: pd.DataFrame, fs_hz: float) -> np.ndarray:
-    """(N,) bool: samples inside a run of at least GAP_MIN_S [s] where some IMU channel,
-    control or vane was filled in by the preprocessing (a fault bit set: dropout, NaN,
-    sentinel, frozen run).  Isolated outliers (one or two samples) are not gaps: their
-    bridge changes a band-limited signal by far less than its noise."""
-    hit = np.zeros(len(measured), bool)
-    for c in measured.columns:
-        if c.startswith("flags_"):
-            hit |= (measured[c].to_numpy().astype(np.int64) & int(FAULT)) != 0
-    out = np.zeros_like(hit)
-    shortest = max(3, int(np.ceil(GAP_MIN_S * fs_hz)))
-    for a, b in true_runs(hit):
-        if b - a >= shortest:
-            out[a:b] = True
-    return out
 
 
 def _inverted_angles(fc, s: pd.DataFrame, delta_p, delta_y, vehicle: Vehicle, db: AeroDatabase, segment: str,

@@ -123,9 +123,7 @@ def test_cli_validate_prints_and_writes_the_report(small_run):
     assert [m["name"] for m in doc["outputs"]] == ["alpha_rad", "q_rad_s", "az_m_s2"]
     assert [m["name"] for m in doc["coefficients"]] == ["CN", "Cm", "CY", "Cn", "Cl"]
     assert doc["sources"]["attitude"].startswith("telemetry phi_rad")
-    # the simulated flight's sync gap splits it, and so do the rows the regression leaves
-    # out around bridged dropouts (docs/estimation.md "Gaps")
-    assert doc["n_spans"] >= 2
+    assert doc["n_spans"] == 2  # the simulated flight's sync gap splits it
     frame = pd.read_parquet(out / "validation.parquet")
     rows = frame[frame["span"] >= 0]
     for m in doc["outputs"]:  # the printed/recorded numbers are those of the written time histories
