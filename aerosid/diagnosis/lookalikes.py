@@ -357,7 +357,7 @@ def model_lookalikes(channel: str, y: np.ndarray, model, signals: dict, candidat
         p_in = x_in - A @ _scaled_lstsq(A, x_in)
         alts, regs = [cand], [x_in]
         for c in by_name.values():
-            if c.name == cand.name or any(tt.effect == c.name or norm(tt.expression) == norm(c.term)
+            if c.name == cand.name or c.alias_of == cand.name or cand.alias_of == c.name or any(tt.effect == c.name or norm(tt.expression) == norm(c.term)
                                           or tt.coefficient == c.coefficient for tt in model.terms):
                 continue
             x = np.asarray(c.regressor(signals), float)
@@ -401,7 +401,10 @@ def resolve(ranked: Sequence, models: dict, signals: dict, fd, candidates: Seque
                 names.append(n)
         by_name = {c.name: c for c in candidates if c.channel == top.channel}
         ev = {e.name: e for e in ranked if e.channel == top.channel}
-        names = [n for n in names if n in by_name and ev.get(n) is not None and ev[n].identifiable][:MAX_ALTERNATIVES]
+        # an alias (alpha_dot under pitch_damping) is one derivative reported together, not a look-alike
+        names = [n for n in names if n in by_name and ev.get(n) is not None and ev[n].identifiable
+                 and (n == top.name or (by_name[n].alias_of != top.name
+                                        and by_name[top.name].alias_of != n))][:MAX_ALTERNATIVES]
         if len(names) > 1:
             model = models[top.channel]
             Xb, _ = model.design(signals)
