@@ -748,12 +748,13 @@ def diagnose(flight_data: pd.DataFrame, vehicle, models: dict[str, ChannelModel]
 
     ranked = sorted(evidence, key=lambda e: (not e.significant, not e.identifiable, -e.score))
     window = (float(fd["mach"].min()), float(fd["mach"].max()))
-    from aerosid.diagnosis.floor import floors
+    from aerosid.diagnosis.floor import angle_floor_parts, floors
     from aerosid.diagnosis.lookalikes import resolve
 
     looks, recommended = resolve(ranked, models, signals, fd, candidates, confusion_r=CONFUSION_R, p_max=P_MAX,
                                  cov=cov)
-    floor = floors({ch: rep.residual for ch, rep in reports.items()}, fd)
+    floor = floors({ch: rep.residual for ch, rep in reports.items()}, fd,
+                   angle_floor_parts(fd, vehicle, models, reports))
     return Diagnosis(tuple(ranked), reports, models, n, window, int(win.max()) + 1, looks, recommended, floor)
 
 

@@ -111,6 +111,7 @@ class Alternative:
     coefficient_shift_sigma: dict = field(default_factory=dict)  # base coefficient -> shift / base sigma
     partial_x: np.ndarray = field(repr=False, default=None)  # term with base + the others removed
     partial_y: np.ndarray = field(repr=False, default=None)  # measured with base + the others removed
+    p_value: float = float("nan")  # corrected p of the term in base + this term
 
     @property
     def max_shift_sigma(self) -> float:
@@ -138,7 +139,7 @@ class Alternative:
         return {"name": self.name, "coefficient": self.coefficient, "term": self.term, "spec_term": self.spec_term,
                 "in_model": self.in_model, "estimate": f(self.estimate), "std_error": f(self.std_error),
                 "estimate_joint": f(self.estimate_joint), "std_error_joint": f(self.std_error_joint),
-                "t_joint": f(self.t_joint), "heldout_rms": f(self.heldout_rms),
+                "t_joint": f(self.t_joint), "p_value": f(self.p_value), "heldout_rms": f(self.heldout_rms),
                 "heldout_sse_per_window": [f(x) for x in self.heldout_sse],
                 "coefficient_shift_sigma": {k: f(v) for k, v in self.coefficient_shift_sigma.items()},
                 "max_shift_sigma": f(self.max_shift_sigma), "partial_residuals_binned": self.partial_binned()}
@@ -278,7 +279,8 @@ def compare(channel: str, y: np.ndarray, base_X: np.ndarray, base_names: Sequenc
             c.name, c.coefficient, c.term, getattr(c, "spec_term", None), c.name == in_model,
             float(fi.estimate[nb]), float(fi.std_error[nb]), float(joint.estimate[nb + i]),
             float(joint.std_error[nb + i]), float(joint.t_values[nb + i]),
-            float(math.sqrt(tot.sum() / y.size)) if tot.size else float("nan"), sse[i], shift, px, py))
+            float(math.sqrt(tot.sum() / y.size)) if tot.size else float("nan"), sse[i], shift, px, py,
+            float(fi.p_values[nb])))
     # the criterion
     t_distinct = float(scipy.stats.t.isf(p_distinct / 2.0, joint.dof_eff))
     criterion = (f"separated = Delta_ij = t_i|j^2 - t_j|i^2 >= {DELTA_MIN:.2f} (2 ln 19: the coloured-residual "
@@ -326,6 +328,10 @@ def compare(channel: str, y: np.ndarray, base_X: np.ndarray, base_names: Sequenc
                f"explain correlate by r = {max(corr.values()):.2f} and the evidence does not separate them "
                f"(Delta {ds} < {DELTA_MIN:.2f}, or held-out prediction disagrees). No recommendation. "
                f"To separate them: {manoeuvre}.")
+        if all(not (a.p_value < p_distinct) for a in alts):
+            msg += (f" Neither is significant on its own here (p = {', '.join(f'{a.p_value:.2g}' for a in alts)}"
+                    f" >= {p_distinct:g})" + (f": the model's {in_model} is not supported by this flight." if in_model
+                                              else "."))
         if in_model:
             msg += (f" The model holds {in_model}; this flight cannot confirm it over "
                     f"{', '.join(n for n in names if n != in_model)}: the loop is not closed.")
@@ -336,20 +342,20 @@ def compare(channel: str, y: np.ndarray, base_X: np.ndarray, base_names: Sequenc
 def model_lookalikes(channel: str, y: np.ndarray, model, signals: dict, candidates: Sequence, *,
                      confusion_r: float, p_max: float, cov: str = "morelli_klein"
                      ) -> list[LookalikeComparison]:
-    """For each term of `model` that is a candidate effect (same effect name or expression)
-    and significant in the model (corrected p < p_max), compare it with the candidates not
-    in the model whose regressors, with the rest of the model removed, correlate with it by
-    >= confusion_r."""
+    """For each term of `model` that is a candidate effect (same effect name or expression),
+    compare it with the candidates not in the model whose regressors, with the rest of the
+    model removed, correlate with it by >= confusion_r.  Whether or not the term is
+    significant in the model: a term the data do not support, with a look-alike the data
+    support as little, is not a confirmed choice either (the loop stays open)."""
     out = []
     Xm, _ = model.design(signals)
     Am = Xm.to_numpy(float)
-    fit = fit_linear(y, Am, names=list(model.names), channel=channel, cov=cov)
     by_name = {c.name: c for c in candidates if c.channel == channel}
     norm = lambda s: s.replace(" ", "")  # noqa: E731
     for m, t in enumerate(model.terms):
         cand = by_name.get(t.effect or "") or next((c for c in by_name.values()
                                                      if norm(c.term) == norm(t.expression)), None)
-        if cand is None or not (fit.p_values[m] < p_max):
+        if cand is None:
             continue
         keep = [i for i in range(Am.shape[1]) if i != m]
         A = Am[:, keep]
