@@ -178,7 +178,8 @@ class LookalikeComparison:
     @property
     def swap(self) -> bool:
         """The model holds one alternative and the data prefer another."""
-        return self.in_model is not None and self.recommended is not None and self.recommended != self.in_model
+        return (self.verdict == "separated" and self.in_model is not None and self.recommended is not None
+                and self.recommended != self.in_model)
 
     def to_dict(self) -> dict:
         return {"channel": self.channel, "alternatives": [a.to_dict() for a in self.alternatives],
@@ -299,7 +300,13 @@ def compare(channel: str, y: np.ndarray, base_X: np.ndarray, base_names: Sequenc
     other = alternatives[1] if k > 1 else alternatives[0]
     manoeuvre = separating_manoeuvre(ref.term, other.term)
     pair_txt = " and ".join(names)
-    if winner is not None:
+    if distinct:
+        verdict = "distinct"
+        recommended = next((n for n in names if n != in_model), names[0])
+        msg = (f"{pair_txt} are both needed in {channel}: each keeps p < {p_distinct:g} with the other(s) in "
+               f"the model (|t| {', '.join(f'{abs(a.t_joint):.1f}' for a in alts)} >= {t_distinct:.1f}); add "
+               f"{recommended}" + (" as well." if in_model else " first."))
+    elif winner is not None:
         verdict = "separated"
         w = next(a for a in alts if a.name == winner)
         losers = [a for a in alts if a.name != winner]
@@ -314,12 +321,6 @@ def compare(channel: str, y: np.ndarray, base_X: np.ndarray, base_names: Sequenc
         if in_model and winner != in_model:
             msg += (f" The model holds {in_model}: replace it by {winner} (in the spec: remove = "
                     f"[\"{in_model}\"], add = [\"{w.spec_term or w.coefficient}\"]).")
-    elif distinct:
-        verdict = "distinct"
-        recommended = names[0]
-        msg = (f"{pair_txt} are both needed in {channel}: each keeps p < {p_distinct:g} with the other(s) in "
-               f"the model (|t| {', '.join(f'{abs(a.t_joint):.1f}' for a in alts)} >= {t_distinct:.1f}); add "
-               f"{names[0]} first.")
     else:
         verdict = "unresolved"
         recommended = None
