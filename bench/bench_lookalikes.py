@@ -13,7 +13,7 @@ default models.  Recorded per run:
   RMS(measured - true) (modelling_loop.md's "floor" column);
 * the excess over the floor before and after adding the true effect (identify), and its drop.
 
-    python bench/bench_lookalikes.py --seeds 0-9 --jobs 2
+    python bench/bench_lookalikes.py --seeds 0-9 --jobs 2 [--seeds-other 0-4] [--cache DIR]
     -> bench/results/lookalikes.md, bench/results/lookalikes_runs.csv
 """
 from __future__ import annotations
@@ -38,23 +38,45 @@ def _rms(x) -> float:
     return float(np.sqrt(np.mean(np.square(x))))
 
 
-def one(job: tuple[str, int]) -> dict:
+def _flight(name: str, seed: int, cache: str | None):
+    """(flight data, truth on the flight-data rows): simulated and estimated, or read from
+    `cache` (files {name}_{seed}_fd.parquet / _truth.parquet written by an earlier run of this
+    bench with the same code: the estimation chain is deterministic given the seed)."""
+    from aerosid.ebm import estimate_flight_data
+    from aerosid.effects import CATALOGUE
+    from aerosid.simulation import load_case, simulate
+
+    if cache:
+        f_fd, f_tr = Path(cache) / f"{name}_{seed}_fd.parquet", Path(cache) / f"{name}_{seed}_truth.parquet"
+        if f_fd.is_file() and f_tr.is_file():
+            return pd.read_parquet(f_fd), pd.read_parquet(f_tr)
+    case = load_case("seed-rlv")
+    flight = simulate(case, () if name == "none" else ((CATALOGUE[name], 1.0),), seed=seed)
+    fd = estimate_flight_data(flight.telemetry, case.vehicle, flight="flight").flight_data
+    fd = fd.sort_values(["flight", "t_s"], kind="stable").reset_index(drop=True)
+    truth = flight.truth.set_index(np.round(flight.truth["t_s"], 6)).loc[np.round(fd["t_s"], 6)].reset_index(drop=True)
+    if cache:
+        Path(cache).mkdir(parents=True, exist_ok=True)
+        tmp = Path(cache) / f"{name}_{seed}_fd.tmp"
+        truth.to_parquet(Path(cache) / f"{name}_{seed}_truth.parquet")
+        fd.to_parquet(tmp)
+        tmp.rename(Path(cache) / f"{name}_{seed}_fd.parquet")
+    return fd, truth
+
+
+def one(job: tuple) -> dict:
     from aerosid.diagnosis import diagnose
     from aerosid.diagnosis.floor import excess
-    from aerosid.ebm import estimate_flight_data
     from aerosid.effects import CATALOGUE
     from aerosid.identification.band import low_pass_runs
     from aerosid.identify import identify, mach_window_mask
     from aerosid.models import default_models, parse_term
-    from aerosid.simulation import load_case, simulate
+    from aerosid.simulation import load_case
 
-    name, seed = job
+    name, seed, cache = job
     t0 = time.perf_counter()
-    case = load_case("seed-rlv")
-    vehicle = case.vehicle
-    flight = simulate(case, () if name == "none" else ((CATALOGUE[name], 1.0),), seed=seed)
-    fd = estimate_flight_data(flight.telemetry, vehicle, flight="flight").flight_data
-    fd = fd.sort_values(["flight", "t_s"], kind="stable").reset_index(drop=True)
+    vehicle = load_case("seed-rlv").vehicle
+    fd, truth = _flight(name, seed, cache)
     d = diagnose(fd, vehicle)
     top_look = next((c for c in d.lookalikes if c.in_model is None), None)
     row = {"effect": name, "seed": seed, "top": d.top.name, "top_significant": bool(d.top.significant),
@@ -72,7 +94,6 @@ def one(job: tuple[str, int]) -> dict:
                detectable_size=e.detectable_size, truth=eff.value,
                above_floor=bool(abs(eff.value) > e.detectable_size))
     # the floor against the truth
-    truth = flight.truth.set_index(np.round(flight.truth["t_s"], 6)).loc[np.round(fd["t_s"], 6)].reset_index(drop=True)
     t = fd["t_s"].to_numpy(float)
     seg = fd["segment"].astype(str).to_numpy()
     brk = np.nonzero((np.diff(t) > 0.015) | (seg[1:] != seg[:-1]))[0] + 1
@@ -117,13 +138,13 @@ def _seeds(text: str) -> list[int]:
     return list(range(int(a), int(b) + 1)) if b else [int(a)]
 
 
-def _report(df: pd.DataFrame, seeds: list[int], wall_s: float) -> str:
+def _report(df: pd.DataFrame, seeds: list[int], wall_s: float, other_txt: str | None = None) -> str:
     from machine import cpu_model, loadavg
 
     n = len(seeds)
-    L = [f"# Look-alikes and the floor on the real pipeline (issue 18), {n} seeds per effect", "",
+    L = [f"# Look-alikes and the floor on the real pipeline (issue 18), {n} seeds per look-alike effect", "",
          f"{date.today()}, {cpu_model()}, {os.cpu_count()} cores, load {loadavg()}; wall {wall_s / 60:.1f} min. "
-         f"`python bench/bench_lookalikes.py --seeds {seeds[0]}-{seeds[-1]}`.", "",
+         f"`python bench/bench_lookalikes.py --seeds {seeds[0]}-{seeds[-1]}`" + (f" --seeds-other {other_txt}" if other_txt else "") + ".", "",
          "Each run: seed-rlv with one hidden effect at scale 1 (Table 2 noise), preprocess, EKF + MBF, band-path "
          "flight data, `diagnose` the default models. *recommended* = diagnosis.json `recommended`. For the two "
          "look-alikes the wrong one is then added and the flight re-diagnosed: *closed on wrong* = the "
@@ -174,9 +195,16 @@ def main() -> None:
     ap.add_argument("--jobs", type=int, default=1)
     ap.add_argument("--effects", default=",".join(EFFECTS))
     ap.add_argument("--out", default=str(Path(__file__).parent / "results"))
+    ap.add_argument("--cache", default=None, help="folder to keep (and reuse) each run's flight data and truth")
+    ap.add_argument("--seeds-other", default=None,
+                    help="seeds for the effects other than the two look-alikes and none (default: --seeds)")
     args = ap.parse_args()
     seeds = _seeds(args.seeds)
-    jobs = [(n, s) for n in args.effects.split(",") for s in seeds] + [("none", s) for s in seeds]
+    other = _seeds(args.seeds_other) if args.seeds_other else seeds
+    names = args.effects.split(",")
+    first = [n for n in names if n in WRONG]
+    jobs = ([(n, s, args.cache) for n in first for s in seeds] + [("none", s, args.cache) for s in seeds]
+            + [(n, s, args.cache) for n in names if n not in WRONG for s in other])
     t0 = time.perf_counter()
     with ProcessPoolExecutor(args.jobs) as pool:
         rows = []
@@ -187,7 +215,7 @@ def main() -> None:
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     df.to_csv(out / "lookalikes_runs.csv", index=False)
-    text = _report(df, seeds, time.perf_counter() - t0)
+    text = _report(df, seeds, time.perf_counter() - t0, args.seeds_other)
     (out / "lookalikes.md").write_text(text)
     print(text)
     print(platform.platform())
