@@ -193,10 +193,10 @@ class LookalikeComparison:
     def summary(self) -> str:
         lines = [f"Look-alikes in {self.channel}: {', '.join(self.names)} ({self.verdict})",
                  f"  {'alternative':<22}{'estimate':>11}{'sigma':>10}{'t | others':>11}{'held-out RMS':>14}"
-                 f"{'max shift':>11}"]
+                 f"{'max shift of the model coefficients [sigma]':>45}"]
         for a in self.alternatives:
             lines.append(f"  {a.name + (' (in model)' if a.in_model else ''):<22}{a.estimate:>11.4g}"
-                         f"{a.std_error:>10.3g}{a.t_joint:>11.2f}{a.heldout_rms:>14.4g}{a.max_shift_sigma:>9.1f} s")
+                         f"{a.std_error:>10.3g}{a.t_joint:>11.2f}{a.heldout_rms:>14.4g}{a.max_shift_sigma:>45.1f}")
         for k, v in self.delta.items():
             lines.append(f"  Delta {k} = {v:.2f} (>= {DELTA_MIN:.2f} to separate); held-out better in "
                          f"{self.heldout_windows_better.get(k, float('nan')):.0%} of the blocks")
