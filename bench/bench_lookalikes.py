@@ -144,7 +144,7 @@ def _report(df: pd.DataFrame, seeds: list[int], wall_s: float, other_txt: str | 
     n = len(seeds)
     L = [f"# Look-alikes and the floor on the real pipeline (issue 18), {n} seeds per look-alike effect", "",
          f"{date.today()}, {cpu_model()}, {os.cpu_count()} cores, load {loadavg()}; wall {wall_s / 60:.1f} min. "
-         f"`python bench/bench_lookalikes.py --seeds {seeds[0]}-{seeds[-1]}`" + (f" --seeds-other {other_txt}" if other_txt else "") + ".", "",
+         f"`python bench/bench_lookalikes.py --seeds {seeds[0]}-{seeds[-1]}" + (f" --seeds-other {other_txt}" if other_txt else "") + "`.", "",
          "Each run: seed-rlv with one hidden effect at scale 1 (Table 2 noise), preprocess, EKF + MBF, band-path "
          "flight data, `diagnose` the default models. *recommended* = diagnosis.json `recommended`. For the two "
          "look-alikes the wrong one is then added and the flight re-diagnosed: *closed on wrong* = the "
