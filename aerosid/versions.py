@@ -34,6 +34,8 @@ __all__ = ["ModelVersion", "VersionHistory", "fit_version", "history", "load_ver
            "read_flight_data", "run_vehicle", "models_from_spec", "MODELS_DIR", "VersionError"]
 
 MODELS_DIR = "models"
+#: held-out errors within this fraction of each other are reported as a tie in `history`
+HELDOUT_TIE = 0.01
 _ID = re.compile(r"^v(\d{3,})$")
 
 
@@ -193,6 +195,14 @@ class VersionHistory:
                             f"{'(' + _fmt(v.channel_metric(ch, 'rms_residual'), '.4g') + ')':>10}" for ch in chans)
             note = f" ({v.note})" if v.note else ""
             lines.append(f"  {ranks.get(v.id, '-'):<5}{v.id:<8}{(v.parent or '-'):<8}{cells}  {self.changes(v)}{note}")
+        for ch in chans:  # near ties between different models of a channel are not a ranking
+            vals = sorted(((held[v.id][ch], v) for v in self.versions if math.isfinite(held[v.id][ch])),
+                          key=lambda hv: hv[0])
+            if len(vals) >= 2 and vals[1][0] - vals[0][0] < HELDOUT_TIE * vals[0][0] \
+                    and vals[0][1].models[ch].terms != vals[1][1].models[ch].terms:
+                lines.append(f"  note: {ch}: {vals[0][1].id} and {vals[1][1].id} predict within "
+                             f"{100 * (vals[1][0] / vals[0][0] - 1):.1f} % of each other (< {HELDOUT_TIE:.0%}): "
+                             "not a meaningful difference; `aerosid diagnose` compares look-alike terms directly")
         return "\n".join(lines)
 
 
