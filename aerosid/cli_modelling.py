@@ -73,9 +73,17 @@ def diagnose(run_dir, model_spec, version_id, n_windows, mach_half_width, quiet)
       the recovered angles cannot explain it.  It says plainly when nothing
       significant is missing.
 
-    Writes RUN_DIR/diagnosis.json (effects best first, regimes, time windows,
-    whiteness, message).  Act on the first finding only: add it, `aerosid fit`,
-    and diagnose again.
+    When the candidates that explain the residual are look-alikes (e.g.
+    control_alpha and alpha_nonlinearity in Cm), each is fitted and they are
+    compared on held-out prediction, the shift each forces on the other
+    coefficients and partial residuals; one is recommended only when the
+    evidence separates them, else none, with the manoeuvre that would.  Each
+    channel's residual is shown against its floor (the flight-derived
+    coefficient's own sigma) and the excess over it.
+
+    Writes RUN_DIR/diagnosis.json (effects best first, recommended, lookalikes,
+    floor, regimes, time windows, whiteness, message).  Act on the
+    recommendation only: add it, `aerosid fit`, and diagnose again.
     """
     _check_run_dir(run_dir)
     from aerosid.cli_progress import StageProgress
@@ -261,13 +269,18 @@ def _loud_warnings(coefficients: Path) -> list[str]:
 @click.command()
 @_RUN_DIR
 @click.option("--csv", "csv_path", type=click.Path(dir_okay=False, path_type=Path), default=None,
-              help="Also write the table (version, parent, changes, note, rms/r2/pse per channel) as CSV.")
+              help="Also write the table (version, parent, changes, note, rank_heldout, rms/heldout/r2/pse per "
+                   "channel) as CSV.")
 def history(run_dir, csv_path):
     """Show the model versions of a run: what changed and how the error fell.
 
-    One row per version under RUN_DIR/models: its parent, the terms added or
-    removed relative to the parent, and the residual RMS per channel (R^2 and
-    PSE in --csv).  Read-only.
+    One row per version under RUN_DIR/models, best first by held-out
+    prediction error: each channel's data are cut into 8 time blocks, the
+    model is fitted without a block and predicts it (leave-one-window-out
+    RMS; the in-sample residual RMS in brackets).  A look-alike of the true
+    term lowers the in-sample RMS almost as much; it predicts unseen blocks
+    worse.  Also: the parent and the terms added or removed relative to it
+    (R^2, PSE, held-out RMS and the rank in --csv).  Read-only.
     """
     _check_run_dir(run_dir)
     from aerosid.versions import history as read_history

@@ -34,6 +34,8 @@ __all__ = ["ModelVersion", "VersionHistory", "fit_version", "history", "load_ver
            "read_flight_data", "run_vehicle", "models_from_spec", "spec_for_run", "MODELS_DIR", "VersionError"]
 
 MODELS_DIR = "models"
+#: held-out errors within this fraction of each other are reported as a tie in `history`
+HELDOUT_TIE = 0.01
 _ID = re.compile(r"^v(\d{3,})$")
 
 
@@ -116,13 +118,39 @@ class VersionHistory:
             return f"(parent {v.parent} missing) " + _spec_brief(v.models)
         return _diff(p.models, v.models) or "no change"
 
+    def heldout(self, v: ModelVersion, channel: str) -> float:
+        """Leave-one-window-out prediction RMS (metrics.json `heldout_rms`; computed from the
+        run's flight data for versions fitted before it was stored, not written back)."""
+        x = v.channel_metric(channel, "heldout_rms")
+        if math.isfinite(x):
+            return x
+        return _heldout_backfill(self.run_dir, v).get(channel, float("nan"))
+
+    def heldout_ranks(self) -> dict[str, int]:
+        """Version -> rank (1 = best) by held-out prediction error: the mean over channels of
+        each channel's held-out RMS relative to the best version's in that channel."""
+        if not self.versions:
+            return {}
+        chans = list(self.versions[0].metrics["channels"])
+        h = {v.id: {ch: self.heldout(v, ch) for ch in chans} for v in self.versions}
+        best = {ch: min((h[v][ch] for v in h if math.isfinite(h[v][ch])), default=float("nan")) for ch in chans}
+        score = {}
+        for vid, d in h.items():
+            r = [d[ch] / best[ch] for ch in chans if math.isfinite(d[ch]) and math.isfinite(best[ch]) and best[ch] > 0]
+            score[vid] = sum(r) / len(r) if r else float("inf")
+        order = sorted(score, key=lambda k: score[k])
+        return {vid: i + 1 for i, vid in enumerate(order)}
+
     def table(self) -> pd.DataFrame:
         rows = []
+        ranks = self.heldout_ranks()
         for v in self.versions:
-            row = {"version": v.id, "parent": v.parent or "", "changes": self.changes(v), "note": v.note}
+            row = {"version": v.id, "parent": v.parent or "", "changes": self.changes(v), "note": v.note,
+                   "rank_heldout": ranks.get(v.id)}
             for ch in v.metrics["channels"]:
                 for key, label in (("rms_residual", "rms"), ("r2", "r2"), ("pse", "pse")):
                     row[f"{label}_{ch}"] = v.channel_metric(ch, key)
+                row[f"heldout_{ch}"] = self.heldout(v, ch)
             rows.append(row)
         return pd.DataFrame(rows)
 
@@ -153,15 +181,47 @@ class VersionHistory:
         if not self.versions:
             return (f"{self.run_dir}: no model versions yet; `aerosid fit {self.run_dir}` creates v001 "
                     "(the default models)")
-        lines = [f"model versions of {self.run_dir} (residual RMS per channel; lower is better)"]
+        lines = [f"model versions of {self.run_dir}, ranked by held-out prediction error (leave-one-window-out "
+                 "RMS: each time block predicted by a fit made without it; in-sample residual RMS in brackets; "
+                 "lower is better; * = best held-out in the channel)"]
         chans = list(self.versions[0].metrics["channels"])
-        head = f"  {'version':<8}{'parent':<8}" + "".join(f"{ch:>11}" for ch in chans) + "  changes"
+        ranks = self.heldout_ranks()
+        held = {v.id: {ch: self.heldout(v, ch) for ch in chans} for v in self.versions}
+        best = {ch: min((held[v][ch] for v in held if math.isfinite(held[v][ch])), default=None) for ch in chans}
+        head = f"  {'rank':<5}{'version':<8}{'parent':<8}" + "".join(f"{ch:>22}" for ch in chans) + "  changes"
         lines.append(head)
-        for v in self.versions:
-            cells = "".join(f"{_fmt(v.channel_metric(ch, 'rms_residual'), '.4g'):>11}" for ch in chans)
+        for v in sorted(self.versions, key=lambda x: ranks.get(x.id, 10 ** 6)):
+            cells = "".join(f"{_fmt(held[v.id][ch], '.4g') + ('*' if held[v.id][ch] == best[ch] else ' '):>12}"
+                            f"{'(' + _fmt(v.channel_metric(ch, 'rms_residual'), '.4g') + ')':>10}" for ch in chans)
             note = f" ({v.note})" if v.note else ""
-            lines.append(f"  {v.id:<8}{(v.parent or '-'):<8}{cells}  {self.changes(v)}{note}")
+            lines.append(f"  {ranks.get(v.id, '-'):<5}{v.id:<8}{(v.parent or '-'):<8}{cells}  {self.changes(v)}{note}")
+        for ch in chans:  # near ties between different models of a channel are not a ranking
+            vals = sorted(((held[v.id][ch], v) for v in self.versions if math.isfinite(held[v.id][ch])),
+                          key=lambda hv: hv[0])
+            if len(vals) >= 2 and vals[1][0] - vals[0][0] < HELDOUT_TIE * vals[0][0] \
+                    and vals[0][1].models[ch].terms != vals[1][1].models[ch].terms:
+                lines.append(f"  note: {ch}: {vals[0][1].id} and {vals[1][1].id} predict within "
+                             f"{100 * (vals[1][0] / vals[0][0] - 1):.1f} % of each other (< {HELDOUT_TIE:.0%}): "
+                             "not a meaningful difference; `aerosid diagnose` compares look-alike terms directly")
         return "\n".join(lines)
+
+
+_HELDOUT_CACHE: dict = {}
+
+
+def _heldout_backfill(run_dir: Path, v: ModelVersion) -> dict:
+    """Held-out RMS of a version whose metrics.json predates it (read-only, cached)."""
+    key = (str(Path(run_dir).resolve()), v.id, (v.path / "metrics.json").stat().st_mtime_ns)
+    if key not in _HELDOUT_CACHE:
+        try:
+            from aerosid.diagnosis.heldout import heldout_rms
+            from aerosid.vehicle import load_vehicle
+
+            _HELDOUT_CACHE[key] = heldout_rms(read_flight_data(run_dir), load_vehicle(run_vehicle(run_dir)), v.models,
+                                              v.metrics.get("mach_half_width", 0.5))
+        except (VersionError, ValueError, OSError):
+            _HELDOUT_CACHE[key] = {}
+    return _HELDOUT_CACHE[key]
 
 
 def _same_models(a: dict, b: dict) -> bool:
@@ -268,7 +328,8 @@ def _claim(root: Path) -> Path:
             k += 1
 
 
-def _metrics(ident, vehicle: str, note: str, parent: str | None, version: str, mach_half_width) -> dict:
+def _metrics(ident, vehicle: str, note: str, parent: str | None, version: str, mach_half_width,
+             heldout: dict | None = None) -> dict:
     def f(x):
         x = float(x)
         return x if math.isfinite(x) else None
@@ -277,7 +338,8 @@ def _metrics(ident, vehicle: str, note: str, parent: str | None, version: str, m
     for ch, fit in ident.fits.items():
         chans[ch] = {
             "terms": [_term_label(t) for t in ident.models[ch].terms],
-            "rms_residual": f(fit.rms_residual), "r2": f(fit.r2), "pse": f(fit.pse), "f_stat": f(fit.f_stat),
+            "rms_residual": f(fit.rms_residual), "heldout_rms": f((heldout or {}).get(ch, float("nan"))),
+            "r2": f(fit.r2), "pse": f(fit.pse), "f_stat": f(fit.f_stat),
             "f_stat_corrected": f(fit.f_stat_corrected), "n_eff": f(fit.n_eff), "n_obs": int(fit.n_obs),
             "coefficients": {n: {"estimate": f(fit.estimate[i]), "std_error": f(fit.std_error[i]),
                                  "std_error_ols": f(fit.std_error_ols[i])} for i, n in enumerate(fit.names)},
@@ -295,13 +357,17 @@ def _write_version(run_dir: Path, fd: pd.DataFrame, vehicle_name: str, models: d
 
     veh = load_vehicle(vehicle_name)
     ident = identify(fd, veh, models, mach_half_width)  # fit before claiming an id: a failed fit leaves nothing
+    from aerosid.diagnosis.heldout import heldout_rms
+
+    heldout = heldout_rms(fd, veh, models, mach_half_width)
     path = _claim(run_dir / MODELS_DIR)
     try:
         write_text_atomic(models_to_toml(models), path / "spec.toml")
         write_parquet_atomic(ident.table(), path / "coefficients.parquet", metadata={"aerosid.kind": "coefficients",
                                                                                     "aerosid.model_version": path.name})
         write_text_atomic((parent or "") + "\n", path / "parent")
-        write_json_atomic(_metrics(ident, vehicle_name, note, parent, path.name, mach_half_width), path / "metrics.json")
+        write_json_atomic(_metrics(ident, vehicle_name, note, parent, path.name, mach_half_width, heldout),
+                          path / "metrics.json")
     except BaseException:
         shutil.rmtree(path, ignore_errors=True)
         raise

@@ -310,6 +310,17 @@ class Diagnosis:
     #: channels that are identities by construction (alpha, beta inverted from them): their
     #: residual is numerical, so they are left out of "where it fails"
     identities: tuple[str, ...] = ()
+    #: look-alike comparisons (aerosid.diagnosis.lookalikes), the recommendation (None when
+    #: nothing is significant or the look-alikes are not separated), per-channel floor
+    lookalikes: tuple = ()
+    recommended: str | None = None
+    floor: dict = field(default_factory=dict)  # channel -> aerosid.diagnosis.floor.ChannelFloor
+
+    @property
+    def loop_closed(self) -> bool:
+        """Nothing significant is missing and no look-alike choice is open or refuted."""
+        return self.nothing_significant and not any(c.swap or (c.in_model and c.verdict != "separated")
+                                                    for c in self.lookalikes)
 
     @property
     def significant(self) -> tuple[EffectEvidence, ...]:
@@ -347,6 +358,11 @@ class Diagnosis:
 
     @property
     def message(self) -> str:
+        from aerosid.diagnosis.lookalikes import lookalike_message
+
+        return lookalike_message(self, self._base_message())
+
+    def _base_message(self) -> str:
         sig = self.significant
         where = self._where_text()
         if sig:
@@ -413,6 +429,10 @@ class Diagnosis:
             "mach_window": [_f(self.mach_window[0]), _f(self.mach_window[1])],
             "effects": [e.to_dict() for e in self.effects],
             "identities": list(self.identities),
+            "recommended": self.recommended,
+            "loop_closed": self.loop_closed,
+            "lookalikes": [c.to_dict() for c in self.lookalikes],
+            "floor": {ch: f.to_dict() for ch, f in self.floor.items()},
             "regimes": regimes,
             "regime_map": regime_map,
             "time_windows": windows,
@@ -437,6 +457,10 @@ class Diagnosis:
             lines.append(f"  {ch:<8}{rep.fit.rms_residual:>11.3g}{rep.fit.r2:>10.5f}{rep.fit.n_eff:>8.0f}"
                          f"{w.correlation_time_s:>10.2f} s{w.ljung_box_p:>13.2g}  {w.dominant_band}"
                          f"{'' if w.white else ' (coloured)'}")
+        if self.floor:
+            from aerosid.diagnosis.floor import floor_table
+
+            lines += ["", *floor_table(self.floor)]
         lines += ["", "Where it fails (residual RMS relative to the channel's; * = flagged >= "
                   f"{FLAG_RATIO:g}x):"]
         for ch, rep in self.channels.items():
@@ -461,7 +485,10 @@ class Diagnosis:
                          f"{_g(100 * e.rms_drop_fraction, '8.1f')}%  {note[:70]}")
         if len(self.effects) > max_effects:
             lines.append(f"  ... {len(self.effects) - max_effects} more")
-        lines += ["", f"Rule: {RULE_TEXT}.", "", self.message]
+        for c in self.lookalikes:
+            lines += ["", c.summary()]
+        lines += ["", f"Rule: {RULE_TEXT}.", "",
+                  f"Recommended: {self.recommended or 'none'}", self.message]
         return "\n".join(lines)
 
     def figure(self, channel: str):
@@ -742,7 +769,16 @@ def diagnose(flight_data: pd.DataFrame, vehicle, models: dict[str, ChannelModel]
 
     ranked = sorted(evidence, key=lambda e: (not e.significant, not e.identifiable, -e.score))
     window = (float(fd["mach"].min()), float(fd["mach"].max()))
-    return Diagnosis(tuple(ranked), reports, models, n, window, int(win.max()) + 1, identity_channels(vehicle, models))
+    from aerosid.diagnosis.floor import angle_floor_parts, floors
+    from aerosid.diagnosis.lookalikes import resolve
+
+    looks, recommended = resolve(ranked, models, signals, fd, candidates, confusion_r=CONFUSION_R, p_max=P_MAX,
+                                 cov=cov)
+    identities = identity_channels(vehicle, models)  # their residual is numerical: no floor to speak of
+    floor = floors({ch: rep.residual for ch, rep in reports.items() if ch not in identities}, fd,
+                   angle_floor_parts(fd, vehicle, models, reports))
+    return Diagnosis(tuple(ranked), reports, models, n, window, int(win.max()) + 1,
+                     identities, looks, recommended, floor)
 
 
 def identity_channels(vehicle, channels) -> tuple[str, ...]:

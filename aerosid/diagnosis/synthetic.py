@@ -85,8 +85,8 @@ def flight_data_from_truth(truth: pd.DataFrame, noise: NoiseLevels = MEASURED_NO
     }
     for ch in ("CY", "CN", "Cl", "Cm", "Cn"):
         out[ch] = noisy(ch, getattr(noise, ch))
-    out["sigma_CN"] = np.full(n, noise.CN)
-    out["sigma_Cm"] = np.full(n, noise.Cm)
+    for ch in ("CY", "CN", "Cl", "Cm", "Cn"):  # the errors' own 1-sigma (an honest sigma column)
+        out[f"sigma_{ch}"] = np.full(n, getattr(noise, ch))
     alpha = noisy("alpha_rad", noise.alpha_rad)
     beta = noisy("beta_rad", noise.beta_rad)
     out["alpha_rad"], out["beta_rad"] = alpha, beta
