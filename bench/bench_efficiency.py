@@ -1,0 +1,180 @@
+"""Efficiency bench (issue 20): how close the estimates come to the Cramér–Rao bound, and
+whether the reported sigma tells their scatter.
+
+    python bench/bench_efficiency.py [--seeds 0-29] [--vehicles seed-rlv,c172x] [--workers 2]
+    python bench/bench_efficiency.py --report-only      # the tables again from the CSV
+    -> bench/results/efficiency_runs.csv and bench/results/efficiency.md
+
+Each run: the flight of bench_generalisation.simulate (seed-rlv: aerosid's simulator with
+Table 2 noise; c172x: the JSBSim 3-2-1-1 flight with its shipped vehicle file), then
+``aerosid.ebm.process_telemetry`` at default settings; per coefficient the estimate, the
+reported (coloured-residual corrected) sigma, the plain OLS sigma and ``crb_std``
+(aerosid.identification.crb: output-error information of the gyros and accelerometers
+under the run's R, inputs taken as measured).
+
+Per coefficient over the runs:
+* efficiency = Monte-Carlo std of the estimates / RMS of the CRB (1 = efficient; the CRB
+  changes little between seeds, the RMS is the right mean for a variance bound);
+* honesty of sigma = Monte-Carlo std / mean reported sigma (1 = honest, < 1 conservative);
+* bias = mean error / Monte-Carlo std (how much of the error the scatter does not explain).
+Each ratio of stds carries the sampling error of a std from n runs: a 95 % band
+sqrt(chi2(0.025, n-1)/(n-1)) .. sqrt(chi2(0.975, n-1)/(n-1)) (0.80-1.26 for n = 30).
+The CSV is written after every run (a stopped bench keeps what it measured).
+"""
+from __future__ import annotations
+
+import argparse
+import math
+import os
+import platform
+import sys
+import tempfile
+import time
+import traceback
+import warnings
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from datetime import date
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import scipy.stats
+
+sys.path.insert(0, str(Path(__file__).parent))
+from bench_accuracy import parse_seeds  # noqa: E402
+from bench_generalisation import simulate  # noqa: E402
+from machine import cpu_model, loadavg  # noqa: E402
+
+OUT = Path(__file__).parent / "results"
+CSV = OUT / "efficiency_runs.csv"
+MD = OUT / "efficiency.md"
+#: A coefficient whose Monte-Carlo std exceeds this many CRB is named and explained.
+INEFFICIENT = 1.5
+TABLES, TABLES_END = "<!-- tables: bench/bench_efficiency.py -->", "<!-- end of tables -->"
+
+
+def one(job: tuple[str, int]) -> list[dict]:
+    vehicle_name, seed = job
+    from aerosid.ebm import process_telemetry
+
+    base = {"vehicle": vehicle_name, "seed": seed}
+    try:
+        with tempfile.TemporaryDirectory() as tmp, warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            flight, vehicle = simulate(vehicle_name, seed, Path(tmp))
+            t0 = time.perf_counter()
+            run = process_telemetry(flight.telemetry, vehicle)
+    except Exception as exc:
+        return [{**base, "failed": f"{type(exc).__name__}: {exc}", "traceback": traceback.format_exc(limit=3)}]
+    found = [f"{f['kind']} {f['channel']}" for f in run.findings]
+    tab = run.identification.table()
+    rows = []
+    for _, r in tab.iterrows():
+        rows.append({**base, "failed": "", "time_s": time.perf_counter() - t0, "findings": "; ".join(found),
+                     "channel": r["channel"], "coefficient": r["coefficient"],
+                     "truth": float(flight.coefficients.get(r["coefficient"], math.nan)),
+                     "estimate": r["estimate"], "std_error": r["std_error"], "std_error_ols": r["std_error_ols"],
+                     "crb_std": r["crb_std"], "condition_number": r["condition_number"], "n_eff": r["n_eff"],
+                     "n_obs": r["n_obs"], "band_hz": float(run.flight_data["band_hz"].median())})
+    return rows
+
+
+def chi2_band(n: int) -> tuple[float, float]:
+    """95 % band of (sample std / true std) from n independent normal draws."""
+    if n < 2:
+        return math.nan, math.nan
+    return (math.sqrt(scipy.stats.chi2.ppf(0.025, n - 1) / (n - 1)),
+            math.sqrt(scipy.stats.chi2.ppf(0.975, n - 1) / (n - 1)))
+
+
+def summarise(df: pd.DataFrame) -> pd.DataFrame:
+    ok = df[(df["failed"].fillna("") == "") & np.isfinite(df["estimate"].astype(float))]
+    out = []
+    for (veh, ch, coef), g in ok.groupby(["vehicle", "channel", "coefficient"], sort=False):
+        n = len(g)
+        est = g["estimate"].to_numpy(float)
+        sd = float(np.std(est, ddof=1)) if n > 1 else math.nan
+        crb = float(np.sqrt(np.mean(g["crb_std"].to_numpy(float) ** 2)))
+        sig = float(np.mean(g["std_error"]))
+        truth = float(g["truth"].iloc[0])
+        err = est - truth
+        out.append({"vehicle": veh, "channel": ch, "coefficient": coef, "n": n, "truth": truth,
+                    "mean_estimate": float(est.mean()), "mc_std": sd, "crb_rms": crb,
+                    "mean_sigma": sig, "mean_sigma_ols": float(np.mean(g["std_error_ols"])),
+                    "efficiency": sd / crb if crb > 0 else math.nan, "honesty": sd / sig if sig > 0 else math.nan,
+                    "sigma_over_crb": sig / crb if crb > 0 else math.nan,
+                    "bias_over_std": float(err.mean()) / sd if sd > 0 and math.isfinite(truth) else math.nan,
+                    "rms_err_over_crb": float(np.sqrt(np.mean(err ** 2))) / crb if crb > 0 and math.isfinite(truth)
+                    else math.nan,
+                    "condition_number": float(g["condition_number"].median()), "n_eff": float(g["n_eff"].median())})
+    return pd.DataFrame(out)
+
+
+def report(df: pd.DataFrame, head: str) -> str:
+    s = summarise(df)
+    lines = [*([head, ""] if head else []),
+             "Definitions: bench/bench_efficiency.py (docstring).  efficiency = Monte-Carlo std / RMS CRB; "
+             "honesty = Monte-Carlo std / mean reported sigma; bias = mean error / Monte-Carlo std.  "
+             f"Coefficients with efficiency > {INEFFICIENT} are marked **bold**.", ""]
+    for veh, g in s.groupby("vehicle", sort=False):
+        n = int(g["n"].max())
+        lo, hi = chi2_band(n)
+        failed = df[(df["vehicle"] == veh) & (df["failed"].fillna("") != "")]["seed"].nunique()
+        lines += [f"## {veh}: {n} runs ({failed} failed); a std ratio's 95 % sampling band {lo:.2f}..{hi:.2f}", "",
+                  "| coefficient | truth | mean estimate | MC std | CRB | mean sigma | sigma OLS | std/CRB | "
+                  "std/sigma | sigma/CRB | bias/std | cond. | N_eff |", "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+        for _, r in g.iterrows():
+            name = f"**{r['coefficient']}**" if r["efficiency"] > INEFFICIENT else r["coefficient"]
+            lines.append(f"| {name} | {r['truth']:.4g} | {r['mean_estimate']:.4g} | {r['mc_std']:.3g} | "
+                         f"{r['crb_rms']:.3g} | {r['mean_sigma']:.3g} | {r['mean_sigma_ols']:.3g} | "
+                         f"{r['efficiency']:.2f} | {r['honesty']:.2f} | {r['sigma_over_crb']:.2f} | "
+                         f"{r['bias_over_std']:+.2f} | {r['condition_number']:.1f} | {r['n_eff']:.0f} |")
+        lines.append("")
+    return "\n".join(lines) + "\n"
+
+
+def write_md(df: pd.DataFrame, head: str | None) -> None:
+    """efficiency.md: head (None: keep the file's), the tables from df, and the file's
+    hand-written analysis (everything after TABLES_END) kept as it was."""
+    old = MD.read_text() if MD.exists() else ""
+    if head is None:
+        head = old.split(TABLES, 1)[0].rstrip() if TABLES in old else "# Efficiency bench"
+    analysis = old.split(TABLES_END, 1)[1] if TABLES_END in old else "\n"
+    MD.write_text(f"{head}\n\n{TABLES}\n{report(df, '').lstrip()}{TABLES_END}{analysis}")
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--seeds", default="0-29")
+    ap.add_argument("--vehicles", default="seed-rlv,c172x")
+    ap.add_argument("--workers", type=int, default=2)
+    ap.add_argument("--report-only", action="store_true", help="rewrite efficiency.md from the CSV")
+    ap.add_argument("--csv", default=str(CSV))
+    args = ap.parse_args()
+    csv = Path(args.csv)
+    if args.report_only:
+        write_md(pd.read_csv(csv), None)
+        print(MD.read_text())
+        return
+    seeds = parse_seeds(args.seeds)
+    jobs = [(v, s) for s in seeds for v in args.vehicles.split(",")]
+    load0, t0 = loadavg(), time.perf_counter()
+    rows: list[dict] = []
+    with ProcessPoolExecutor(args.workers) as pool:
+        futures = [pool.submit(one, j) for j in jobs]
+        for fut in as_completed(futures):
+            rows += fut.result()
+            pd.DataFrame(rows).drop(columns=["traceback"], errors="ignore").to_csv(csv, index=False,
+                                                                                   float_format="%.8g")
+            print(f"{len({(r['vehicle'], r['seed']) for r in rows})}/{len(jobs)} runs, "
+                  f"{(time.perf_counter() - t0) / 60:.1f} min", flush=True)
+    head = (f"# Efficiency of the estimates against the Cramér–Rao bound ({len(seeds)} seeds per vehicle)\n\n"
+            f"{date.today()}, Python {platform.python_version()}, machine: {cpu_model()}, {os.cpu_count()} cores, "
+            f"load average {load0} (start) / {loadavg()} (end); {args.workers} worker(s), wall time "
+            f"{(time.perf_counter() - t0) / 60:.1f} min; seeds {seeds[0]}..{seeds[-1]}; default settings, "
+            "Mach window half-width 0.5.")
+    write_md(pd.DataFrame(rows), head)
+    print(MD.read_text())
+
+if __name__ == "__main__":
+    main()
