@@ -165,3 +165,29 @@ def test_no_noise_estimate_gives_no_bound():
 
 if __name__ == "__main__":
     pytest.main([__file__])
+
+
+def test_coefficient_table_carries_the_bound():
+    """crb_std reaches coefficients.parquet (schema with unit metadata) and the CLI table."""
+    import pandera.errors
+
+    from aerosid.identify import Identification, format_table
+    from aerosid.models import ChannelModel, Term
+    from aerosid.regression import fit_linear
+    from schemas.coefficients import Coefficients
+
+    rng = np.random.default_rng(0)
+    alpha = rng.normal(0, 0.05, 300)
+    fit = fit_linear(0.01 - 0.5 * alpha + rng.normal(0, 1e-3, 300), np.column_stack([np.ones(300), alpha]),
+                     names=("Cm_0", "Cm_alpha"), channel="Cm")
+    model = ChannelModel("Cm", (Term("Cm_0", "1"), Term("Cm_alpha", "alpha")))
+    ident = Identification({"Cm": fit}, {"Cm": model}, {}, 300, (0.9, 1.1), crb_std={"Cm_0": 1e-4, "Cm_alpha": 2e-3})
+    tab = ident.table()
+    Coefficients.validate(tab)
+    assert tab.set_index("coefficient")["crb_std"].to_dict() == {"Cm_0": 1e-4, "Cm_alpha": 2e-3}
+    text = format_table(tab)
+    line = next(x for x in text.splitlines() if x.strip().startswith("Cm_alpha"))
+    assert "CRB" in text and "3.5e-05" in line  # 2e-3 per rad, printed per degree
+    assert Coefficients.to_schema().columns["crb_std"].metadata["unit"].startswith("per rad")
+    with pytest.raises(pandera.errors.SchemaError):
+        Coefficients.validate(tab.assign(crb_std=-1.0))
