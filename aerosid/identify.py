@@ -14,7 +14,7 @@ import pandas as pd
 
 from aerosid.aeromodel import AeroModel
 from aerosid.eiv import simex_estimates
-from aerosid.identification.crb import coefficient_bounds
+from aerosid.identification.crb import identification_bounds
 from aerosid.models import ChannelModel, default_models, signals_from_flight_data, vehicle_signals
 from aerosid.plausibility.estimates import preflight_departure
 from aerosid.regression import LinearFit, fit_linear, with_corrected_estimate
@@ -211,8 +211,6 @@ def identify(flight_data: pd.DataFrame, vehicle: Vehicle, models: dict[str, Chan
     refs = AeroModel.preflight(vehicle).linear_truth() if vehicle.preflight is not None else {}
     window = (float(fd["mach"].min()), float(fd["mach"].max()))
     identities = tuple(ch for ch in INVERSION_CHANNELS if ch in fits) if vehicle.air_data_source != "vanes" else ()
-    designs = {ch: (model.design(signals)[0].to_numpy(float), model.names, np.asarray(fits[ch].identifiable))
-               for ch, model in models.items()}
-    crb = coefficient_bounds(fd, vehicle, designs, {ch: ch not in identities for ch in designs})
+    crb = identification_bounds(fd, vehicle, models, fits, identities)
     return Identification(fits, dict(models), refs, len(fd), window, identities, vehicle.envelope.preflight_factor,
                           crb.std)

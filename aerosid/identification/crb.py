@@ -58,6 +58,7 @@ from aerosid.rigid_body import inertia_constants
 
 #: Per-sample measurement-noise 1-sigma the run estimated (the EKF's R), flight-data columns,
 #: in the order of the measured outputs (ax, ay, az, p, q, r).
+OUTPUTS = ("ax", "ay", "az", "p", "q", "r")
 R_COLUMNS = ("R_sigma_ax_m_s2", "R_sigma_ay_m_s2", "R_sigma_az_m_s2",
              "R_sigma_p_rad_s", "R_sigma_q_rad_s", "R_sigma_r_rad_s")
 #: Channels whose coefficients act on a force (row of the specific force) and on a moment.
@@ -182,12 +183,15 @@ def information_matrix(S: np.ndarray, sigma: np.ndarray) -> np.ndarray:
     return Sw.T @ Sw
 
 
-def coefficient_bounds(fd: pd.DataFrame, vehicle, designs: dict, report: dict | None = None) -> CramerRaoBounds:
+def coefficient_bounds(fd: pd.DataFrame, vehicle, designs: dict, report: dict | None = None,
+                       outputs: tuple = OUTPUTS) -> CramerRaoBounds:
     """The bounds of one identification.  fd: the flight data the fits used (t_s, flight,
     segment, qbar_pa, p/q/r_rad_s and the R_sigma_* columns); designs: channel ->
     (X (N, k) regressor matrix on fd's rows, names, usable (k,) bool -- False for a column the
     fit could not identify); report: channel -> bool, whether the channel's bounds are
-    reported (an identity channel's coefficients stay unknown parameters but get NaN)."""
+    reported (an identity channel's coefficients stay unknown parameters but get NaN);
+    outputs: the measured outputs whose information counts (default all six; e.g. the gyros
+    alone: ("p", "q", "r"))."""
     names = [nm for ch, (X, nms, use) in designs.items() for nm, u in zip(nms, use) if u]
     nan_all = {nm: float("nan") for ch, (X, nms, use) in designs.items() for nm in nms}
     missing = [c for c in R_COLUMNS if c not in fd.columns]
@@ -199,6 +203,10 @@ def coefficient_bounds(fd: pd.DataFrame, vehicle, designs: dict, report: dict | 
     sigma = fd[list(R_COLUMNS)].to_numpy(float)
     if not np.all(np.isfinite(sigma)) or np.any(sigma <= 0):
         return CramerRaoBounds(nan_all, n, 0, tuple(np.nanmedian(sigma, axis=0)), note="R not positive and finite")
+    unknown = set(outputs) - set(OUTPUTS)
+    if unknown:
+        raise ValueError(f"unknown output(s) {sorted(unknown)}; the measured outputs are {OUTPUTS}")
+    sigma_used = np.where(np.isin(np.array(OUTPUTS), list(outputs))[None, :], sigma, np.inf)
     qs = fd["qbar_pa"].to_numpy(float) * vehicle.S_m2
     lengths = {"Cl": vehicle.length_lateral_m, "Cm": vehicle.length_pitch_m, "Cn": vehicle.length_lateral_m}
     inertia = {"Cl": vehicle.Ixx_kg_m2, "Cm": vehicle.Iyy_kg_m2, "Cn": vehicle.Izz_kg_m2}
@@ -220,7 +228,7 @@ def coefficient_bounds(fd: pd.DataFrame, vehicle, designs: dict, report: dict | 
     rates = fd[["p_rad_s", "q_rad_s", "r_rad_s"]].to_numpy(float)
     inert = (vehicle.Ixx_kg_m2, vehicle.Iyy_kg_m2, vehicle.Izz_kg_m2, vehicle.Ixz_kg_m2)
     S = output_sensitivities(fd["t_s"].to_numpy(float), dforce, dmoment, rates, inert, vehicle.accel_offset_m, runs)
-    cov = _inverse(information_matrix(S, sigma))
+    cov = _inverse(information_matrix(S, sigma_used))
     std = dict(nan_all)
     report = report or {}
     for i, nm in enumerate(names):
@@ -228,4 +236,19 @@ def coefficient_bounds(fd: pd.DataFrame, vehicle, designs: dict, report: dict | 
         if report.get(ch, True):
             v = cov[i, i]
             std[nm] = float(np.sqrt(v)) if np.isfinite(v) and v >= 0 else float("nan")
-    return CramerRaoBounds(std, n, len(runs), tuple(float(v) for v in np.median(sigma, axis=0)))
+    method = CramerRaoBounds.method if tuple(outputs) == OUTPUTS else \
+        f"output-error information, measured inputs, outputs {', '.join(outputs)} only"
+    return CramerRaoBounds(std, n, len(runs), tuple(float(v) for v in np.median(sigma, axis=0)), method)
+
+
+def identification_bounds(fd: pd.DataFrame, vehicle, models: dict, fits: dict, identities=(),
+                          outputs: tuple = OUTPUTS) -> CramerRaoBounds:
+    """The bounds of the fits of aerosid.identify.identify: fd the flight data they used (inside
+    the Mach window, sorted by flight and time), models/fits per channel, identities the
+    channels reported without numbers."""
+    from aerosid.models import vehicle_signals
+
+    signals = vehicle_signals(fd, vehicle)
+    designs = {ch: (model.design(signals)[0].to_numpy(float), model.names, np.asarray(fits[ch].identifiable))
+               for ch, model in models.items() if ch in fits}
+    return coefficient_bounds(fd, vehicle, designs, {ch: ch not in identities for ch in designs}, outputs)

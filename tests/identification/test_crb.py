@@ -48,6 +48,9 @@ def test_side_force_channel_reduces_to_the_static_form():
     assert np.isnan(b2.std["CY_d"]) and np.isfinite(b2.std["CY_beta"])
     b3 = coefficient_bounds(fd, VEH, {"CY": (X, ("CY_0", "CY_beta", "CY_d"), np.ones(3, bool))}, {"CY": False})
     assert all(np.isnan(v) for v in b3.std.values())
+    # the gyros alone know nothing of a side force at the CG
+    b4 = coefficient_bounds(fd, VEH, {"CY": (X, ("CY_0", "CY_beta", "CY_d"), np.ones(3, bool))}, outputs=("p", "q", "r"))
+    assert all(np.isnan(v) for v in b4.std.values()) and "p, q, r only" in b4.method
 
 
 def test_pitch_rate_sensitivity_is_the_integral_of_the_input():
