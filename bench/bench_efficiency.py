@@ -53,28 +53,88 @@ INEFFICIENT = 1.5
 TABLES, TABLES_END = "<!-- tables: bench/bench_efficiency.py -->", "<!-- end of tables -->"
 
 
-def one(job: tuple[str, int]) -> list[dict]:
-    vehicle_name, seed = job
+#: --variant exact-inputs: the noise of every regressor's source scaled by this factor
+EXACT = 0.01
+
+
+def simulate_variant(vehicle_name: str, seed: int, workdir: Path, variant: str):
+    """bench_generalisation.simulate, or with the regressors' noise sources x EXACT
+    (variant "exact-inputs"): seed-rlv the accelerometers (alpha, beta are inverted from
+    them); c172x the vanes, the surfaces and V (and the vehicle's vane noise for SIMEX).
+    The gyros keep their noise: what is left between the scatter and the gyros-only bound is
+    the estimator's own (equation error on the band-limited derivative)."""
+    if variant == "default":
+        return simulate(vehicle_name, seed, workdir)
+    if variant != "exact-inputs":
+        raise ValueError(f"unknown variant {variant!r}")
+    from dataclasses import replace
+
+    if vehicle_name == "seed-rlv":
+        from aerosid.simulation import load_case, simulate as sim
+
+        case = load_case("seed-rlv")
+        sens = replace(case.sensors, accel_noise_m_s2=tuple(EXACT * v for v in case.sensors.accel_noise_m_s2))
+        return sim(replace(case, sensors=sens), seed=seed), case.vehicle
+    if vehicle_name != "c172x":
+        raise ValueError("the exact-inputs variant is defined for seed-rlv and c172x")
+    import copy
+
+    import aerosid.simulation.jsbsim_flight as jf
+    from aerosid.vehicle import load_vehicle
+
+    original = jf.load_jsbsim_config
+
+    def quiet(aircraft="c172x"):
+        sim_cfg, veh_cfg = original(aircraft)
+        sim_cfg = copy.deepcopy(sim_cfg)
+        for key in ("vane_noise_deg", "surface_noise_deg", "V_noise_m_s"):
+            sim_cfg["sensors"][key] *= EXACT
+        return sim_cfg, veh_cfg
+
+    jf.load_jsbsim_config = quiet
+    try:
+        flight = jf.simulate_jsbsim("c172x", "3211", seed)
+    finally:
+        jf.load_jsbsim_config = original
+    vehicle = load_vehicle("c172x")
+    return flight, replace(vehicle, vane_noise_rad=EXACT * vehicle.vane_noise_rad)
+
+
+def gyro_bounds(run, vehicle) -> dict:
+    """crb_std from the gyros alone (the accelerometers' lever-arm information left out)."""
+    from aerosid.identification.crb import identification_bounds
+    from aerosid.identify import mach_window_mask
+
+    ident = run.identification
+    fd = run.flight_data.sort_values(["flight", "t_s"], kind="stable").reset_index(drop=True)
+    fd = fd.loc[mach_window_mask(fd["mach"].to_numpy(), vehicle.mach_reference, 0.5)].reset_index(drop=True)
+    return identification_bounds(fd, vehicle, ident.models, ident.fits, ident.identities, ("p", "q", "r")).std
+
+
+def one(job: tuple[str, int, str]) -> list[dict]:
+    vehicle_name, seed, variant = job
     from aerosid.ebm import process_telemetry
 
-    base = {"vehicle": vehicle_name, "seed": seed}
+    base = {"vehicle": vehicle_name, "seed": seed, "variant": variant}
     try:
         with tempfile.TemporaryDirectory() as tmp, warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            flight, vehicle = simulate(vehicle_name, seed, Path(tmp))
+            flight, vehicle = simulate_variant(vehicle_name, seed, Path(tmp), variant)
             t0 = time.perf_counter()
             run = process_telemetry(flight.telemetry, vehicle)
     except Exception as exc:
         return [{**base, "failed": f"{type(exc).__name__}: {exc}", "traceback": traceback.format_exc(limit=3)}]
     found = [f"{f['kind']} {f['channel']}" for f in run.findings]
     tab = run.identification.table()
+    gyro = gyro_bounds(run, vehicle)
     rows = []
     for _, r in tab.iterrows():
         rows.append({**base, "failed": "", "time_s": time.perf_counter() - t0, "findings": "; ".join(found),
                      "channel": r["channel"], "coefficient": r["coefficient"],
                      "truth": float(flight.coefficients.get(r["coefficient"], math.nan)),
                      "estimate": r["estimate"], "std_error": r["std_error"], "std_error_ols": r["std_error_ols"],
-                     "crb_std": r["crb_std"], "condition_number": r["condition_number"], "n_eff": r["n_eff"],
+                     "crb_std": r["crb_std"], "crb_gyro_std": gyro.get(r["coefficient"], math.nan),
+                     "condition_number": r["condition_number"], "n_eff": r["n_eff"],
                      "n_obs": r["n_obs"], "band_hz": float(run.flight_data["band_hz"].median())})
     return rows
 
@@ -107,6 +167,9 @@ def summarise(df: pd.DataFrame) -> pd.DataFrame:
                     "rms_err_over_crb": float(np.sqrt(np.mean(err ** 2))) / crb if crb > 0 and math.isfinite(truth)
                     else math.nan,
                     "condition_number": float(g["condition_number"].median()), "n_eff": float(g["n_eff"].median())})
+        if "crb_gyro_std" in g:
+            cg = float(np.sqrt(np.mean(g["crb_gyro_std"].to_numpy(float) ** 2)))
+            out[-1].update(crb_gyro_rms=cg, efficiency_gyro=sd / cg if cg > 0 else math.nan)
     return pd.DataFrame(out)
 
 
@@ -120,15 +183,18 @@ def report(df: pd.DataFrame, head: str) -> str:
         n = int(g["n"].max())
         lo, hi = chi2_band(n)
         failed = df[(df["vehicle"] == veh) & (df["failed"].fillna("") != "")]["seed"].nunique()
+        gyro = "efficiency_gyro" in g and g["efficiency_gyro"].notna().any()
         lines += [f"## {veh}: {n} runs ({failed} failed); a std ratio's 95 % sampling band {lo:.2f}..{hi:.2f}", "",
                   "| coefficient | truth | mean estimate | MC std | CRB | mean sigma | sigma OLS | std/CRB | "
-                  "std/sigma | sigma/CRB | bias/std | cond. | N_eff |", "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+                  "std/sigma | sigma/CRB | bias/std | cond. | N_eff |" + (" std/CRB gyros only |" if gyro else ""),
+                  "|---|---|---|---|---|---|---|---|---|---|---|---|---|" + ("---|" if gyro else "")]
         for _, r in g.iterrows():
             name = f"**{r['coefficient']}**" if r["efficiency"] > INEFFICIENT else r["coefficient"]
             lines.append(f"| {name} | {r['truth']:.4g} | {r['mean_estimate']:.4g} | {r['mc_std']:.3g} | "
                          f"{r['crb_rms']:.3g} | {r['mean_sigma']:.3g} | {r['mean_sigma_ols']:.3g} | "
                          f"{r['efficiency']:.2f} | {r['honesty']:.2f} | {r['sigma_over_crb']:.2f} | "
-                         f"{r['bias_over_std']:+.2f} | {r['condition_number']:.1f} | {r['n_eff']:.0f} |")
+                         f"{r['bias_over_std']:+.2f} | {r['condition_number']:.1f} | {r['n_eff']:.0f} |"
+                         + (f" {r['efficiency_gyro']:.2f} |" if gyro else ""))
         lines.append("")
     return "\n".join(lines) + "\n"
 
@@ -149,15 +215,20 @@ def main() -> None:
     ap.add_argument("--vehicles", default="seed-rlv,c172x")
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--report-only", action="store_true", help="rewrite efficiency.md from the CSV")
-    ap.add_argument("--csv", default=str(CSV))
+    ap.add_argument("--csv", default=None)
+    ap.add_argument("--variant", default="default", choices=("default", "exact-inputs"),
+                    help="exact-inputs: the regressors' noise sources x0.01 (see simulate_variant)")
     args = ap.parse_args()
-    csv = Path(args.csv)
+    global MD
+    if args.variant != "default":
+        MD = OUT / f"efficiency_{args.variant}.md"
+    csv = Path(args.csv) if args.csv else (CSV if args.variant == "default" else OUT / f"efficiency_{args.variant}_runs.csv")
     if args.report_only:
         write_md(pd.read_csv(csv), None)
         print(MD.read_text())
         return
     seeds = parse_seeds(args.seeds)
-    jobs = [(v, s) for s in seeds for v in args.vehicles.split(",")]
+    jobs = [(v, s, args.variant) for s in seeds for v in args.vehicles.split(",")]
     load0, t0 = loadavg(), time.perf_counter()
     rows: list[dict] = []
     with ProcessPoolExecutor(args.workers) as pool:
@@ -168,7 +239,8 @@ def main() -> None:
                                                                                    float_format="%.8g")
             print(f"{len({(r['vehicle'], r['seed']) for r in rows})}/{len(jobs)} runs, "
                   f"{(time.perf_counter() - t0) / 60:.1f} min", flush=True)
-    head = (f"# Efficiency of the estimates against the Cramér–Rao bound ({len(seeds)} seeds per vehicle)\n\n"
+    what = "" if args.variant == "default" else f", variant {args.variant}: the regressors' noise x{EXACT}"
+    head = (f"# Efficiency of the estimates against the Cramér–Rao bound ({len(seeds)} seeds per vehicle{what})\n\n"
             f"{date.today()}, Python {platform.python_version()}, machine: {cpu_model()}, {os.cpu_count()} cores, "
             f"load average {load0} (start) / {loadavg()} (end); {args.workers} worker(s), wall time "
             f"{(time.perf_counter() - t0) / 60:.1f} min; seeds {seeds[0]}..{seeds[-1]}; default settings, "
