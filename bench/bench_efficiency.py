@@ -63,7 +63,7 @@ def simulate_variant(vehicle_name: str, seed: int, workdir: Path, variant: str):
     them); c172x the vanes, the surfaces and V (and the vehicle's vane noise for SIMEX).
     The gyros keep their noise: what is left between the scatter and the gyros-only bound is
     the estimator's own (equation error on the band-limited derivative)."""
-    if variant == "default":
+    if variant in ("default", "estimator"):
         return simulate(vehicle_name, seed, workdir)
     if variant != "exact-inputs":
         raise ValueError(f"unknown variant {variant!r}")
@@ -111,6 +111,58 @@ def gyro_bounds(run, vehicle) -> dict:
     return identification_bounds(fd, vehicle, ident.models, ident.fits, ident.identities, ("p", "q", "r")).std
 
 
+def estimator_noise_std(run, vehicle, replicates: int = 200, seed: int = 0) -> dict:
+    """Std of the regression's estimates when only the gyros' and accelerometers' white noise
+    (at the run's R) goes through the estimator: every regressor exact, the noise low-passed
+    and differentiated as aerosid.identification.band does (linear part: B^-1 w_dot for the
+    moments, a - w_dot x r for the forces), scaled to coefficients and fitted by OLS on the
+    run's own design matrices.  The equation-error estimator's own loss against the bound."""
+    from aerosid.identification.band import low_pass_runs
+    from aerosid.identification.crb import R_COLUMNS, rate_coupling_matrix, runs_of
+    from aerosid.identify import mach_window_mask
+    from aerosid.models import vehicle_signals
+
+    ident = run.identification
+    fd = run.flight_data.sort_values(["flight", "t_s"], kind="stable").reset_index(drop=True)
+    fd = fd.loc[mach_window_mask(fd["mach"].to_numpy(), vehicle.mach_reference, 0.5)].reset_index(drop=True)
+    t = fd["t_s"].to_numpy(float)
+    runs = runs_of(t, (fd["flight"].astype(str) + "/" + fd["segment"].astype(str)).to_numpy())
+    fs = 1.0 / float(np.median(np.diff(t)))
+    band = float(fd["band_hz"].median())
+    sigma = fd[list(R_COLUMNS)].to_numpy(float)
+    qs = fd["qbar_pa"].to_numpy(float) * vehicle.S_m2
+    Binv = np.linalg.inv(rate_coupling_matrix((vehicle.Ixx_kg_m2, vehicle.Iyy_kg_m2, vehicle.Izz_kg_m2,
+                                               vehicle.Ixz_kg_m2)))
+    scale = {"CN": -vehicle.mass_kg / qs, "CY": vehicle.mass_kg / qs,
+             "Cl": vehicle.Ixx_kg_m2 / (qs * vehicle.length_lateral_m), "Cm": vehicle.Iyy_kg_m2 / (qs * vehicle.length_pitch_m),
+             "Cn": vehicle.Izz_kg_m2 / (qs * vehicle.length_lateral_m)}
+    signals = vehicle_signals(fd, vehicle)
+    designs = {ch: m.design(signals)[0].to_numpy(float)[:, np.asarray(ident.fits[ch].identifiable)]
+               for ch, m in ident.models.items() if ch in scale and ch not in ident.identities}
+    rng = np.random.default_rng(seed)
+    est = {ch: [] for ch in designs}
+    r_off = np.asarray(vehicle.accel_offset_m, float)
+    for _ in range(replicates):
+        noise = rng.standard_normal(sigma.shape) * sigma
+        f = low_pass_runs(noise, fs, band, runs)
+        wdot = np.full((len(t), 3), np.nan)
+        for r in runs:
+            if r.stop - r.start > 1:
+                wdot[r] = np.gradient(f[r, 3:], t[r], axis=0)
+        ang = wdot @ Binv.T
+        acc = f[:, :3] - np.cross(wdot, r_off)
+        coef = {"CN": acc[:, 2], "CY": acc[:, 1], "Cl": ang[:, 0], "Cm": ang[:, 1], "Cn": ang[:, 2]}
+        for ch, X in designs.items():
+            y = scale[ch] * coef[ch]
+            ok = np.isfinite(y) & np.all(np.isfinite(X), axis=1)
+            est[ch].append(np.linalg.lstsq(X[ok], y[ok], rcond=None)[0])
+    out = {}
+    for ch, rows in est.items():
+        names = [n for n, u in zip(ident.models[ch].names, ident.fits[ch].identifiable) if u]
+        out.update(dict(zip(names, np.std(np.array(rows), axis=0, ddof=1))))
+    return out
+
+
 def one(job: tuple[str, int, str]) -> list[dict]:
     vehicle_name, seed, variant = job
     from aerosid.ebm import process_telemetry
@@ -127,6 +179,7 @@ def one(job: tuple[str, int, str]) -> list[dict]:
     found = [f"{f['kind']} {f['channel']}" for f in run.findings]
     tab = run.identification.table()
     gyro = gyro_bounds(run, vehicle)
+    own = estimator_noise_std(run, vehicle) if variant == "estimator" else {}
     rows = []
     for _, r in tab.iterrows():
         rows.append({**base, "failed": "", "time_s": time.perf_counter() - t0, "findings": "; ".join(found),
@@ -134,6 +187,7 @@ def one(job: tuple[str, int, str]) -> list[dict]:
                      "truth": float(flight.coefficients.get(r["coefficient"], math.nan)),
                      "estimate": r["estimate"], "std_error": r["std_error"], "std_error_ols": r["std_error_ols"],
                      "crb_std": r["crb_std"], "crb_gyro_std": gyro.get(r["coefficient"], math.nan),
+                     "estimator_noise_std": own.get(r["coefficient"], math.nan),
                      "condition_number": r["condition_number"], "n_eff": r["n_eff"],
                      "n_obs": r["n_obs"], "band_hz": float(run.flight_data["band_hz"].median())})
     return rows
@@ -170,6 +224,9 @@ def summarise(df: pd.DataFrame) -> pd.DataFrame:
         if "crb_gyro_std" in g:
             cg = float(np.sqrt(np.mean(g["crb_gyro_std"].to_numpy(float) ** 2)))
             out[-1].update(crb_gyro_rms=cg, efficiency_gyro=sd / cg if cg > 0 else math.nan)
+        if "estimator_noise_std" in g and g["estimator_noise_std"].notna().any():
+            own = float(np.sqrt(np.mean(g["estimator_noise_std"].to_numpy(float) ** 2)))
+            out[-1].update(estimator_over_crb=own / crb if crb > 0 else math.nan)
     return pd.DataFrame(out)
 
 
@@ -184,17 +241,20 @@ def report(df: pd.DataFrame, head: str) -> str:
         lo, hi = chi2_band(n)
         failed = df[(df["vehicle"] == veh) & (df["failed"].fillna("") != "")]["seed"].nunique()
         gyro = "efficiency_gyro" in g and g["efficiency_gyro"].notna().any()
+        own = "estimator_over_crb" in g and g["estimator_over_crb"].notna().any()
         lines += [f"## {veh}: {n} runs ({failed} failed); a std ratio's 95 % sampling band {lo:.2f}..{hi:.2f}", "",
                   "| coefficient | truth | mean estimate | MC std | CRB | mean sigma | sigma OLS | std/CRB | "
-                  "std/sigma | sigma/CRB | bias/std | cond. | N_eff |" + (" std/CRB gyros only |" if gyro else ""),
-                  "|---|---|---|---|---|---|---|---|---|---|---|---|---|" + ("---|" if gyro else "")]
+                  "std/sigma | sigma/CRB | bias/std | cond. | N_eff |" + (" std/CRB gyros only |" if gyro else "")
+                  + (" estimator's own std/CRB |" if own else ""),
+                  "|---|---|---|---|---|---|---|---|---|---|---|---|---|" + ("---|" if gyro else "") + ("---|" if own else "")]
         for _, r in g.iterrows():
             name = f"**{r['coefficient']}**" if r["efficiency"] > INEFFICIENT else r["coefficient"]
             lines.append(f"| {name} | {r['truth']:.4g} | {r['mean_estimate']:.4g} | {r['mc_std']:.3g} | "
                          f"{r['crb_rms']:.3g} | {r['mean_sigma']:.3g} | {r['mean_sigma_ols']:.3g} | "
                          f"{r['efficiency']:.2f} | {r['honesty']:.2f} | {r['sigma_over_crb']:.2f} | "
                          f"{r['bias_over_std']:+.2f} | {r['condition_number']:.1f} | {r['n_eff']:.0f} |"
-                         + (f" {r['efficiency_gyro']:.2f} |" if gyro else ""))
+                         + (f" {r['efficiency_gyro']:.2f} |" if gyro else "")
+                         + (f" {r['estimator_over_crb']:.2f} |" if own else ""))
         lines.append("")
     return "\n".join(lines) + "\n"
 
@@ -216,8 +276,9 @@ def main() -> None:
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--report-only", action="store_true", help="rewrite efficiency.md from the CSV")
     ap.add_argument("--csv", default=None)
-    ap.add_argument("--variant", default="default", choices=("default", "exact-inputs"),
-                    help="exact-inputs: the regressors' noise sources x0.01 (see simulate_variant)")
+    ap.add_argument("--variant", default="default", choices=("default", "exact-inputs", "estimator"),
+                    help="exact-inputs: the regressors' noise sources x0.01 (see simulate_variant); estimator: "
+                         "default flights, plus the estimator's own noise std (estimator_noise_std)")
     args = ap.parse_args()
     global MD
     if args.variant != "default":
