@@ -4,6 +4,16 @@ whether the reported sigma tells their scatter.
     python bench/bench_efficiency.py [--seeds 0-29] [--vehicles seed-rlv,c172x] [--workers 2]
     python bench/bench_efficiency.py --report-only      # the tables again from the CSV
     -> bench/results/efficiency_runs.csv and bench/results/efficiency.md
+    python bench/bench_efficiency.py --variant exact-inputs --seeds 0-14   # regressors' noise x0.01
+    python bench/bench_efficiency.py --variant estimator --seeds 0-5       # + the estimator's own std
+    -> bench/results/efficiency_<variant>_runs.csv and efficiency_<variant>.md
+
+The variants take the default flights apart: ``exact-inputs`` scales the noise of every
+regressor's source by 0.01 (seed-rlv: the accelerometers alpha and beta are inverted from;
+c172x: vanes, surfaces, V) and keeps the gyros' (errors in variables removed, except the
+rates' own noise where they are regressors); ``estimator`` adds, per run, the std of the
+regression's estimates when only the sensors' white noise at the run's R goes through the
+band-limited equation-error estimator with exact regressors (``estimator_noise_std``).
 
 Each run: the flight of bench_generalisation.simulate (seed-rlv: aerosid's simulator with
 Table 2 noise; c172x: the JSBSim 3-2-1-1 flight with its shipped vehicle file), then
