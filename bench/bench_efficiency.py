@@ -152,13 +152,20 @@ def estimator_noise_std(run, vehicle, replicates: int = 200, seed: int = 0) -> d
     rng = np.random.default_rng(seed)
     est = {ch: [] for ch in designs}
     r_off = np.asarray(vehicle.accel_offset_m, float)
+    # the pipeline filters whole segments and drops their edges: the noise of a run here is
+    # filtered with PAD band periods of context on both sides, then cropped to the run
+    pad = int(np.ceil(2.0 * fs / band))
     for _ in range(replicates):
-        noise = rng.standard_normal(sigma.shape) * sigma
-        f = low_pass_runs(noise, fs, band, runs)
+        f = np.full(sigma.shape, np.nan)
         wdot = np.full((len(t), 3), np.nan)
         for r in runs:
-            if r.stop - r.start > 1:
-                wdot[r] = np.gradient(f[r, 3:], t[r], axis=0)
+            n = r.stop - r.start
+            if n < 2:
+                continue
+            sig = np.vstack([np.repeat(sigma[r][:1], pad, 0), sigma[r], np.repeat(sigma[r][-1:], pad, 0)])
+            x = low_pass_runs(rng.standard_normal(sig.shape) * sig, fs, band, [slice(0, n + 2 * pad)])
+            f[r] = x[pad:pad + n]
+            wdot[r] = np.gradient(x[:, 3:], 1.0 / fs, axis=0)[pad:pad + n]
         ang = wdot @ Binv.T
         acc = f[:, :3] - np.cross(wdot, r_off)
         coef = {"CN": acc[:, 2], "CY": acc[:, 1], "Cl": ang[:, 0], "Cm": ang[:, 1], "Cn": ang[:, 2]}
