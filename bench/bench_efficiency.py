@@ -5,13 +5,16 @@ whether the reported sigma tells their scatter.
     python bench/bench_efficiency.py --report-only      # the tables again from the CSV
     -> bench/results/efficiency_runs.csv and bench/results/efficiency.md
     python bench/bench_efficiency.py --variant exact-inputs --seeds 0-14   # regressors' noise x0.01
+    python bench/bench_efficiency.py --variant exact-inputs-no-faults --seeds 0-9  # and no dropouts/outliers
     python bench/bench_efficiency.py --variant estimator --seeds 0-5       # + the estimator's own std
     -> bench/results/efficiency_<variant>_runs.csv and efficiency_<variant>.md
 
 The variants take the default flights apart: ``exact-inputs`` scales the noise of every
 regressor's source by 0.01 (seed-rlv: the accelerometers alpha and beta are inverted from;
 c172x: vanes, surfaces, V) and keeps the gyros' (errors in variables removed, except the
-rates' own noise where they are regressors); ``estimator`` adds, per run, the std of the
+rates' own noise where they are regressors); ``exact-inputs-no-faults`` also leaves out the
+dropouts, outliers and sync gap (the samples used are then the same in every run, so model
+error cannot move the estimates from seed to seed); ``estimator`` adds, per run, the std of the
 regression's estimates when only the sensors' white noise at the run's R goes through the
 band-limited equation-error estimator with exact regressors (``estimator_noise_std``).
 
@@ -75,16 +78,18 @@ def simulate_variant(vehicle_name: str, seed: int, workdir: Path, variant: str):
     the estimator's own (equation error on the band-limited derivative)."""
     if variant in ("default", "estimator"):
         return simulate(vehicle_name, seed, workdir)
-    if variant != "exact-inputs":
+    if variant not in ("exact-inputs", "exact-inputs-no-faults"):
         raise ValueError(f"unknown variant {variant!r}")
     from dataclasses import replace
 
+    faults = variant == "exact-inputs"
     if vehicle_name == "seed-rlv":
         from aerosid.simulation import load_case, simulate as sim
 
         case = load_case("seed-rlv")
         sens = replace(case.sensors, accel_noise_m_s2=tuple(EXACT * v for v in case.sensors.accel_noise_m_s2))
-        return sim(replace(case, sensors=sens), seed=seed), case.vehicle
+        case = replace(case, sensors=sens, **({} if faults else {"faults": case.faults.without_faults()}))
+        return sim(case, seed=seed), case.vehicle
     if vehicle_name != "c172x":
         raise ValueError("the exact-inputs variant is defined for seed-rlv and c172x")
     import copy
@@ -103,7 +108,7 @@ def simulate_variant(vehicle_name: str, seed: int, workdir: Path, variant: str):
 
     jf.load_jsbsim_config = quiet
     try:
-        flight = jf.simulate_jsbsim("c172x", "3211", seed)
+        flight = jf.simulate_jsbsim("c172x", "3211", seed, faults=faults)
     finally:
         jf.load_jsbsim_config = original
     vehicle = load_vehicle("c172x")
@@ -293,7 +298,7 @@ def main() -> None:
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--report-only", action="store_true", help="rewrite efficiency.md from the CSV")
     ap.add_argument("--csv", default=None)
-    ap.add_argument("--variant", default="default", choices=("default", "exact-inputs", "estimator"),
+    ap.add_argument("--variant", default="default", choices=("default", "exact-inputs", "exact-inputs-no-faults", "estimator"),
                     help="exact-inputs: the regressors' noise sources x0.01 (see simulate_variant); estimator: "
                          "default flights, plus the estimator's own noise std (estimator_noise_std)")
     args = ap.parse_args()
@@ -317,7 +322,9 @@ def main() -> None:
                                                                                    float_format="%.8g")
             print(f"{len({(r['vehicle'], r['seed']) for r in rows})}/{len(jobs)} runs, "
                   f"{(time.perf_counter() - t0) / 60:.1f} min", flush=True)
-    what = "" if args.variant == "default" else f", variant {args.variant}: the regressors' noise x{EXACT}"
+    what = {"default": "", "exact-inputs": f", variant exact-inputs: the regressors' noise x{EXACT}",
+            "exact-inputs-no-faults": f", variant exact-inputs-no-faults: the regressors' noise x{EXACT}, no faults",
+            "estimator": ", variant estimator: default flights + the estimator's own noise std"}[args.variant]
     head = (f"# Efficiency of the estimates against the Cramér–Rao bound ({len(seeds)} seeds per vehicle{what})\n\n"
             f"{date.today()}, Python {platform.python_version()}, machine: {cpu_model()}, {os.cpu_count()} cores, "
             f"load average {load0} (start) / {loadavg()} (end); {args.workers} worker(s), wall time "
