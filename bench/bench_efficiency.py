@@ -224,7 +224,7 @@ def chi2_band(n: int) -> tuple[float, float]:
 
 
 def summarise(df: pd.DataFrame) -> pd.DataFrame:
-    ok = df[(df["failed"].fillna("") == "") & np.isfinite(df["estimate"].astype(float))]
+    ok = df[(df["failed"].astype(object).fillna("") == "") & np.isfinite(df["estimate"].astype(float))]
     out = []
     for (veh, ch, coef), g in ok.groupby(["vehicle", "channel", "coefficient"], sort=False):
         n = len(g)
@@ -261,7 +261,7 @@ def report(df: pd.DataFrame, head: str) -> str:
     for veh, g in s.groupby("vehicle", sort=False):
         n = int(g["n"].max())
         lo, hi = chi2_band(n)
-        failed = df[(df["vehicle"] == veh) & (df["failed"].fillna("") != "")]["seed"].nunique()
+        failed = df[(df["vehicle"] == veh) & (df["failed"].astype(object).fillna("") != "")]["seed"].nunique()
         gyro = "efficiency_gyro" in g and g["efficiency_gyro"].notna().any()
         own = "estimator_over_crb" in g and g["estimator_over_crb"].notna().any()
         lines += [f"## {veh}: {n} runs ({failed} failed); a std ratio's 95 % sampling band {lo:.2f}..{hi:.2f}", "",
