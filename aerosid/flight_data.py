@@ -16,6 +16,7 @@ from aerosid.derivatives import zero_phase_low_pass
 from aerosid.estimation.findings import DEPARTURE_MIN_S, DEPARTURE_SIGMA, Finding, dilate, span_findings
 from aerosid.identification.band import (accel_at_cg, band_limited_signals, band_noise_gain, bridge_spikes,
                                          finite_runs, low_pass_runs)
+from aerosid.identification.crb import R_COLUMNS
 from aerosid.inversion import invert_alpha_beta, total_angles
 from aerosid.vehicle import Vehicle
 
@@ -173,6 +174,7 @@ def build_flight_data(smoothed: pd.DataFrame, measured: pd.DataFrame, vehicle: V
         **rates,
         "band_hz": np.full(len(V), band_hz),
         "eiv_sigma_alpha_rad": eiv_a, "eiv_sigma_beta_rad": eiv_b,
+        **{c: s[c].to_numpy(float) for c in R_COLUMNS if c in s},  # the filter's R (Cramér-Rao bounds)
     })
     if not vanes and signals == "band" and edge.any():
         frame = frame.loc[~drop_rows].reset_index(drop=True)

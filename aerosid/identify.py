@@ -6,13 +6,15 @@ plain least squares) vs F, printed per degree as the seed does.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+import math
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 import pandas as pd
 
 from aerosid.aeromodel import AeroModel
 from aerosid.eiv import simex_estimates
+from aerosid.identification.crb import identification_bounds
 from aerosid.models import ChannelModel, default_models, signals_from_flight_data, vehicle_signals
 from aerosid.plausibility.estimates import preflight_departure
 from aerosid.regression import LinearFit, fit_linear, with_corrected_estimate
@@ -35,6 +37,8 @@ class Identification:
     identities: tuple[str, ...] = ()
     #: estimates beyond preflight x/÷ this factor are reported (vehicle [plausibility])
     preflight_factor: float = 3.0
+    #: coefficient -> Cramér-Rao bound on its std (aerosid.identification.crb), NaN where none
+    crb_std: dict = field(default_factory=dict)
 
     def table(self, alpha: float = 0.05) -> pd.DataFrame:
         """The coefficients.parquet rows.  A channel in ``identities`` is reported without
@@ -53,7 +57,9 @@ class Identification:
                 rows.append({
                     "channel": channel, "coefficient": rec["coefficient"],
                     "estimate": float(rec["estimate"]), "std_error": float(rec["std_error"]),
-                    "std_error_ols": float(rec["std_error_ols"]), "ci_low": float(rec["ci_low"]),
+                    "std_error_ols": float(rec["std_error_ols"]),
+                    "crb_std": float(self.crb_std.get(rec["coefficient"], np.nan)) if ident else np.nan,
+                    "ci_low": float(rec["ci_low"]),
                     "ci_high": float(rec["ci_high"]), "reference": float(self.references.get(rec["coefficient"], np.nan)),
                     "t_value": float(rec["t_value"]), "p_value": float(rec["p_value"]),
                     "identifiable": ident, "note": IDENTITY_NOTE if identity else "",
@@ -74,14 +80,16 @@ class Identification:
 
 def format_table(table: pd.DataFrame, per_degree: bool = False) -> str:
     """Seed Table 3 style text of a coefficients table: preflight vs estimate vs sigma
-    (corrected and plain OLS) vs F.  SI per radian for every coefficient (slopes and rate
+    (corrected and plain OLS) vs CRB vs F.  SI per radian for every coefficient (slopes and rate
     derivatives alike); per_degree: per degree instead (aerosid.coefficient_units), and
-    the header says which."""
+    the header says which.  CRB = Cramer-Rao bound on the std from the gyros' and
+    accelerometers' noise (aerosid.identification.crb)."""
     from aerosid.coefficient_units import per_degree_factor, unit_label, units_header
 
-    lines = [f"moments about the CG; {units_header(per_degree)}",
-             f"{'coefficient':<20}{'preflight':>12}{'estimate':>12}{'sigma':>11}{'sigma OLS':>11}{'95% interval':>26}"
-             "  unit"]
+    lines = [f"moments about the CG; {units_header(per_degree)}; CRB = Cramér-Rao bound on the std from the "
+             "gyros' and accelerometers' noise (aerosid.identification.crb)",
+             f"{'coefficient':<20}{'preflight':>12}{'estimate':>12}{'sigma':>11}{'sigma OLS':>11}{'CRB':>11}"
+             f"{'95% interval':>26}  unit"]
     for channel, rows in table.groupby("channel", sort=False):
         first = rows.iloc[0]
         lines.append(f"[{channel}]  F = {first['f_stat']:,.0f} (corrected {first['f_stat_corrected']:,.1f}), "
@@ -97,6 +105,7 @@ def format_table(table: pd.DataFrame, per_degree: bool = False) -> str:
                 continue
             lines.append(f"  {row['coefficient']:<18}{ref}{row['estimate'] * k:>12.5g}"
                          f"{row['std_error'] * k:>11.2g}{row['std_error_ols'] * k:>11.2g}"
+                         f"{row.get('crb_std', np.nan) * k:>11.2g}"
                          f"{'[' + format(row['ci_low'] * k, '.5g') + ', ' + format(row['ci_high'] * k, '.5g') + ']':>26}"
                          f"  {u}")
         for i, w in enumerate(w for w in first["warnings"].split(" | ") if w):
@@ -209,4 +218,6 @@ def identify(flight_data: pd.DataFrame, vehicle: Vehicle, models: dict[str, Chan
     refs = AeroModel.preflight(vehicle).linear_truth() if vehicle.preflight is not None else {}
     window = (float(fd["mach"].min()), float(fd["mach"].max()))
     identities = tuple(ch for ch in INVERSION_CHANNELS if ch in fits) if vehicle.air_data_source != "vanes" else ()
-    return Identification(fits, dict(models), refs, len(fd), window, identities, vehicle.envelope.preflight_factor)
+    crb = identification_bounds(fd, vehicle, models, fits, identities)
+    return Identification(fits, dict(models), refs, len(fd), window, identities, vehicle.envelope.preflight_factor,
+                          crb.std)

@@ -95,6 +95,8 @@ def smooth_segment_frame(rows: pd.DataFrame, vehicle: Vehicle, options: dict | N
     for j, col in enumerate(RATE_DERIVATIVE_COLUMNS):
         data[col] = angacc[:, j]
         data[f"sigma_{col}"] = angacc_sigma[:, j]
+    for name, sig in zip(res.meas_names, res.R_sigma):  # the R the filter used, for the Cramér-Rao bounds
+        data[f"R_sigma_{name}_{'m_s2' if name.startswith('a') else 'rad_s'}"] = np.full(len(t), float(sig))
     data["nis_filter"] = res.nis_filter
     data["nis_smoother"] = res.nis_smoother
     data["updated"] = res.used.any(axis=1)

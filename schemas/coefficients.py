@@ -8,6 +8,8 @@ cannot identify (no excitation) has NaN estimate and ``identifiable`` False.
 """
 from __future__ import annotations
 
+from typing import Optional
+
 import numpy as np
 import pandas as pd
 import pandera.pandas as pa
@@ -22,6 +24,9 @@ class Coefficients(pa.DataFrameModel):
     estimate: Series[float] = pa.Field(nullable=True, metadata={"unit": "per rad (or -)"})
     std_error: Series[float] = pa.Field(nullable=True, ge=0, metadata={"unit": "per rad", "description": "coloured-residual corrected"})
     std_error_ols: Series[float] = pa.Field(nullable=True, ge=0, metadata={"unit": "per rad"})
+    crb_std: Optional[Series[float]] = pa.Field(nullable=True, ge=0, metadata={
+        "unit": "per rad (or -), as estimate", "description": "Cramér-Rao lower bound on the std: output-error "
+        "information of the gyros and accelerometers under the run's R (aerosid.identification.crb)"})
     ci_low: Series[float] = pa.Field(nullable=True, metadata={"unit": "per rad", "description": "95 % interval from std_error"})
     ci_high: Series[float] = pa.Field(nullable=True, metadata={"unit": "per rad"})
     reference: Series[float] = pa.Field(nullable=True, metadata={"unit": "per rad", "description": "preflight value about the CG"})
