@@ -188,9 +188,11 @@ def test_coefficient_table_carries_the_bound():
     tab = ident.table()
     Coefficients.validate(tab)
     assert tab.set_index("coefficient")["crb_std"].to_dict() == {"Cm_0": 1e-4, "Cm_alpha": 2e-3}
-    text = format_table(tab)
+    text = format_table(tab)  # SI per radian by default
     line = next(x for x in text.splitlines() if x.strip().startswith("Cm_alpha"))
-    assert "CRB" in text and "3.5e-05" in line  # 2e-3 per rad, printed per degree
+    assert "CRB" in text and " 0.002 " in line
+    line = next(x for x in format_table(tab, per_degree=True).splitlines() if x.strip().startswith("Cm_alpha"))
+    assert "3.5e-05" in line  # 2e-3 per rad, printed per degree
     assert Coefficients.to_schema().columns["crb_std"].metadata["unit"].startswith("per rad")
     with pytest.raises(pandera.errors.SchemaError):
         Coefficients.validate(tab.assign(crb_std=-1.0))
