@@ -57,6 +57,8 @@ import scipy.stats
 from statsmodels.stats.diagnostic import acorr_ljungbox
 
 from aerosid.diagnosis.candidates import Candidate, default_candidates, derived_signals
+from aerosid.diagnosis.lookalikes import heldout_sse as _heldout_sse, scaled_lstsq as _scaled_lstsq
+from aerosid.diagnosis.lookalikes import windows_index as _windows_index
 from aerosid.expressions import evaluate
 from aerosid.identify import angle_cutoff_hz, mach_window_mask
 from aerosid.eiv import with_angle_noise
@@ -516,11 +518,6 @@ def _g(x: float, fmt: str) -> str:
 
 
 # --------------------------------------------------------------------------- helpers
-def _windows_index(n: int, n_windows: int) -> np.ndarray:
-    k = max(1, min(int(n_windows), n))
-    return np.minimum((np.arange(n) * k) // n, k - 1)
-
-
 def _rms(x: np.ndarray) -> float:
     return float(np.sqrt(np.mean(np.square(x)))) if x.size else float("nan")
 
@@ -596,27 +593,6 @@ def _whiteness(channel: str, resid: np.ndarray, fs: float, n_eff: float) -> Whit
 def _regressor_matrix(model: ChannelModel, signals: dict) -> np.ndarray:
     n = len(signals["alpha"])
     return np.column_stack([evaluate(t.expression, signals, n) for t in model.terms])
-
-
-def _scaled_lstsq(A: np.ndarray, y: np.ndarray) -> np.ndarray:
-    s = np.linalg.norm(A, axis=0)
-    s[s == 0] = 1.0
-    c, *_ = np.linalg.lstsq(A / s, y, rcond=None)
-    return c / s
-
-
-def _heldout_sse(A: np.ndarray, y: np.ndarray, win: np.ndarray) -> np.ndarray:
-    """Squared prediction error on each window of a fit made without it."""
-    out = np.zeros(int(win.max()) + 1)
-    for k in range(out.size):
-        test = win == k
-        if test.all() or not test.any():
-            out[k] = np.nan
-            continue
-        c = _scaled_lstsq(A[~test], y[~test])
-        e = y[test] - A[test] @ c
-        out[k] = float(e @ e)
-    return out
 
 
 def _already_in(model: ChannelModel, cand: Candidate) -> bool:

@@ -47,7 +47,7 @@ import scipy.stats
 from aerosid.regression import fit_linear
 
 __all__ = ["Alternative", "LookalikeComparison", "compare", "model_lookalikes", "separating_manoeuvre",
-           "heldout_sse", "resolve", "lookalike_message", "DELTA_MIN", "LOOKALIKE_WINDOWS", "MAX_ALTERNATIVES"]
+           "heldout_sse", "scaled_lstsq", "windows_index", "resolve", "lookalike_message", "DELTA_MIN", "LOOKALIKE_WINDOWS", "MAX_ALTERNATIVES"]
 
 DELTA_MIN = 2.0 * math.log(19.0)
 """Smallest Delta_ij = t_i|j^2 - t_j|i^2 to call i separated from j (Akaike weight >= 95 %)."""
@@ -65,7 +65,8 @@ _LEVEL_WORDS = {"alpha": "alpha", "beta": "beta", "mach": "Mach", "qbar": "dynam
                 "delta_y": "yaw-fin deflection", "delta_r": "roll-fin deflection"}
 
 
-def _scaled_lstsq(A: np.ndarray, y: np.ndarray) -> np.ndarray:
+def scaled_lstsq(A: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """Least squares with the columns scaled to unit norm (well conditioned for mixed units)."""
     s = np.linalg.norm(A, axis=0)
     s[s == 0] = 1.0
     c, *_ = np.linalg.lstsq(A / s, y, rcond=None)
@@ -81,7 +82,7 @@ def heldout_sse(A: np.ndarray, y: np.ndarray, win: np.ndarray) -> np.ndarray:
         if test.all() or not test.any():
             out[k] = np.nan
             continue
-        c = _scaled_lstsq(A[~test], y[~test])
+        c = scaled_lstsq(A[~test], y[~test])
         e = y[test] - A[test] @ c
         out[k] = float(e @ e)
     return out
@@ -250,7 +251,7 @@ def compare(channel: str, y: np.ndarray, base_X: np.ndarray, base_names: Sequenc
     names = [c.name for c in alternatives]
     coefs = [f"{c.coefficient}__{i}" for i, c in enumerate(alternatives)]
     joint = fit_linear(y, np.column_stack([A, *X]), names=list(base_names) + coefs, channel=channel, cov=cov)
-    perps = [x - A @ _scaled_lstsq(A, x) for x in X]
+    perps = [x - A @ scaled_lstsq(A, x) for x in X]
     corr, delta, better = {}, {}, {}
     sse = [heldout_sse(np.column_stack([A, x]), y, win) for x in X]
     for i in range(k):
@@ -273,8 +274,8 @@ def compare(channel: str, y: np.ndarray, base_X: np.ndarray, base_names: Sequenc
                  else float("nan") for m, n in enumerate(base_names)}
         others = [X[j] for j in range(k) if j != i]
         R = np.column_stack([A, *others]) if others else A
-        px = X[i] - R @ _scaled_lstsq(R, X[i])
-        py = y - R @ _scaled_lstsq(R, y)
+        px = X[i] - R @ scaled_lstsq(R, X[i])
+        py = y - R @ scaled_lstsq(R, y)
         tot = sse[i][np.isfinite(sse[i])]
         alts.append(Alternative(
             c.name, c.coefficient, c.term, getattr(c, "spec_term", None), c.name == in_model,
@@ -361,7 +362,7 @@ def model_lookalikes(channel: str, y: np.ndarray, model, signals: dict, candidat
         keep = [i for i in range(Am.shape[1]) if i != m]
         A = Am[:, keep]
         x_in = Am[:, m]
-        p_in = x_in - A @ _scaled_lstsq(A, x_in)
+        p_in = x_in - A @ scaled_lstsq(A, x_in)
         alts, regs = [cand], [x_in]
         for c in by_name.values():
             if c.name == cand.name or c.alias_of == cand.name or cand.alias_of == c.name or any(tt.effect == c.name or norm(tt.expression) == norm(c.term)
@@ -370,7 +371,7 @@ def model_lookalikes(channel: str, y: np.ndarray, model, signals: dict, candidat
             x = np.asarray(c.regressor(signals), float)
             if x.shape != y.shape or not np.all(np.isfinite(x)):
                 continue
-            p = x - A @ _scaled_lstsq(A, x)
+            p = x - A @ scaled_lstsq(A, x)
             den = float(np.linalg.norm(p) * np.linalg.norm(p_in))
             if den > 0 and abs(float(p @ p_in)) / den >= confusion_r:
                 alts.append(c)
