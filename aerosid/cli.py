@@ -16,6 +16,7 @@ Examples:
   aerosid simulate --list-effects
   aerosid simulate --case seed-rlv --seed 3 --out runs/flight3
   aerosid simulate --effect pitch_damping --effect mach_cm_alpha=0.5 --out runs/hidden
+  aerosid simulate --hidden pitch_control_lag --out runs/lag   # not a catalogue effect (localisation)
   aerosid simulate --duration 600 --rate 100 --out runs/long
 """
 
@@ -66,6 +67,9 @@ def main() -> None:
 @click.option("--effect", "effects", multiple=True, metavar="NAME[=SCALE]",
               help="Hide a catalogue effect in the flight aerodynamics (repeatable); SCALE multiplies "
                    "its physical default size. See --list-effects.")
+@click.option("--hidden", "hidden", multiple=True, metavar="NAME[=SCALE]",
+              help="Hide an effect that is NOT in the diagnosis catalogue (repeatable; for testing the "
+                   "diagnosis' localisation): see the second section of --list-effects.")
 @click.option("--seed", default=0, show_default=True, type=int, help="Random seed for noise and faults.")
 @click.option("--out", "out_dir", type=click.Path(file_okay=False, path_type=Path),
               help="Output folder for telemetry.parquet, truth.parquet and truth.json.")
@@ -79,7 +83,7 @@ def main() -> None:
                    "design and DIR/vehicle.toml generated). Needs the extra: pip install 'aerosid[jsbsim]'.")
 @click.option("--manoeuvre", default="3211", show_default=True,
               help="JSBSim input sequence: 3211 = elevator 3-2-1-1, then aileron and rudder doublets.")
-def simulate(case_name, effects, seed, out_dir, duration, rate, no_faults, list_effects, jsbsim_aircraft,
+def simulate(case_name, effects, hidden, seed, out_dir, duration, rate, no_faults, list_effects, jsbsim_aircraft,
              manoeuvre):
     """Simulate a flight whose truth is known and write its telemetry.
 
@@ -90,16 +94,20 @@ def simulate(case_name, effects, seed, out_dir, duration, rate, no_faults, list_
     """
     from aerosid.effects import catalogue_table, parse_effect_spec
 
+    from aerosid.simulation.hidden import hidden_table, parse_hidden_spec
+
     if list_effects:
         click.echo(catalogue_table())
+        click.echo(hidden_table())
         return
     if out_dir is None:
         raise click.UsageError("--out DIR is required (or use --list-effects)")
     from dataclasses import replace
 
     if jsbsim_aircraft is not None:
-        if effects or duration is not None or rate is not None:
-            raise click.UsageError("--effect, --duration and --rate apply to the built-in simulator, not --jsbsim")
+        if effects or hidden or duration is not None or rate is not None:
+            raise click.UsageError("--effect, --hidden, --duration and --rate apply to the built-in simulator, "
+                                   "not --jsbsim")
         from aerosid.simulation.jsbsim_flight import JSBSimUnavailable, simulate_jsbsim
 
         try:
@@ -118,6 +126,7 @@ def simulate(case_name, effects, seed, out_dir, duration, rate, no_faults, list_
 
     try:
         parsed = tuple(parse_effect_spec(e) for e in effects)
+        parsed_hidden = tuple(parse_hidden_spec(h) for h in hidden)
         overrides = {}
         if duration is not None:
             overrides["duration_s"] = duration
@@ -128,7 +137,7 @@ def simulate(case_name, effects, seed, out_dir, duration, rate, no_faults, list_
             case = replace(case, faults=case.faults.without_faults())
     except (KeyError, ValueError) as exc:
         raise click.BadParameter(str(exc.args[0] if exc.args else exc)) from exc
-    flight = run_simulation(case, parsed, seed=seed)
+    flight = run_simulation(case, parsed, seed=seed, hidden=parsed_hidden)
     paths = flight.write(out_dir)
     click.echo(flight.summary())
     for kind, path in paths.items():

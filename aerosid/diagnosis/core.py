@@ -306,6 +306,8 @@ class Diagnosis:
     n_samples: int
     mach_window: tuple[float, float]
     n_windows: int
+    #: channel -> localisation findings (aerosid.diagnosis.localise), best first
+    localisation: dict = field(default_factory=dict)
 
     @property
     def significant(self) -> tuple[EffectEvidence, ...]:
@@ -405,6 +407,7 @@ class Diagnosis:
             "regimes": regimes,
             "time_windows": windows,
             "whiteness": {ch: rep.whiteness.to_dict() for ch, rep in self.channels.items()},
+            "localisation": {ch: [f.to_dict() for f in fs] for ch, fs in self.localisation.items()},
             "channels": {ch: {"terms": list(self.models[ch].names), "rms_residual": _f(rep.fit.rms_residual),
                               "r2": _f(rep.fit.r2), "pse": _f(rep.fit.pse), "f_stat": _f(rep.fit.f_stat),
                               "f_stat_corrected": _f(rep.fit.f_stat_corrected), "n_eff": _f(rep.fit.n_eff),
@@ -446,6 +449,10 @@ class Diagnosis:
                          f"{_g(100 * e.rms_drop_fraction, '8.1f')}%  {note[:70]}")
         if len(self.effects) > max_effects:
             lines.append(f"  ... {len(self.effects) - max_effects} more")
+        if self.localisation:
+            from aerosid.diagnosis.localise import localisation_text
+
+            lines += ["", localisation_text(self.localisation)]
         lines += ["", f"Rule: {RULE_TEXT}.", "", self.message]
         return "\n".join(lines)
 
@@ -587,7 +594,7 @@ def _already_in(model: ChannelModel, cand: Candidate) -> bool:
 def diagnose(flight_data: pd.DataFrame, vehicle, models: dict[str, ChannelModel] | None = None, *,
              mach_half_width: float | None = 0.5, n_windows: int = 8,
              candidates: Sequence[Candidate] | None = None, cov: str = "morelli_klein",
-             angle_sigma_rad: float | None = None) -> Diagnosis:
+             angle_sigma_rad: float | None = None, localisation: bool = True) -> Diagnosis:
     """Diagnose `models` (default: the method.md §11 models) against the flight data.
 
     flight_data: a FlightData frame (schemas/flight_data.py); the samples with
@@ -598,6 +605,8 @@ def diagnose(flight_data: pd.DataFrame, vehicle, models: dict[str, ChannelModel]
     errors-in-variables (SIMEX) check.  Default: median(sigma_CN) / |CN_alpha|
     (alpha and beta come from inverting the force database, so a C_N error maps
     to an angle error through the normal-force slope); 0 switches the check off.
+    localisation: also localise where each channel's model fails, as suggested terms
+    (:mod:`aerosid.diagnosis.localise`; the ``localisation`` field).
     """
     models = dict(models or default_models(vehicle))
     if candidates is None:
@@ -721,7 +730,13 @@ def diagnose(flight_data: pd.DataFrame, vehicle, models: dict[str, ChannelModel]
 
     ranked = sorted(evidence, key=lambda e: (not e.significant, not e.identifiable, -e.score))
     window = (float(fd["mach"].min()), float(fd["mach"].max()))
-    return Diagnosis(tuple(ranked), reports, models, n, window, int(win.max()) + 1)
+    loc = {}
+    if localisation:
+        from aerosid.diagnosis.localise import localise
+
+        loc = localise(signals, {ch: fd[ch].to_numpy(float) for ch in models}, models, t, groups, win,
+                       vehicle.mach_reference, float(angle_sigma_rad))
+    return Diagnosis(tuple(ranked), reports, models, n, window, int(win.max()) + 1, loc)
 
 
 def _simex_signals(fd: pd.DataFrame, vehicle, groups: np.ndarray, sigma: float) -> dict:

@@ -66,9 +66,9 @@ HIDDEN: dict[str, HiddenEffect] = {
             name="alpha_cubic", channel="Cm", kind="shape", coefficient="Cm_alpha3", term="alpha**3",
             description="cubic static stability: the pitching moment bends as alpha^3 (vortex lift on the "
                         "body's lee side growing faster than alpha|alpha| at the larger angles)",
-            sizing="-3.5 alpha^3: at 6 deg (0.105 rad) 15 % of the linear Cm_alpha alpha term there, "
-                   "about 20 % of the Cm variation on seed-rlv",
-            value=-3.5,
+            sizing="-4.8 alpha^3: at 6 deg (0.105 rad) 21 % of the linear Cm_alpha alpha term there; "
+                   "about 25 % of the Cm variation on seed-rlv (the catalogue's alpha_nonlinearity: 26 %)",
+            value=-4.8,
         ),
         HiddenEffect(
             name="pitch_control_lag", channel="Cm", kind="lag", coefficient="Cm_delta_p_dot",
