@@ -54,8 +54,8 @@ LAG_SCAN_S = 0.2
 IDENTITY_RATIO = 1e-3
 #: Findings kept per channel: every significant one, and the strongest non-significant ones up to this.
 MAX_PER_CHANNEL = 3
-#: A shape in a measured angle whose error variance is above this share of its variance is
-#: not called significant: errors in the variable bend its partial residual (errors in variables).
+#: A shape whose column gets more than this share of its variance from the recovered angles'
+#: own errors is not called significant: errors in the variable bend its partial residual.
 MAX_ERROR_VARIANCE_SHARE = 0.05
 CONTROLS = ("delta_p", "delta_y", "delta_r")
 SLOW = ("mach", "qbar", "t")  # the flight-condition variables
@@ -234,7 +234,33 @@ def _binned_partial(x: np.ndarray, pr: np.ndarray, bins: int = 8) -> dict:
     return {"partial_residual_x": cx, "partial_residual_mean": cy}
 
 
-def _shape_findings(c: _Channel, mach_ref: float, error_var: dict) -> list[Finding]:
+def _error_share(expr: str, signals: dict, perturbed: dict | None) -> float:
+    """Share of a column's variance that one draw of the angles' own error makes
+    (var(column(perturbed angles) - column) / var(column)); 0 without angle errors."""
+    if perturbed is None:
+        return 0.0
+    x = evaluate(expr, signals, len(signals["alpha"]))
+    xp = evaluate(expr, perturbed, len(signals["alpha"]))
+    v = float(np.var(x))
+    return float(np.var(xp - x) / v) if v > 0 else 0.0
+
+
+def _perturbed(signals: dict, sigma: float) -> dict | None:
+    """The signals with white errors of sigma [rad] added to alpha and beta (alpha_r, phi_r
+    recomputed), a fixed draw: the errors-in-variables guard of the shapes."""
+    if not sigma > 0:
+        return None
+    from aerosid.inversion import total_angles
+
+    rng = np.random.default_rng(20240613)
+    out = dict(signals)
+    out["alpha"] = signals["alpha"] + sigma * rng.standard_normal(len(signals["alpha"]))
+    out["beta"] = signals["beta"] + sigma * rng.standard_normal(len(signals["beta"]))
+    out["alpha_r"], out["phi_r"] = total_angles(out["alpha"], out["beta"])
+    return out
+
+
+def _shape_findings(c: _Channel, mach_ref: float, perturbed: dict | None) -> list[Finding]:
     out = []
     model_vars = sorted(set().union(*(signal_names(t.expression, c.signals) for t in c.model.terms)) - {"t"})
     for var in [v for v in model_vars if v in c.signals] + [v for v in SLOW if v not in model_vars]:
@@ -250,10 +276,10 @@ def _shape_findings(c: _Channel, mach_ref: float, error_var: dict) -> list[Findi
             continue
         suffix, expr, r = max(tried, key=lambda s: abs(s[2]["t_value"]))
         reasons = _rule(r)
-        share = error_var.get(var, 0.0) / float(np.var(x)) if var in error_var else 0.0
+        share = _error_share(expr, c.signals, perturbed)
         if share > MAX_ERROR_VARIANCE_SHARE:
-            reasons.append(f"errors in {var} ({share:.0%} of its variance) bend its partial residual by "
-                           "themselves (errors in variables)")
+            reasons.append(f"the errors of the recovered angles make {share:.0%} of the variance of {expr}: "
+                           "they bend its partial residual by themselves (errors in variables)")
         # partial residual: residual + the model's own part in this variable
         own = np.zeros(c.n)
         for i, t in enumerate(c.model.terms):
@@ -435,11 +461,10 @@ def localise(signals: dict, y_by_channel: dict, models: dict, t: np.ndarray, gro
     signals: the model signals on the diagnosed samples (the diagnosis' own);
     y_by_channel: measured coefficient per channel; win: time-window index per sample;
     angle_sigma_rad: 1-sigma error of the recovered angles (for the errors-in-variables
-    guard of shapes in alpha, beta, alpha_r)."""
+    guard of the shapes: a shape the angle errors make by themselves is not significant)."""
     from aerosid.diagnosis.core import CONFUSION_R
 
-    s2 = float(angle_sigma_rad) ** 2
-    error_var = {"alpha": s2, "beta": s2, "alpha_r": s2} if s2 > 0 else {}
+    perturbed = _perturbed(signals, float(angle_sigma_rad))
     result: dict[str, tuple[Finding, ...]] = {}
     for ch, model in models.items():
         y = np.asarray(y_by_channel[ch], float)
@@ -447,7 +472,7 @@ def localise(signals: dict, y_by_channel: dict, models: dict, t: np.ndarray, gro
         if not (np.std(y) > 0) or float(np.std(c.resid)) < IDENTITY_RATIO * float(np.std(y)):
             result[ch] = ()  # an identity by construction (the angles were inverted from this channel)
             continue
-        found = _shape_findings(c, mach_reference, error_var) + _trend_findings(c, mach_reference, t) + \
+        found = _shape_findings(c, mach_reference, perturbed) + _trend_findings(c, mach_reference, t) + \
             _lag_findings(c, t, groups)
         found = _confusions(found, CONFUSION_R)
         found.sort(key=lambda f: (not f.significant, -f.score))
