@@ -77,7 +77,7 @@ def _named(name: str, findings: list[dict]) -> dict | None:
         if name == "pitch_control_lag" and f["kind"] == "lag" and f["variable"] == "delta_p":
             return f
         if name == "cm_alpha_drift" and f["kind"] == "trend" and f.get("coefficient") == "Cm_alpha" and (
-                f["variable"] == "t" or "t" in f.get("confused_with", ())):
+                f["variable"] == "t" or "trend:Cm_alpha:t" in f.get("confused_with", ())):
             return f
     return None
 

@@ -93,6 +93,8 @@ class Finding:
     reasons: tuple[str, ...] = ()  # why not significant
     #: the added column minus what the model's terms explain of it (for the confusability check)
     perp: np.ndarray | None = field(default=None, repr=False, compare=False)
+    #: the added column itself (for the shadow check)
+    column: np.ndarray | None = field(default=None, repr=False, compare=False)
 
     @property
     def id(self) -> str:
@@ -177,31 +179,42 @@ class _Channel:
         self.rss_b = float(self.resid @ self.resid)
         self.sse_b = _heldout_sse(self.Ab, y, win)
 
-    def test(self, name: str, x: np.ndarray) -> dict | None:
-        """Base + column x: the catalogue's evidence for the added column (None if untestable)."""
+    def test(self, name: str, x: np.ndarray, given: tuple = ()) -> dict | None:
+        """Base (+ the `given` columns) + column x: the catalogue's evidence for the added
+        column (None if untestable).  given: ((name, column), ...) already in the model."""
         x = np.asarray(x, float)
         if x.shape != self.y.shape or not np.all(np.isfinite(x)) or np.ptp(x) <= 0:
             return None
-        Xa = self.Xb.copy()
+        Xb = self.Xb.copy()
+        for k, (gname, gcol) in enumerate(given):
+            Xb[f"__given{k}"] = gcol
+        Xa = Xb.copy()
         col = name if name not in self.model.names else f"{name}__loc"
         Xa[col] = x
         try:
-            fa = fit_linear(self.y, Xa, names=list(self.model.names) + [col], channel=self.ch, cov="morelli_klein")
+            fa = fit_linear(self.y, Xa, names=[str(n) for n in Xb.columns] + [col], channel=self.ch,
+                            cov="morelli_klein")
         except ValueError:
             return None
-        j = len(self.model.names)
+        j = Xb.shape[1]
         if not fa.identifiable[j]:
             return None
         rss_a = float(np.asarray(fa.residuals) @ np.asarray(fa.residuals))
-        d = self.sse_b - self._heldout(Xa.to_numpy(float), self.y, self.win)
+        if given:
+            Ab = Xb.to_numpy(float)
+            e = self.y - Ab @ self._lstsq(Ab, self.y)
+            rss_b, sse_b = float(e @ e), self._heldout(Ab, self.y, self.win)
+        else:
+            Ab, rss_b, sse_b = self.Ab, self.rss_b, self.sse_b
+        d = sse_b - self._heldout(Xa.to_numpy(float), self.y, self.win)
         d = d[np.isfinite(d)]
         tot = float(np.sum(np.abs(d)))
-        perp = x - self.Ab @ self._lstsq(self.Ab, x)
+        perp = x - Ab @ self._lstsq(Ab, x)
         return dict(fit=fa, j=j, estimate=float(fa.estimate[j]), std_error=float(fa.std_error[j]),
                     t_value=float(fa.t_values[j]), p_value=float(fa.p_values[j]), n_eff=float(fa.n_eff),
-                    variance_share=1.0 - rss_a / self.rss_b if self.rss_b > 0 else 0.0,
+                    variance_share=1.0 - rss_a / rss_b if rss_b > 0 else 0.0,
                     window_consistency=float(np.sum(np.clip(d, 0, None)) / tot) if tot > 0 else 0.0,
-                    perp=perp)
+                    perp=perp, column=x)
 
 
 def _rule(r: dict) -> list[str]:
@@ -293,7 +306,7 @@ def _shape_findings(c: _Channel, mach_ref: float, perturbed: dict | None) -> lis
                            r["t_value"], r["p_value"], r["variance_share"], r["window_consistency"], r["n_eff"], msg,
                            evidence={"shapes_t": others, "error_variance_share": share,
                                      **_binned_partial(x, c.resid + own)},
-                           reasons=tuple(reasons), perp=r["perp"]))
+                           reasons=tuple(reasons), perp=r["perp"], column=r["column"]))
     return out
 
 
@@ -343,7 +356,7 @@ def _trend_findings(c: _Channel, mach_ref: float, t: np.ndarray) -> list[Finding
         out.append(Finding(c.ch, "trend", var, not reasons, f"{term.coefficient}_{var}", expr, r["estimate"],
                            r["std_error"], r["t_value"], r["p_value"], r["variance_share"], r["window_consistency"],
                            r["n_eff"], msg, coefficient=term.coefficient, evidence=ev, reasons=tuple(reasons),
-                           confused_with=alike, perp=r["perp"]))
+                           confused_with=alike, perp=r["perp"], column=r["column"]))
     return out
 
 
@@ -408,7 +421,7 @@ def _lag_findings(c: _Channel, t: np.ndarray, groups: np.ndarray) -> list[Findin
                            r["std_error"], r["t_value"], r["p_value"], r["variance_share"], r["window_consistency"],
                            r["n_eff"], msg, coefficient=term.coefficient,
                            evidence={"lag_s": tau, "lag_std_s": tau_se, **scan}, reasons=tuple(reasons),
-                           perp=r["perp"]))
+                           perp=r["perp"], column=r["column"]))
     return out
 
 
@@ -452,6 +465,40 @@ def _confusions(findings: list[Finding], r_min: float) -> list[Finding]:
     return out
 
 
+def _shadows(c: _Channel, findings: list[Finding]) -> list[Finding]:
+    """Significant findings tested given each other: A is a shadow of B when A fails the rule
+    with B in the model while B still passes with A in it (A is then not significant, and says
+    which finding explains it).  Two that explain each other stay, each listing the other."""
+    from dataclasses import replace
+
+    sig = [f for f in findings if f.significant and f.column is not None]
+    if len(sig) < 2:
+        return findings
+    passes: dict[tuple[int, int], tuple[bool, dict | None]] = {}
+    for a in range(len(sig)):
+        for b in range(len(sig)):
+            if a != b:
+                r = c.test(sig[a].suggested_coefficient, sig[a].column,
+                           given=((sig[b].suggested_coefficient, sig[b].column),))
+                passes[a, b] = (r is not None and not _rule(r), r)
+    out = {id(f): f for f in findings}
+    for a in range(len(sig)):
+        for b in range(len(sig)):
+            if a == b or passes[a, b][0]:
+                continue
+            f = out[id(sig[a])]
+            r = passes[a, b][1]
+            given = (f"t = {r['t_value']:.3g}, p = {r['p_value']:.2g}, consistency {r['window_consistency']:.0%}"
+                     if r else "not identifiable")
+            if passes[b, a][0]:  # a shadow of b
+                out[id(sig[a])] = replace(f, significant=False, reasons=(
+                    f"a shadow of {sig[b].id} ({sig[b].suggested_expression}): with it in the model, {given}",)
+                    + f.reasons, evidence={**f.evidence, "shadow_of": sig[b].id})
+            elif sig[b].id not in f.confused_with:  # they explain each other
+                out[id(sig[a])] = replace(f, confused_with=f.confused_with + (sig[b].id,))
+    return [out[id(f)] for f in findings]
+
+
 # --------------------------------------------------------------------------- entry point
 def localise(signals: dict, y_by_channel: dict, models: dict, t: np.ndarray, groups: np.ndarray, win: np.ndarray,
              mach_reference: float, angle_sigma_rad: float = 0.0) -> dict[str, tuple[Finding, ...]]:
@@ -475,6 +522,7 @@ def localise(signals: dict, y_by_channel: dict, models: dict, t: np.ndarray, gro
         found = _shape_findings(c, mach_reference, perturbed) + _trend_findings(c, mach_reference, t) + \
             _lag_findings(c, t, groups)
         found = _confusions(found, CONFUSION_R)
+        found = _shadows(c, found)
         found.sort(key=lambda f: (not f.significant, -f.score))
         sig = [f for f in found if f.significant]
         result[ch] = tuple(sig + [f for f in found if not f.significant][: max(0, MAX_PER_CHANNEL - len(sig))])
