@@ -113,7 +113,9 @@ def analyse(name: str, seed: int, cache: str) -> dict:
     chan = loc.get(ch, [])
     hit = _named(name, [f for f in chan if f["significant"]])
     first = chan[0] if chan else None
+    top = _named(name, chan[:1])  # the channel's strongest finding names it, significant or not
     row.update(channel=ch, named=hit is not None, named_first=bool(hit is not None and first is hit),
+               named_strongest_any=top is not None,
                first_finding=(f"{first['kind']}:{first['variable']}" if first else ""),
                suggested=hit["suggested_expression"] if hit else "", p_value=hit["p_value"] if hit else np.nan,
                message=hit["message"] if hit else "")
@@ -134,7 +136,7 @@ def analyse(name: str, seed: int, cache: str) -> dict:
     use = hit or first
     if use is not None:
         aug = dict(models)
-        aug[ch] = models[ch].with_term(parse_term(f"{use['suggested_coefficient']} = {use['suggested_expression']}", ch))
+        aug[ch] = models[ch].with_term(parse_term(use["spec_line"], ch))
         variants["after"] = aug
     true_term = dict(models)
     true_term[ch] = models[ch].with_term(parse_term(f"{h['coefficient']} = {h['term']}", ch))
@@ -176,10 +178,13 @@ def _report(df: pd.DataFrame, seeds: list[int], wall_s: float) -> str:
              "Mach/qbar when the finding lists t as indistinguishable). `model error` = RMS(model on the true "
              "signals - true coefficient) over |M - 12.4| <= 0.5, default model -> default + the suggested "
              "expression; `true term` = default + the effect's own first-order term, for comparison.", "",
-             "| effect | size (std ratio) | named | named first | suggested (most frequent) | corrected p (median) "
+             "`named first`: that finding is the channel's first; `strongest names it`: the channel's strongest "
+             "finding names it, significant or not (the hint an engineer gets when the rule is not passed).", "",
+             "| effect | size (std ratio) | named | named first | strongest names it | suggested (most frequent) "
+             "| corrected p (median over named runs) "
              "| model error before -> after (drop mean, min) | with the true term (drop) | floor | catalogue: "
              "something significant |",
-             "|---|---|---|---|---|---|---|---|---|---|"]
+             "|---|---|---|---|---|---|---|---|---|---|---|"]
     eff = df[df["effect"] != "none"]
     for name, g in eff.groupby("effect", sort=False):
         sug = g.loc[g["suggested"].astype(str) != "", "suggested"]
@@ -187,14 +192,16 @@ def _report(df: pd.DataFrame, seeds: list[int], wall_s: float) -> str:
         after = g["model_err_drop"].dropna() if "model_err_drop" in g else pd.Series(dtype=float)
         lines.append(
             f"| {name} | {g['size_ratio'].mean():.1%} | {int(g['named'].sum())}/{len(g)} "
-            f"| {int(g['named_first'].sum())}/{len(g)} | {sug_txt} | {g['p_value'].median():.2g} "
+            f"| {int(g['named_first'].sum())}/{len(g)} | {int(g['named_strongest_any'].sum())}/{len(g)} "
+            f"| {sug_txt} | {g['p_value'].median():.2g} "
             f"| {g['model_err_before'].mean():.2e} -> {g['model_err_after'].mean():.2e} "
             f"({after.mean():.0%}, min {after.min():.0%}) "
             f"| {g['model_err_true_term'].mean():.2e} ({g['model_err_drop_true_term'].mean():.0%}) "
             f"| {g['floor'].mean():.2e} | {int(g['catalogue_significant'].sum())}/{len(g)} |")
     lag = eff[eff["effect"] == "pitch_control_lag"]
     if "lag_ms" in lag and lag["lag_ms"].notna().any():
-        lines += ["", f"Lag estimates (truth 40 ms): derivative fit {lag['lag_ms'].mean():.1f} ± {lag['lag_ms'].std():.1f} ms, "
+        lines += ["", f"Lag estimates (truth 40 ms): derivative fit {lag['lag_ms'].mean():.1f} ± "
+                      f"{lag['lag_ms'].std():.1f} ms, "
                       f"shift scan {lag['lag_scan_ms'].mean():.1f} ± {lag['lag_scan_ms'].std():.1f} ms."]
     dr = eff[eff["effect"] == "cm_alpha_drift"]
     if "drift_pct_per_min" in dr and dr["drift_pct_per_min"].notna().any():

@@ -346,7 +346,9 @@ class Diagnosis:
     @property
     def message(self) -> str:
         sig = self.significant
-        where = self._where_text()
+        from aerosid.diagnosis.localise import localisation_hint
+
+        where = self._where_text() + localisation_hint(self.localisation)
         if sig:
             e = sig[0]
             add = (f"add `{e.spec_term}` to [{e.channel}] in the model spec, fit again "

@@ -37,16 +37,17 @@ from __future__ import annotations
 
 import math
 import re
-from dataclasses import dataclass, field
 
 import numpy as np
 import pandas as pd
 import scipy.stats
 
+from aerosid.diagnosis.finding import Finding, localisation_hint, localisation_text
 from aerosid.expressions import evaluate, signal_names
 from aerosid.regression import fit_linear
 
-__all__ = ["Finding", "localise", "localisation_text", "LAG_SCAN_S", "IDENTITY_RATIO", "MAX_PER_CHANNEL"]
+__all__ = ["Finding", "localise", "localisation_text", "localisation_hint", "LAG_SCAN_S", "IDENTITY_RATIO",
+           "MAX_PER_CHANNEL"]
 
 #: Shift range of the lag scan [s].
 LAG_SCAN_S = 0.2
@@ -60,65 +61,6 @@ MAX_ERROR_VARIANCE_SHARE = 0.05
 CONTROLS = ("delta_p", "delta_y", "delta_r")
 SLOW = ("mach", "qbar", "t")  # the flight-condition variables
 _UNITS = {"mach": "-", "qbar": "Pa", "t": "s"}
-
-
-def _f(x) -> float | None:
-    if x is None:
-        return None
-    x = float(x)
-    return x if math.isfinite(x) else None
-
-
-@dataclass(frozen=True)
-class Finding:
-    """One localisation finding: ``channel += coefficient * suggested_expression``."""
-
-    channel: str
-    kind: str  # "shape", "trend" or "lag"
-    variable: str  # the signal it is about (alpha, delta_p, t, mach, ...)
-    significant: bool
-    suggested_coefficient: str
-    suggested_expression: str
-    estimate: float
-    std_error: float
-    t_value: float
-    p_value: float
-    variance_share: float
-    window_consistency: float
-    n_eff: float
-    message: str
-    coefficient: str | None = None  # the model coefficient a trend or lag is about (Cm_alpha, Cm_delta_p)
-    evidence: dict = field(default_factory=dict)
-    confused_with: tuple[str, ...] = ()  # ids (kind:coefficient-or-channel:variable) it cannot be told from
-    reasons: tuple[str, ...] = ()  # why not significant
-    #: the added column minus what the model's terms explain of it (for the confusability check)
-    perp: np.ndarray | None = field(default=None, repr=False, compare=False)
-    #: the added column itself (for the shadow check)
-    column: np.ndarray | None = field(default=None, repr=False, compare=False)
-
-    @property
-    def id(self) -> str:
-        return f"{self.kind}:{self.coefficient or self.channel}:{self.variable}"
-
-    @property
-    def spec_line(self) -> str:
-        return f"{self.suggested_coefficient} = {self.suggested_expression}"
-
-    @property
-    def score(self) -> float:
-        return float(self.t_value ** 2) if math.isfinite(self.t_value) else -1.0
-
-    def to_dict(self) -> dict:
-        ev = {k: (_f(v) if isinstance(v, (int, float, np.floating)) else v) for k, v in self.evidence.items()}
-        return {"id": self.id, "channel": self.channel, "kind": self.kind, "variable": self.variable,
-                "coefficient": self.coefficient, "significant": bool(self.significant),
-                "suggested_coefficient": self.suggested_coefficient,
-                "suggested_expression": self.suggested_expression, "spec_line": self.spec_line,
-                "estimate": _f(self.estimate), "std_error": _f(self.std_error), "t_value": _f(self.t_value),
-                "p_value": _f(self.p_value), "variance_share": _f(self.variance_share),
-                "window_consistency": _f(self.window_consistency), "n_eff": _f(self.n_eff),
-                "message": self.message, "evidence": ev, "confused_with": list(self.confused_with),
-                "reasons": list(self.reasons)}
 
 
 # --------------------------------------------------------------------------- helpers
@@ -145,11 +87,6 @@ def _shapes(var: str, x: np.ndarray, mach_ref: float) -> list[tuple[str, str]]:
         d = f"({var} - {_num(c)})"
         return [(var, d), (f"{var}2", f"{d}**2")]
     return [(f"{var}2", f"{var}**2"), (f"abs_{var}", f"{var}*abs({var})"), (f"{var}3", f"{var}**3")]
-
-
-def _window_index(n: int, k: int) -> np.ndarray:
-    k = max(1, min(int(k), n))
-    return np.minimum((np.arange(n) * k) // n, k - 1)
 
 
 def _shift(t: np.ndarray, u: np.ndarray, groups: np.ndarray, tau: float) -> np.ndarray:
@@ -527,20 +464,3 @@ def localise(signals: dict, y_by_channel: dict, models: dict, t: np.ndarray, gro
         sig = [f for f in found if f.significant]
         result[ch] = tuple(sig + [f for f in found if not f.significant][: max(0, MAX_PER_CHANNEL - len(sig))])
     return result
-
-
-def localisation_text(localisation: dict) -> str:
-    """The findings for Diagnosis.summary()."""
-    if not localisation:
-        return ""
-    lines = ["Localisation (where each channel's model fails, as a term; * = passes the rule):"]
-    for ch, fs in localisation.items():
-        if not fs:
-            continue
-        for f in fs:
-            tail = f"  [not told apart from {', '.join(f.confused_with)}]" if f.confused_with else ""
-            why = "" if f.significant else f"  (not significant: {f.reasons[0]})" if f.reasons else ""
-            lines.append(f"  {'*' if f.significant else ' '} {f.message}{tail}{why}")
-    if len(lines) == 1:
-        lines.append("  nothing to localise")
-    return "\n".join(lines)
