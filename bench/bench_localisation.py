@@ -200,12 +200,12 @@ def _report(df: pd.DataFrame, seeds: list[int], wall_s: float) -> str:
             f"| {g['floor'].mean():.2e} | {int(g['catalogue_significant'].sum())}/{len(g)} |")
     lag = eff[eff["effect"] == "pitch_control_lag"]
     if "lag_ms" in lag and lag["lag_ms"].notna().any():
-        lines += ["", f"Lag estimates (truth 40 ms): derivative fit {lag['lag_ms'].mean():.1f} ± "
+        lines += ["", f"Lag estimates over the named runs (truth 40 ms): derivative fit {lag['lag_ms'].mean():.1f} ± "
                       f"{lag['lag_ms'].std():.1f} ms, "
                       f"shift scan {lag['lag_scan_ms'].mean():.1f} ± {lag['lag_scan_ms'].std():.1f} ms."]
     dr = eff[eff["effect"] == "cm_alpha_drift"]
     if "drift_pct_per_min" in dr and dr["drift_pct_per_min"].notna().any():
-        lines += ["", f"Drift estimates (truth -8 % over 90 s = -5.3 %/min of Cm_alpha): "
+        lines += ["", f"Drift estimates over the runs that named t (truth -8 % over 90 s = -5.3 %/min of Cm_alpha): "
                       f"{dr['drift_pct_per_min'].mean():.1f} ± {dr['drift_pct_per_min'].std():.1f} %/min."]
     none = df[df["effect"] == "none"]
     if len(none):
