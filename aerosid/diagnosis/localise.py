@@ -122,12 +122,15 @@ class _Channel:
         x = np.asarray(x, float)
         if x.shape != self.y.shape or not np.all(np.isfinite(x)) or np.ptp(x) <= 0:
             return None
+        # added columns scaled to |x| <= 1 (a column of q-bar squared, ~1e10 Pa^2, beside
+        # q_hat, ~1e-5, makes the design numerically rank-deficient); estimates scaled back
         Xb = self.Xb.copy()
         for k, (gname, gcol) in enumerate(given):
-            Xb[f"__given{k}"] = gcol
+            Xb[f"__given{k}"] = gcol / (float(np.max(np.abs(gcol))) or 1.0)
         Xa = Xb.copy()
         col = name if name not in self.model.names else f"{name}__loc"
-        Xa[col] = x
+        scale = float(np.max(np.abs(x))) or 1.0
+        Xa[col] = x / scale
         try:
             fa = fit_linear(self.y, Xa, names=[str(n) for n in Xb.columns] + [col], channel=self.ch,
                             cov="morelli_klein")
@@ -147,7 +150,8 @@ class _Channel:
         d = d[np.isfinite(d)]
         tot = float(np.sum(np.abs(d)))
         perp = x - Ab @ self._lstsq(Ab, x)
-        return dict(fit=fa, j=j, estimate=float(fa.estimate[j]), std_error=float(fa.std_error[j]),
+        return dict(fit=fa, j=j, scale=scale, estimate=float(fa.estimate[j]) / scale,
+                    std_error=float(fa.std_error[j]) / scale,
                     t_value=float(fa.t_values[j]), p_value=float(fa.p_values[j]), n_eff=float(fa.n_eff),
                     variance_share=1.0 - rss_a / rss_b if rss_b > 0 else 0.0,
                     window_consistency=float(np.sum(np.clip(d, 0, None)) / tot) if tot > 0 else 0.0,
@@ -340,10 +344,11 @@ def _lag_findings(c: _Channel, t: np.ndarray, groups: np.ndarray) -> list[Findin
         if r is None:
             continue
         fa, j = r["fit"], r["j"]
-        b_u, b_d = float(fa.estimate[i]), float(fa.estimate[j])
+        b_u, b_d = float(fa.estimate[i]), r["estimate"]
         tau = -b_d / b_u if b_u != 0 else float("nan")
-        # delta method: tau = -b_d/b_u
-        cov = np.asarray(fa.cov)[np.ix_([i, j], [i, j])]
+        # delta method: tau = -b_d/b_u (the added column was fitted scaled by 1/r["scale"])
+        unscale = np.diag([1.0, 1.0 / r["scale"]])
+        cov = unscale @ np.asarray(fa.cov)[np.ix_([i, j], [i, j])] @ unscale
         g = np.array([b_d / b_u**2, -1.0 / b_u]) if b_u != 0 else np.full(2, np.nan)
         tau_se = float(math.sqrt(max(g @ cov @ g, 0.0))) if np.all(np.isfinite(cov)) else float("nan")
         scan = _lag_scan(c, i, term.expression, u, t, groups)
