@@ -66,7 +66,8 @@ def test_hidden_effects_add_exactly_their_contribution_to_cm():
         f = simulate(case, seed=0, hidden=((e, 1.0),))
         tr = f.truth
         c = base.coefficients(tr["alpha_r_rad"], tr["phi_r_rad"], tr["mach"], tr["delta_p_rad"], tr["delta_y_rad"],
-                              tr["delta_r_rad"], tr["p_rad_s"], tr["q_rad_s"], tr["r_rad_s"], tr["V_m_s"], tr["qbar_pa"])
+                              tr["delta_r_rad"], tr["p_rad_s"], tr["q_rad_s"], tr["r_rad_s"], tr["V_m_s"],
+                              tr["qbar_pa"])
         got = (tr["Cm"] - c["Cm"]).to_numpy()
         a, t, dp = tr["alpha_rad"].to_numpy(), tr["t_s"].to_numpy(), tr["delta_p_rad"].to_numpy()
         if name == "alpha_cubic":
@@ -171,7 +172,8 @@ def test_localisation_is_in_the_json_and_the_summary(hidden_flights, vehicle):
     d = _diagnosis(hidden_flights["pitch_control_lag"], vehicle)
     doc = json.loads(json.dumps(d.to_json()))
     cm = doc["localisation"]["Cm"]
-    assert cm and {"channel", "kind", "variable", "p_value", "message", "suggested_expression", "evidence"} <= set(cm[0])
+    keys = {"channel", "kind", "variable", "p_value", "message", "suggested_expression", "evidence"}
+    assert cm and keys <= set(cm[0])
     assert cm[0]["spec_line"] == f"{cm[0]['suggested_coefficient']} = {cm[0]['suggested_expression']}"
     text = d.summary()
     assert "Localisation" in text and cm[0]["message"] in text
