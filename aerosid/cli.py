@@ -16,6 +16,7 @@ Examples:
   aerosid simulate --list-effects
   aerosid simulate --case seed-rlv --seed 3 --out runs/flight3
   aerosid simulate --effect pitch_damping --effect mach_cm_alpha=0.5 --out runs/hidden
+  aerosid simulate --hidden pitch_control_lag --out runs/lag   # not a catalogue effect (localisation)
   aerosid simulate --duration 600 --rate 100 --out runs/long
 """
 
@@ -66,6 +67,9 @@ def main() -> None:
 @click.option("--effect", "effects", multiple=True, metavar="NAME[=SCALE]",
               help="Hide a catalogue effect in the flight aerodynamics (repeatable); SCALE multiplies "
                    "its physical default size. See --list-effects.")
+@click.option("--hidden", "hidden", multiple=True, metavar="NAME[=SCALE]",
+              help="Hide an effect that is NOT in the diagnosis catalogue (repeatable; for testing the "
+                   "diagnosis' localisation): see the second section of --list-effects.")
 @click.option("--seed", default=0, show_default=True, type=int, help="Random seed for noise and faults.")
 @click.option("--out", "out_dir", type=click.Path(file_okay=False, path_type=Path),
               help="Output folder for telemetry.parquet, truth.parquet and truth.json.")
@@ -82,7 +86,7 @@ def main() -> None:
 @click.option("--input", "input_file", type=click.Path(exists=True, dir_okay=False, path_type=Path), default=None,
               help="Fly a designed input (DIR/input.parquet or .csv of `aerosid design`): t_s plus control "
                    "columns in radians; it replaces the manoeuvres of its axes.")
-def simulate(case_name, effects, seed, out_dir, duration, rate, no_faults, list_effects, jsbsim_aircraft,
+def simulate(case_name, effects, hidden, seed, out_dir, duration, rate, no_faults, list_effects, jsbsim_aircraft,
              manoeuvre, input_file):
     """Simulate a flight whose truth is known and write its telemetry.
 
@@ -93,16 +97,20 @@ def simulate(case_name, effects, seed, out_dir, duration, rate, no_faults, list_
     """
     from aerosid.effects import catalogue_table, parse_effect_spec
 
+    from aerosid.simulation.hidden import hidden_table, parse_hidden_spec
+
     if list_effects:
         click.echo(catalogue_table())
+        click.echo(hidden_table())
         return
     if out_dir is None:
         raise click.UsageError("--out DIR is required (or use --list-effects)")
     from dataclasses import replace
 
     if jsbsim_aircraft is not None:
-        if effects or duration is not None or rate is not None:
-            raise click.UsageError("--effect, --duration and --rate apply to the built-in simulator, not --jsbsim")
+        if effects or hidden or duration is not None or rate is not None:
+            raise click.UsageError("--effect, --hidden, --duration and --rate apply to the built-in simulator, "
+                                   "not --jsbsim")
         from aerosid.simulation.jsbsim_flight import JSBSimUnavailable, simulate_jsbsim
 
         from aerosid.cli_progress import stage_progress
@@ -127,6 +135,7 @@ def simulate(case_name, effects, seed, out_dir, duration, rate, no_faults, list_
 
     try:
         parsed = tuple(parse_effect_spec(e) for e in effects)
+        parsed_hidden = tuple(parse_hidden_spec(h) for h in hidden)
         overrides = {}
         if duration is not None:
             overrides["duration_s"] = duration
@@ -146,7 +155,7 @@ def simulate(case_name, effects, seed, out_dir, duration, rate, no_faults, list_
     from aerosid.cli_progress import stage_progress
 
     with stage_progress("simulate") as progress:
-        flight = run_simulation(case, parsed, seed=seed, progress=progress)
+        flight = run_simulation(case, parsed, seed=seed, progress=progress, hidden=parsed_hidden)
         progress("sensors, faults and write", 0.0)
         paths = flight.write(out_dir)
     click.echo(flight.summary())

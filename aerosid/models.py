@@ -25,7 +25,11 @@ from aerosid.effects import CATALOGUE
 from aerosid.expressions import ExpressionError, evaluate, parse, signal_names
 
 SIGNALS = ("alpha", "beta", "alpha_r", "phi_r", "mach", "V", "qbar", "delta_p", "delta_y", "delta_r",
-           "p", "q", "r", "p_hat", "q_hat", "r_hat", "alpha_dot_hat", "beta_dot_hat", "t")
+           "p", "q", "r", "p_hat", "q_hat", "r_hat", "alpha_dot_hat", "beta_dot_hat", "t",
+           "delta_p_dot", "delta_y_dot", "delta_r_dot")
+#: Half-length of the Savitzky-Golay window of the fin rates delta_*_dot [s]: the fins are
+#: measured with little noise (0.02 deg), and a control lag of tens of ms lives at 1-3 Hz
+FIN_RATE_HALF_WINDOW_S = 0.05
 CHANNELS = ("CN", "Cm", "CY", "Cn", "Cl")
 #: Default half-length of the Savitzky-Golay window of alpha_dot_hat and beta_dot_hat [s]
 #: (a vehicle file may set its own: [air_data] derivative_half_window_s)
@@ -235,6 +239,9 @@ def signals_from_flight_data(fd: pd.DataFrame, d_m: float, lateral_m: float | No
         "alpha_dot_hat": derivative(alpha) * d_m / (2 * V),
         "beta_dot_hat": derivative(beta) * b_m / (2 * V),
         "t": t,
+        # fin rates [rad/s] (a control lag tau shows as -tau x the fin term's coefficient on them)
+        **{f"{c}_dot": smooth_derivative(t, fd[f"{c}_rad"].to_numpy(float), groups, FIN_RATE_HALF_WINDOW_S)
+           for c in ("delta_p", "delta_y", "delta_r")},
     }
 
 

@@ -323,6 +323,8 @@ class Diagnosis:
         """Nothing significant is missing and no look-alike choice is open or refuted."""
         return self.nothing_significant and not any(c.swap or (c.in_model and c.verdict != "separated")
                                                     for c in self.lookalikes)
+    #: channel -> localisation findings (aerosid.diagnosis.localise), best first
+    localisation: dict = field(default_factory=dict)
 
     @property
     def significant(self) -> tuple[EffectEvidence, ...]:
@@ -366,7 +368,9 @@ class Diagnosis:
 
     def _base_message(self) -> str:
         sig = self.significant
-        where = self._where_text()
+        from aerosid.diagnosis.localise import localisation_hint
+
+        where = self._where_text() + localisation_hint(self.localisation)
         if sig:
             e = sig[0]
             add = ("add it with the lines below in a model spec file SPEC, fit again "
@@ -439,6 +443,7 @@ class Diagnosis:
             "regime_map": regime_map,
             "time_windows": windows,
             "whiteness": {ch: rep.whiteness.to_dict() for ch, rep in self.channels.items()},
+            "localisation": {ch: [f.to_dict() for f in fs] for ch, fs in self.localisation.items()},
             "channels": {ch: {"terms": list(self.models[ch].names), "rms_residual": _f(rep.fit.rms_residual),
                               "r2": _f(rep.fit.r2), "pse": _f(rep.fit.pse), "f_stat": _f(rep.fit.f_stat),
                               "f_stat_corrected": _f(rep.fit.f_stat_corrected), "n_eff": _f(rep.fit.n_eff),
@@ -489,6 +494,10 @@ class Diagnosis:
             lines.append(f"  ... {len(self.effects) - max_effects} more")
         for c in self.lookalikes:
             lines += ["", c.summary()]
+        if self.localisation:
+            from aerosid.diagnosis.localise import localisation_text
+
+            lines += ["", localisation_text(self.localisation)]
         lines += ["", f"Rule: {RULE_TEXT}.", "",
                   f"Recommended: {self.recommended or 'none'}", self.message]
         return "\n".join(lines)
@@ -606,7 +615,7 @@ def diagnose(flight_data: pd.DataFrame, vehicle, models: dict[str, ChannelModel]
              mach_half_width: float | None = 0.5, n_windows: int = 8,
              candidates: Sequence[Candidate] | None = None, cov: str = "morelli_klein",
              angle_sigma_rad: float | None = None,
-             progress: Callable[[str, float], None] | None = None) -> Diagnosis:
+             progress: Callable[[str, float], None] | None = None, localisation: bool = True) -> Diagnosis:
     """Diagnose `models` (default: the method.md §11 models) against the flight data.
 
     flight_data: a FlightData frame (schemas/flight_data.py); the samples with
@@ -618,6 +627,8 @@ def diagnose(flight_data: pd.DataFrame, vehicle, models: dict[str, ChannelModel]
     (alpha and beta come from inverting the force database, so a C_N error maps
     to an angle error through the normal-force slope); 0 switches the check off.
     progress: an optional callback progress("candidates", fraction done) (the CLI's display).
+    localisation: also localise where each channel's model fails, as suggested terms
+    (:mod:`aerosid.diagnosis.localise`; the ``localisation`` field).
     """
     models = dict(models or default_models(vehicle))
     if candidates is None:
@@ -753,8 +764,14 @@ def diagnose(flight_data: pd.DataFrame, vehicle, models: dict[str, ChannelModel]
     identities = identity_channels(vehicle, models)  # their residual is numerical: no floor to speak of
     floor = floors({ch: rep.residual for ch, rep in reports.items() if ch not in identities}, fd,
                    angle_floor_parts(fd, vehicle, models, reports))
+    loc = {}
+    if localisation:
+        from aerosid.diagnosis.localise import localise
+
+        loc = localise(signals, {ch: fd[ch].to_numpy(float) for ch in models}, models, t, groups, win,
+                       vehicle.mach_reference, float(angle_sigma_rad))
     return Diagnosis(tuple(ranked), reports, models, n, window, int(win.max()) + 1,
-                     identities, looks, recommended, floor)
+                     identities, looks, recommended, floor, loc)
 
 
 def identity_channels(vehicle, channels) -> tuple[str, ...]:
@@ -765,6 +782,7 @@ def identity_channels(vehicle, channels) -> tuple[str, ...]:
     if getattr(vehicle, "air_data_source", None) == "vanes":
         return ()
     return tuple(ch for ch in INVERSION_CHANNELS if ch in channels)
+
 
 
 def _simex_signals(fd: pd.DataFrame, vehicle, groups: np.ndarray, sigma: float) -> dict:

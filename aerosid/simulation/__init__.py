@@ -38,6 +38,8 @@ class SimulatedFlight:
     info: dict = field(default_factory=dict)
     #: other files that belong with the telemetry, name -> text (a generated vehicle.toml)
     files: dict[str, str] = field(default_factory=dict)
+    #: uncatalogued effects (aerosid.simulation.hidden): their truth.json entries
+    hidden: tuple = ()
 
     def truth_document(self) -> dict:
         """The content of truth.json."""
@@ -50,6 +52,7 @@ class SimulatedFlight:
             "effects": [{"name": n, "scale": s} for n, s in self.effects],
             "coefficients": self.coefficients,
             "info": self.info,
+            **({"hidden_effects": list(self.hidden)} if self.hidden else {}),
         }
 
     def summary(self) -> str:
@@ -57,7 +60,8 @@ class SimulatedFlight:
         at = f" at M {i['mach_reference']:.3g}" if "mach_reference" in i else ""
         lines = [
             f"simulated flight {self.case} seed {self.seed}, effects: "
-            f"{', '.join(f'{n}x{s:g}' for n, s in self.effects) or 'none'}",
+            f"{', '.join(f'{n}x{s:g}' for n, s in self.effects) or 'none'}"
+            + (f"; not in the diagnosis catalogue: {_hidden_names(self.hidden)}" if self.hidden else ""),
             f"  {i['n_samples']} samples at {i['sample_rate_hz']:g} Hz, {len(self.telemetry)} telemetry rows "
             f"({i['n_dropout']} dropout samples, {i['n_outliers']} outliers, sync gap {i['sync_gap_s']:g} s)",
             f"  Mach {i['mach_min']:.2f}..{i['mach_max']:.2f}, h {i['h_min_m'] / 1e3:.1f}..{i['h_max_m'] / 1e3:.1f} km, "
@@ -87,6 +91,10 @@ class SimulatedFlight:
             "truth_json": write_json_atomic(self.truth_document(), out / "truth.json"),
         }
         return paths
+
+
+def _hidden_names(hidden) -> str:
+    return ", ".join(f"{h['name']}x{h['scale']:g}" for h in hidden)
 
 
 def flight_model(case: SimulationCase, effects: tuple[tuple[Effect, float], ...] = ()) -> AeroModel:
@@ -147,17 +155,24 @@ def _controller(case: SimulationCase):
 
 
 def simulate(case: SimulationCase | str = "seed-rlv", effects: tuple[tuple[Effect, float], ...] = (),
-             seed: int = 0, progress=None) -> SimulatedFlight:
+             seed: int = 0, progress=None, hidden: tuple = ()) -> SimulatedFlight:
     """Fly the case with the given hidden effects; noise and faults from `seed`.
-    progress: an optional callback progress(stage, fraction) (the CLI's display)."""
+    progress: an optional callback progress(stage, fraction) (the CLI's display).
+    hidden: ((HiddenEffect, scale), ...) effects outside the diagnosis catalogue
+    (aerosid.simulation.hidden), for testing the diagnosis' localisation."""
+    from aerosid.simulation.hidden import lagged_controller, with_hidden
+
     if isinstance(case, str):
         case = load_case(case)
     veh = case.vehicle
-    model = flight_model(case, effects)
+    model = with_hidden(flight_model(case, effects), hidden)
     plant = Plant(veh, model)
     n = int(round(case.duration_s * case.sample_rate_hz)) + 1
     t = np.arange(n) / case.sample_rate_hz
-    states, controls = integrate(plant, _initial_state(case, model), t, _controller(case), progress)
+    controller = _controller(case)
+    if hidden:
+        controller = lagged_controller(controller, model.lag_s(), case.sample_rate_hz)
+    states, controls = integrate(plant, _initial_state(case, model), t, controller, progress)
 
     truth = truth_frame(plant, t, states, controls)
     clean = {"t_s": t}
@@ -191,6 +206,7 @@ def simulate(case: SimulationCase | str = "seed-rlv", effects: tuple[tuple[Effec
         truth=truth,
         coefficients=model.linear_truth(),
         info=info,
+        hidden=tuple(e.truth(model, float(sc)) for e, sc in hidden),
     )
 
 
@@ -208,8 +224,8 @@ def truth_frame(plant: Plant, t: np.ndarray, states: np.ndarray, controls: np.nd
     a_sound = np.array([a[1] for a in atm])
     mach = V / a_sound
     qbar = 0.5 * rho * V * V
-    dp, dy, dr = controls.T
-    c = model.coefficients(alpha_r, phi_r, mach, dp, dy, dr, p, q, r, V, qbar)
+    dp, dy, dr = controls[:, :3].T
+    c = model.coefficients(alpha_r, phi_r, mach, dp, dy, dr, p, q, r, V, qbar, *controls[:, 3:].T)
     qs = qbar * veh.S_m2
     fx, fy, fz = -c["CA"] * qs / veh.mass_kg, c["CY"] * qs / veh.mass_kg, -c["CN"] * qs / veh.mass_kg
     L_hat = c["Cl"] * qs * veh.d_m / veh.Ixx_kg_m2

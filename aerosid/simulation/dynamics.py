@@ -95,8 +95,9 @@ class Plant:
         rho, a, g = self.atmosphere(-state[2])
         qbar = 0.5 * rho * V * V
         mach = V / a
-        dp, dy, dr = controls
-        c = self.model.coefficients(alpha_r, phi_r, mach, dp, dy, dr, p, q, r, V, qbar)
+        dp, dy, dr = controls[:3]
+        # entries past the three fins (time, lagged fin) feed uncatalogued effects (simulation.hidden)
+        c = self.model.coefficients(alpha_r, phi_r, mach, dp, dy, dr, p, q, r, V, qbar, *controls[3:])
         qs = qbar * veh.S_m2
         qsd = qs * veh.d_m
         f = (-c["CA"] * qs / veh.mass_kg, c["CY"] * qs / veh.mass_kg, -c["CN"] * qs / veh.mass_kg)
@@ -127,16 +128,19 @@ class Plant:
 def integrate(plant: Plant, x0: np.ndarray, t: np.ndarray, controller,
               progress: Callable[[str, float], None] | None = None) -> tuple[np.ndarray, np.ndarray]:
     """RK4 over the sample grid t [s]; controller(t, state) -> (delta_p, delta_y, delta_r)
-    held over each step.  Returns states (N,13) and controls (N,3) at the samples.
+    held over each step (a controller may return extra entries after the three fins, which the
+    plant passes on to the aero model).  Returns states (N,13) and controls (N,3+) at the samples.
     progress: called as progress("integrate", fraction done) about 200 times."""
     n = len(t)
     every = max(1, n // 200)
     states = np.empty((n, 13))
-    controls = np.empty((n, 3))
+    controls = None
     x = np.asarray(x0, dtype=float)
     for k in range(n):
         states[k] = x
         u = controller(t[k], x)
+        if controls is None:  # 3 fins, or more entries for uncatalogued effects (simulation.hidden)
+            controls = np.empty((n, len(u)))
         controls[k] = u
         if k == n - 1:
             break

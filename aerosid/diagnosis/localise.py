@@ -1,0 +1,471 @@
+"""Localisation: where a channel's model fails, as a term one can add (issue 18, item 2).
+
+The catalogue test (:mod:`aerosid.diagnosis.core`) can only name effects it knows.
+This module looks at the residual of each channel's model without a catalogue and
+turns a clear pattern into a suggested expression for the model spec:
+
+``shape``
+    The partial residual (residual + the term's own part) against every signal the
+    model reads and against Mach, q-bar and time: a low-order shape is added to the
+    model (x**2, x*abs(x), x**3 for a regressor; the 2nd and 4th harmonics for phi_r;
+    a line and a parabola for Mach, q-bar and t) and the best shape per signal is kept.
+    "residual bends as alpha**3 in Cm" -> ``Cm_alpha3 = alpha**3``.
+``trend``
+    Each coefficient against time, Mach and q-bar: the term times the variable is added
+    (``alpha*t``: Cm_alpha changing linearly with time); the coefficient is also fitted
+    per time window and its estimates regressed on the window time (evidence).
+    "Cm_alpha drifts +5 %/min" -> ``Cm_alpha_t = alpha*t``.
+``lag``
+    Each control the model reads, shifted by tau: the refit's residual over
+    tau = -200 ... +200 ms (the scan's optimum) and, to first order,
+    u(t - tau) = u(t) - tau u_dot: the fin rate's term is added and
+    tau = -b_dot / b_u.  "control lag ~ 40 ms" -> ``Cm_delta_p_dot = delta_p_dot/2``.
+
+Every test is the catalogue's test (the same rule, coloured-residual honest): the
+added column's t with the Morelli-Klein sigma (``fit_linear(cov="morelli_klein")``,
+Student-t with the effective degrees of freedom), the held-out (leave-one-window-out)
+consistency and the share of residual variance, thresholds
+:data:`aerosid.diagnosis.core.P_MAX` etc.  Findings whose columns correlate by
+|r| >= CONFUSION_R once the model's terms are removed are listed as indistinguishable
+(``confused_with``): on seed-rlv Mach falls monotonically with time, so a drift in time
+and a Mach dependence cannot be told apart there, and the finding says so.
+
+Channels whose residual is below 1e-3 of their variation (C_N and C_Y when alpha and
+beta are inverted from them: identities by construction) are not localised.
+"""
+from __future__ import annotations
+
+import math
+import re
+
+import numpy as np
+import pandas as pd
+import scipy.stats
+
+from aerosid.diagnosis.finding import Finding, localisation_hint, localisation_text
+from aerosid.expressions import evaluate, signal_names
+from aerosid.regression import fit_linear
+
+__all__ = ["Finding", "localise", "localisation_text", "localisation_hint", "LAG_SCAN_S", "IDENTITY_RATIO",
+           "MAX_PER_CHANNEL"]
+
+#: Shift range of the lag scan [s].
+LAG_SCAN_S = 0.2
+#: A channel whose residual RMS is below this fraction of its std is an identity (not localised).
+IDENTITY_RATIO = 1e-3
+#: Findings kept per channel: every significant one, and the strongest non-significant ones up to this.
+MAX_PER_CHANNEL = 3
+#: A shape whose column gets more than this share of its variance from the recovered angles'
+#: own errors is not called significant: errors in the variable bend its partial residual.
+MAX_ERROR_VARIANCE_SHARE = 0.05
+CONTROLS = ("delta_p", "delta_y", "delta_r")
+SLOW = ("mach", "qbar", "t")  # the flight-condition variables
+_UNITS = {"mach": "-", "qbar": "Pa", "t": "s"}
+
+
+# --------------------------------------------------------------------------- helpers
+def _wrap(expr: str) -> str:
+    return expr if re.fullmatch(r"[\w.*/]+|\w+\(.*\)", expr) else f"({expr})"
+
+
+def _centre(x: np.ndarray) -> float:
+    c = float(np.mean(x))
+    digits = max(0, 2 - int(math.floor(math.log10(abs(c))))) if c != 0 else 0
+    return round(c, digits) if digits else float(round(c, 3 - len(str(int(abs(c))))))
+
+
+def _num(c: float) -> str:
+    return f"{c:.6g}"
+
+
+def _shapes(var: str, x: np.ndarray, mach_ref: float) -> list[tuple[str, str]]:
+    """(suffix of the coefficient name, expression) of the shapes tested for a variable."""
+    if var == "phi_r":
+        return [("sin4phi", "sin(4*phi_r)"), ("sin2phi", "sin(2*phi_r)"), ("cos2phi", "cos(2*phi_r)")]
+    if var in SLOW:
+        c = mach_ref if var == "mach" else _centre(x)
+        d = f"({var} - {_num(c)})"
+        return [(var, d), (f"{var}2", f"{d}**2")]
+    return [(f"{var}2", f"{var}**2"), (f"abs_{var}", f"{var}*abs({var})"), (f"{var}3", f"{var}**3")]
+
+
+def _shift(t: np.ndarray, u: np.ndarray, groups: np.ndarray, tau: float) -> np.ndarray:
+    """u(t - tau) within each contiguous group (held at the ends)."""
+    out = np.empty_like(u)
+    for g in pd.unique(groups):
+        m = groups == g
+        out[m] = np.interp(t[m] - tau, t[m], u[m])
+    return out
+
+
+# --------------------------------------------------------------------------- the tests
+class _Channel:
+    """The base fit of one channel and the machinery to test one added column."""
+
+    def __init__(self, ch, model, y, signals, win):
+        from aerosid.diagnosis.core import _heldout_sse, _scaled_lstsq
+
+        self._heldout, self._lstsq = _heldout_sse, _scaled_lstsq
+        self.ch, self.model, self.y, self.signals, self.win = ch, model, y, signals, win
+        self.n = y.size
+        Xb, _ = model.design(signals)
+        self.Xb = Xb
+        self.Ab = Xb.to_numpy(float)
+        self.base = fit_linear(y, Xb, names=model.names, channel=ch, cov="morelli_klein")
+        self.resid = np.asarray(self.base.residuals)
+        self.rss_b = float(self.resid @ self.resid)
+        self.sse_b = _heldout_sse(self.Ab, y, win)
+
+    def test(self, name: str, x: np.ndarray, given: tuple = ()) -> dict | None:
+        """Base (+ the `given` columns) + column x: the catalogue's evidence for the added
+        column (None if untestable).  given: ((name, column), ...) already in the model."""
+        x = np.asarray(x, float)
+        if x.shape != self.y.shape or not np.all(np.isfinite(x)) or np.ptp(x) <= 0:
+            return None
+        # added columns scaled to |x| <= 1 (a column of q-bar squared, ~1e10 Pa^2, beside
+        # q_hat, ~1e-5, makes the design numerically rank-deficient); estimates scaled back
+        Xb = self.Xb.copy()
+        for k, (gname, gcol) in enumerate(given):
+            Xb[f"__given{k}"] = gcol / (float(np.max(np.abs(gcol))) or 1.0)
+        Xa = Xb.copy()
+        col = name if name not in self.model.names else f"{name}__loc"
+        scale = float(np.max(np.abs(x))) or 1.0
+        Xa[col] = x / scale
+        try:
+            fa = fit_linear(self.y, Xa, names=[str(n) for n in Xb.columns] + [col], channel=self.ch,
+                            cov="morelli_klein")
+        except ValueError:
+            return None
+        j = Xb.shape[1]
+        if not fa.identifiable[j]:
+            return None
+        rss_a = float(np.asarray(fa.residuals) @ np.asarray(fa.residuals))
+        if given:
+            Ab = Xb.to_numpy(float)
+            e = self.y - Ab @ self._lstsq(Ab, self.y)
+            rss_b, sse_b = float(e @ e), self._heldout(Ab, self.y, self.win)
+        else:
+            Ab, rss_b, sse_b = self.Ab, self.rss_b, self.sse_b
+        d = sse_b - self._heldout(Xa.to_numpy(float), self.y, self.win)
+        d = d[np.isfinite(d)]
+        tot = float(np.sum(np.abs(d)))
+        perp = x - Ab @ self._lstsq(Ab, x)
+        return dict(fit=fa, j=j, scale=scale, estimate=float(fa.estimate[j]) / scale,
+                    std_error=float(fa.std_error[j]) / scale,
+                    t_value=float(fa.t_values[j]), p_value=float(fa.p_values[j]), n_eff=float(fa.n_eff),
+                    variance_share=1.0 - rss_a / rss_b if rss_b > 0 else 0.0,
+                    window_consistency=float(np.sum(np.clip(d, 0, None)) / tot) if tot > 0 else 0.0,
+                    perp=perp, column=x)
+
+
+def _rule(r: dict) -> list[str]:
+    from aerosid.diagnosis.core import MIN_VARIANCE_SHARE, MIN_WINDOW_CONSISTENCY, P_MAX
+
+    reasons = []
+    if not r["p_value"] < P_MAX:
+        reasons.append(f"corrected p = {r['p_value']:.2g} >= {P_MAX:g}")
+    if not r["window_consistency"] >= MIN_WINDOW_CONSISTENCY:
+        reasons.append(f"held-out window consistency {r['window_consistency']:.0%} < {MIN_WINDOW_CONSISTENCY:.0%}")
+    if not r["variance_share"] >= MIN_VARIANCE_SHARE:
+        reasons.append(f"explains {r['variance_share']:.2%} < {MIN_VARIANCE_SHARE:.0%} of the residual variance")
+    return reasons
+
+
+def _stats_text(r: dict) -> str:
+    return (f"t = {r['t_value']:.3g}, p = {r['p_value']:.2g} (coloured-residual sigma, N_eff {r['n_eff']:.0f}), "
+            f"{r['variance_share']:.1%} of the residual variance, held-out consistency {r['window_consistency']:.0%}")
+
+
+def _binned_partial(x: np.ndarray, pr: np.ndarray, bins: int = 8) -> dict:
+    edges = np.unique(np.quantile(x, np.linspace(0, 1, bins + 1)))
+    idx = np.clip(np.searchsorted(edges, x, side="right") - 1, 0, max(edges.size - 2, 0))
+    cx, cy = [], []
+    for b in range(max(edges.size - 1, 0)):
+        m = idx == b
+        if m.any():
+            cx.append(float(np.mean(x[m])))
+            cy.append(float(np.mean(pr[m])))
+    return {"partial_residual_x": cx, "partial_residual_mean": cy}
+
+
+def _error_share(expr: str, signals: dict, perturbed: dict | None) -> float:
+    """Share of a column's variance that one draw of the angles' own error makes
+    (var(column(perturbed angles) - column) / var(column)); 0 without angle errors."""
+    if perturbed is None:
+        return 0.0
+    x = evaluate(expr, signals, len(signals["alpha"]))
+    xp = evaluate(expr, perturbed, len(signals["alpha"]))
+    v = float(np.var(x))
+    return float(np.var(xp - x) / v) if v > 0 else 0.0
+
+
+def _perturbed(signals: dict, sigma: float) -> dict | None:
+    """The signals with white errors of sigma [rad] added to alpha and beta (alpha_r, phi_r
+    recomputed), a fixed draw: the errors-in-variables guard of the shapes."""
+    if not sigma > 0:
+        return None
+    from aerosid.inversion import total_angles
+
+    rng = np.random.default_rng(20240613)
+    out = dict(signals)
+    out["alpha"] = signals["alpha"] + sigma * rng.standard_normal(len(signals["alpha"]))
+    out["beta"] = signals["beta"] + sigma * rng.standard_normal(len(signals["beta"]))
+    out["alpha_r"], out["phi_r"] = total_angles(out["alpha"], out["beta"])
+    return out
+
+
+def _shape_findings(c: _Channel, mach_ref: float, perturbed: dict | None) -> list[Finding]:
+    out = []
+    model_vars = sorted(set().union(*(signal_names(t.expression, c.signals) for t in c.model.terms)) - {"t"})
+    for var in [v for v in model_vars if v in c.signals] + [v for v in SLOW if v not in model_vars]:
+        x = np.asarray(c.signals[var], float)
+        if not np.all(np.isfinite(x)) or np.ptp(x) <= 0:
+            continue
+        tried = []
+        for suffix, expr in _shapes(var, x, mach_ref):
+            r = c.test(f"{c.ch}_{suffix}", evaluate(expr, c.signals, c.n))
+            if r is not None:
+                tried.append((suffix, expr, r))
+        if not tried:
+            continue
+        suffix, expr, r = max(tried, key=lambda s: abs(s[2]["t_value"]))
+        reasons = _rule(r)
+        share = _error_share(expr, c.signals, perturbed)
+        if share > MAX_ERROR_VARIANCE_SHARE:
+            reasons.append(f"the errors of the recovered angles make {share:.0%} of the variance of {expr}: "
+                           "they bend its partial residual by themselves (errors in variables)")
+        # partial residual: residual + the model's own part in this variable
+        own = np.zeros(c.n)
+        for i, t in enumerate(c.model.terms):
+            if var in signal_names(t.expression, c.signals):
+                own += c.base.estimate[i] * c.Ab[:, i]
+        others = {s[1]: round(s[2]["t_value"], 2) for s in tried}
+        bend = "bends as" if var not in SLOW else "varies as"
+        msg = (f"{c.ch}: the partial residual against {var} {bend} {expr} ({_stats_text(r)}); "
+               f"add `{c.ch}_{suffix} = {expr}` to [{c.ch}]")
+        out.append(Finding(c.ch, "shape", var, not reasons, f"{c.ch}_{suffix}", expr, r["estimate"], r["std_error"],
+                           r["t_value"], r["p_value"], r["variance_share"], r["window_consistency"], r["n_eff"], msg,
+                           evidence={"shapes_t": others, "error_variance_share": share,
+                                     **_binned_partial(x, c.resid + own)},
+                           reasons=tuple(reasons), perp=r["perp"], column=r["column"]))
+    return out
+
+
+def _trend_findings(c: _Channel, mach_ref: float, t: np.ndarray) -> list[Finding]:
+    out = []
+    for i, term in enumerate(c.model.terms):
+        names = signal_names(term.expression, c.signals)
+        if not names or "t" in names:
+            continue  # the intercept's trend is the partial residual against t (a shape)
+        e = c.Ab[:, i]
+        b = float(c.base.estimate[i])
+        tried = []
+        for var in SLOW:
+            v = np.asarray(c.signals[var], float)
+            if not np.all(np.isfinite(v)) or np.ptp(v) <= 0:
+                continue
+            if var == "mach":
+                expr, col = f"{_wrap(term.expression)}*(mach - {_num(mach_ref)})", e * (v - mach_ref)
+            else:
+                expr, col = f"{_wrap(term.expression)}*{var}", e * v
+            r = c.test(f"{term.coefficient}_{var}", col)
+            if r is not None:
+                tried.append((var, expr, r))
+        if not tried:
+            continue
+        var, expr, r = max(tried, key=lambda s: abs(s[2]["t_value"]))
+        from aerosid.diagnosis.core import CONFUSION_R
+
+        alike = tuple(f"trend:{term.coefficient}:{v}" for v, _, o in tried
+                      if v != var and _corr(r["perp"], o["perp"]) >= CONFUSION_R)
+        reasons = _rule(r)
+        rel = r["estimate"] / b if b != 0 else float("nan")  # relative change of the coefficient per unit
+        ev = {"relative_change_per_unit": rel, "coefficient_mean": b,
+              "variable_range": [float(np.min(c.signals[var])), float(np.max(c.signals[var]))],
+              "others_t": {s[0]: round(s[2]["t_value"], 2) for s in tried}}
+        if var == "t":
+            ev["change_pct_per_min"] = 100.0 * 60.0 * rel
+            rate = f"{100.0 * 60.0 * rel:+.2g} %/min ({100.0 * rel * float(np.ptp(t)):+.2g} % over {np.ptp(t):.0f} s)"
+        else:
+            rate = f"{100.0 * rel:+.2g} % per {'unit Mach' if var == 'mach' else 'Pa'}"
+        ev.update(_window_slope(c, i, t))
+        also = [a.rsplit(":", 1)[1] for a in alike]
+        with_var = f"{var} (or {' or '.join(also)}: they move together on this flight)" if also else var
+        msg = (f"{c.ch}: {term.coefficient} {'drifts' if var == 't' else 'changes'} {rate} with {with_var} "
+               f"({_stats_text(r)}; per-window estimates: slope p = {ev.get('window_slope_p', float('nan')):.2g}); "
+               f"add `{term.coefficient}_{var} = {expr}` to [{c.ch}]")
+        out.append(Finding(c.ch, "trend", var, not reasons, f"{term.coefficient}_{var}", expr, r["estimate"],
+                           r["std_error"], r["t_value"], r["p_value"], r["variance_share"], r["window_consistency"],
+                           r["n_eff"], msg, coefficient=term.coefficient, evidence=ev, reasons=tuple(reasons),
+                           confused_with=alike, perp=r["perp"], column=r["column"]))
+    return out
+
+
+def _window_slope(c: _Channel, i: int, t: np.ndarray) -> dict:
+    """Coefficient i fitted per time window (Morelli-Klein sigma) and its estimates regressed
+    on the window's mean time (weighted; sigma inflated by sqrt(max(chi2/dof, 1)))."""
+    est, se, tm = [], [], []
+    for k in np.unique(c.win):
+        m = c.win == k
+        try:
+            f = fit_linear(c.y[m], c.Xb.loc[m], names=c.model.names, channel=c.ch, cov="morelli_klein")
+        except ValueError:
+            continue
+        if f.identifiable[i] and math.isfinite(f.std_error[i]) and f.std_error[i] > 0:
+            est.append(float(f.estimate[i]))
+            se.append(float(f.std_error[i]))
+            tm.append(float(np.mean(t[m])))
+    if len(est) < 4:
+        return {}
+    est, se, tm = map(np.asarray, (est, se, tm))
+    w = 1.0 / se**2
+    A = np.column_stack([np.ones_like(tm), tm - np.average(tm, weights=w)])
+    cov = np.linalg.inv(A.T @ (A * w[:, None]))
+    coef = cov @ (A.T @ (w * est))
+    chi2 = float(np.sum(w * (est - A @ coef) ** 2))
+    dof = len(est) - 2
+    s = math.sqrt(cov[1, 1] * max(chi2 / dof, 1.0))
+    tv = coef[1] / s if s > 0 else float("nan")
+    return {"window_estimates": [float(v) for v in est], "window_std_errors": [float(v) for v in se],
+            "window_t_s": [float(v) for v in tm], "window_slope_per_s": float(coef[1]),
+            "window_slope_p": float(2.0 * scipy.stats.t.sf(abs(tv), dof)) if math.isfinite(tv) else float("nan")}
+
+
+def _lag_findings(c: _Channel, t: np.ndarray, groups: np.ndarray) -> list[Finding]:
+    out = []
+    for i, term in enumerate(c.model.terms):
+        names = signal_names(term.expression, c.signals)
+        ctrl = [u for u in CONTROLS if u in names]
+        if len(ctrl) != 1 or f"{ctrl[0]}_dot" not in c.signals:
+            continue
+        u = ctrl[0]
+        expr = re.sub(rf"\b{u}\b", f"{u}_dot", term.expression)
+        r = c.test(f"{term.coefficient}_dot", evaluate(expr, c.signals, c.n))
+        if r is None:
+            continue
+        fa, j = r["fit"], r["j"]
+        b_u, b_d = float(fa.estimate[i]), r["estimate"]
+        tau = -b_d / b_u if b_u != 0 else float("nan")
+        # delta method: tau = -b_d/b_u (the added column was fitted scaled by 1/r["scale"])
+        unscale = np.diag([1.0, 1.0 / r["scale"]])
+        cov = unscale @ np.asarray(fa.cov)[np.ix_([i, j], [i, j])] @ unscale
+        g = np.array([b_d / b_u**2, -1.0 / b_u]) if b_u != 0 else np.full(2, np.nan)
+        tau_se = float(math.sqrt(max(g @ cov @ g, 0.0))) if np.all(np.isfinite(cov)) else float("nan")
+        scan = _lag_scan(c, i, term.expression, u, t, groups)
+        reasons = _rule(r)
+        if not abs(tau) <= LAG_SCAN_S:
+            reasons.append(f"the implied lag {1e3 * tau:.0f} ms is outside +-{1e3 * LAG_SCAN_S:.0f} ms")
+        what = "lag" if tau > 0 else "lead"
+        msg = (f"{c.ch}: control {what} of about {1e3 * abs(tau):.0f} ± {1e3 * tau_se:.0f} ms on {u} "
+               f"(refit with {u} shifted: optimum at {1e3 * scan['lag_scan_s']:+.0f} ms; {_stats_text(r)}); "
+               f"add `{term.coefficient}_dot = {expr}` to [{c.ch}] (its coefficient is -lag x {term.coefficient})")
+        out.append(Finding(c.ch, "lag", u, not reasons, f"{term.coefficient}_dot", expr, r["estimate"],
+                           r["std_error"], r["t_value"], r["p_value"], r["variance_share"], r["window_consistency"],
+                           r["n_eff"], msg, coefficient=term.coefficient,
+                           evidence={"lag_s": tau, "lag_std_s": tau_se, **scan}, reasons=tuple(reasons),
+                           perp=r["perp"], column=r["column"]))
+    return out
+
+
+def _lag_scan(c: _Channel, i: int, expression: str, u: str, t: np.ndarray, groups: np.ndarray) -> dict:
+    """RSS of the base model with the control shifted by tau (u(t - tau)) over +-LAG_SCAN_S."""
+    dt = float(np.median(np.diff(t))) if t.size > 1 else 0.01
+    step = max(dt, 0.005)
+    taus = np.arange(-LAG_SCAN_S, LAG_SCAN_S + 0.5 * step, step)
+    rss = []
+    sig = dict(c.signals)
+    u0 = np.asarray(c.signals[u], float)
+    A = c.Ab.copy()
+    for tau in taus:
+        sig[u] = _shift(t, u0, groups, tau)
+        A[:, i] = evaluate(expression, sig, c.n)
+        e = c.y - A @ c._lstsq(A, c.y)
+        rss.append(float(e @ e))
+    rss = np.asarray(rss)
+    k = int(np.argmin(rss))
+    k0 = int(np.argmin(np.abs(taus)))
+    return {"lag_scan_s": float(taus[k]), "lag_scan_rss_drop": float(1.0 - rss[k] / rss[k0]) if rss[k0] > 0 else 0.0,
+            "lag_scan_tau_s": [round(float(v), 4) for v in taus[:: max(1, len(taus) // 20)]],
+            "lag_scan_rss": [float(v) for v in rss[:: max(1, len(taus) // 20)]]}
+
+
+def _corr(a: np.ndarray, b: np.ndarray) -> float:
+    den = float(np.linalg.norm(a) * np.linalg.norm(b))
+    return abs(float(a @ b)) / den if den > 0 else 0.0
+
+
+def _confusions(findings: list[Finding], r_min: float) -> list[Finding]:
+    from dataclasses import replace
+
+    out = []
+    for a in findings:
+        conf = list(a.confused_with)
+        for b in findings:
+            if b is not a and a.perp is not None and b.perp is not None and _corr(a.perp, b.perp) >= r_min:
+                conf.append(b.id)
+        out.append(replace(a, confused_with=tuple(conf)))
+    return out
+
+
+def _shadows(c: _Channel, findings: list[Finding]) -> list[Finding]:
+    """Significant findings tested given each other: A is a shadow of B when A fails the rule
+    with B in the model while B still passes with A in it (A is then not significant, and says
+    which finding explains it).  Two that explain each other stay, each listing the other."""
+    from dataclasses import replace
+
+    sig = [f for f in findings if f.significant and f.column is not None]
+    if len(sig) < 2:
+        return findings
+    passes: dict[tuple[int, int], tuple[bool, dict | None]] = {}
+    for a in range(len(sig)):
+        for b in range(len(sig)):
+            if a != b:
+                r = c.test(sig[a].suggested_coefficient, sig[a].column,
+                           given=((sig[b].suggested_coefficient, sig[b].column),))
+                passes[a, b] = (r is not None and not _rule(r), r)
+    out = {id(f): f for f in findings}
+    for a in range(len(sig)):
+        for b in range(len(sig)):
+            if a == b or passes[a, b][0]:
+                continue
+            f = out[id(sig[a])]
+            r = passes[a, b][1]
+            given = (f"t = {r['t_value']:.3g}, p = {r['p_value']:.2g}, consistency {r['window_consistency']:.0%}"
+                     if r else "not identifiable")
+            if passes[b, a][0]:  # a shadow of b
+                out[id(sig[a])] = replace(f, significant=False, reasons=(
+                    f"a shadow of {sig[b].id} ({sig[b].suggested_expression}): with it in the model, {given}",)
+                    + f.reasons, evidence={**f.evidence, "shadow_of": sig[b].id})
+            elif sig[b].id not in f.confused_with:  # they explain each other
+                out[id(sig[a])] = replace(f, confused_with=f.confused_with + (sig[b].id,))
+    return [out[id(f)] for f in findings]
+
+
+# --------------------------------------------------------------------------- entry point
+def localise(signals: dict, y_by_channel: dict, models: dict, t: np.ndarray, groups: np.ndarray, win: np.ndarray,
+             mach_reference: float, angle_sigma_rad: float = 0.0) -> dict[str, tuple[Finding, ...]]:
+    """Localisation findings per channel (significant first, then by |t|): every
+    significant one and the strongest others up to MAX_PER_CHANNEL.
+
+    signals: the model signals on the diagnosed samples (the diagnosis' own);
+    y_by_channel: measured coefficient per channel; win: time-window index per sample;
+    angle_sigma_rad: 1-sigma error of the recovered angles (for the errors-in-variables
+    guard of the shapes: a shape the angle errors make by themselves is not significant)."""
+    from aerosid.diagnosis.core import CONFUSION_R
+
+    perturbed = _perturbed(signals, float(angle_sigma_rad))
+    result: dict[str, tuple[Finding, ...]] = {}
+    for ch, model in models.items():
+        y = np.asarray(y_by_channel[ch], float)
+        c = _Channel(ch, model, y, signals, win)
+        if not (np.std(y) > 0) or float(np.std(c.resid)) < IDENTITY_RATIO * float(np.std(y)):
+            result[ch] = ()  # an identity by construction (the angles were inverted from this channel)
+            continue
+        found = _shape_findings(c, mach_reference, perturbed) + _trend_findings(c, mach_reference, t) + \
+            _lag_findings(c, t, groups)
+        found = _confusions(found, CONFUSION_R)
+        found = _shadows(c, found)
+        found.sort(key=lambda f: (not f.significant, -f.score))
+        sig = [f for f in found if f.significant]
+        result[ch] = tuple(sig + [f for f in found if not f.significant][: max(0, MAX_PER_CHANNEL - len(sig))])
+    return result
