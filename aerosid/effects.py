@@ -15,6 +15,8 @@ Sizes are physical, not tuned to be easy to find: see each ``sizing`` line.
 """
 from __future__ import annotations
 
+import math
+
 from dataclasses import dataclass
 from typing import Callable, Mapping
 
@@ -118,17 +120,25 @@ CATALOGUE: dict[str, Effect] = {
 }
 
 
-def parse_effect_spec(spec: str) -> tuple[Effect, float]:
-    """``NAME`` or ``NAME=SCALE`` (SCALE multiplies the default size) -> (effect, scale)."""
+def parse_scaled_spec(spec: str, table: dict, what: str = "effect"):
+    """``NAME`` or ``NAME=SCALE`` (SCALE multiplies the default size) -> (table[NAME], scale);
+    KeyError for an unknown name, ValueError for a scale that is not a finite number."""
     name, _, scale_text = spec.partition("=")
     name = name.strip()
-    if name not in CATALOGUE:
-        raise KeyError(f"unknown effect {name!r}; known: {', '.join(CATALOGUE)}")
+    if name not in table:
+        raise KeyError(f"unknown {what} {name!r}; known: {', '.join(table)}")
     try:
         scale = float(scale_text) if scale_text else 1.0
     except ValueError as exc:
-        raise ValueError(f"effect {spec!r}: scale {scale_text!r} is not a number") from exc
-    return CATALOGUE[name], scale
+        raise ValueError(f"{what} {spec!r}: scale {scale_text!r} is not a number") from exc
+    if not math.isfinite(scale):
+        raise ValueError(f"{what} {spec!r}: scale must be finite")
+    return table[name], scale
+
+
+def parse_effect_spec(spec: str) -> tuple[Effect, float]:
+    """``NAME`` or ``NAME=SCALE`` (SCALE multiplies the default size) -> (effect, scale)."""
+    return parse_scaled_spec(spec, CATALOGUE, "effect")
 
 
 def catalogue_table() -> str:

@@ -6,14 +6,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from aerosid.diagnosis.core import _f  # JSON-safe float
+
 __all__ = ["Finding", "localisation_text", "localisation_hint"]
-
-
-def _f(x) -> float | None:
-    if x is None:
-        return None
-    x = float(x)
-    return x if math.isfinite(x) else None
 
 
 @dataclass(frozen=True)

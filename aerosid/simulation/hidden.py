@@ -94,17 +94,9 @@ HIDDEN: dict[str, HiddenEffect] = {
 
 def parse_hidden_spec(spec: str) -> tuple[HiddenEffect, float]:
     """``NAME`` or ``NAME=SCALE`` -> (hidden effect, scale)."""
-    name, _, scale_text = spec.partition("=")
-    name = name.strip()
-    if name not in HIDDEN:
-        raise KeyError(f"unknown hidden (uncatalogued) effect {name!r}; known: {', '.join(HIDDEN)}")
-    try:
-        scale = float(scale_text) if scale_text else 1.0
-    except ValueError as exc:
-        raise ValueError(f"hidden effect {spec!r}: scale {scale_text!r} is not a number") from exc
-    if not math.isfinite(scale):
-        raise ValueError(f"hidden effect {spec!r}: scale must be finite")
-    return HIDDEN[name], scale
+    from aerosid.effects import parse_scaled_spec
+
+    return parse_scaled_spec(spec, HIDDEN, "hidden (uncatalogued) effect")
 
 
 def hidden_table() -> str:
