@@ -235,10 +235,13 @@ def _trimmed_fdm(jsbsim, sim_cfg: dict, throttle: float | None = None):
     if throttle is None:
         fdm["simulation/do_simple_trim"] = 1
         return fdm
-    from aerosid.simulation.jsbsim_trim import trim as fixed_throttle_trim
+    from aerosid.simulation.jsbsim_trim import TrimError, trim as fixed_throttle_trim
 
     fdm["propulsion/set-running"] = -1  # a piston engine set running before the first run_ic stays off
-    fixed_throttle_trim(fdm, tr["h_m"], tr["V_m_s"], "glide", throttle=float(throttle))
+    try:
+        fixed_throttle_trim(fdm, tr["h_m"], tr["V_m_s"], "glide", throttle=float(throttle))
+    except TrimError as exc:  # a ValueError: the CLI reports it as a bad parameter, no traceback
+        raise ValueError(f"the designed input's throttle_cmd_norm {throttle:g}: {exc}") from exc
     return fdm
 
 
