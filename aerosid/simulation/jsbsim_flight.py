@@ -215,10 +215,10 @@ def _trimmed_fdm(jsbsim, sim_cfg: dict, throttle: float | None = None):
     (aerosid.simulation.jsbsim_trim.trim, mode "glide"), the speed and height stay."""
     fdm = jsbsim.FGFDMExec(jsbsim.get_default_root_dir())
     fdm.set_debug_level(0)
-    if throttle is not None:
-        fdm.disable_output()  # the trim initialises JSBSim many times
     if not fdm.load_model(sim_cfg["jsbsim"]["model"]):
         raise RuntimeError(f"JSBSim could not load {sim_cfg['jsbsim']['model']!r}")
+    if throttle is not None:
+        fdm.disable_output()  # the trim initialises JSBSim many times (c172x's output file, one error each)
     for i, w in enumerate(sim_cfg["loading"]["pointmass_weights_lbs"]):
         fdm[f"inertia/pointmass-weight-lbs[{i}]"] = float(w)
     fdm.set_dt(float(sim_cfg["jsbsim"]["dt_s"]))
