@@ -71,6 +71,9 @@ def test_the_design_proposes_power_off_only_when_the_model_error_stops_the_separ
     assert "--power idle" in hint and "Cm_q +9.7 %" in hint and "Cm_alpha_dot" not in hint
     # already power-off, or the noise is what fails, or no throttle to set: no proposal
     assert power_hint({"Cm_q": 9.7}, {"Cm_q": 1.0}, "idle", Jsb()) == ""
-    assert power_hint({"Cm_q": 9.7}, {"Cm_q": 6.0}, "trim", Jsb()) == ""
+    assert power_hint({"Cm_q": 3.0}, {"Cm_q": 6.0}, "trim", Jsb()) == ""
+    # the powered c172x design: Cm_q's model error dominates although Cm_alpha_dot's 2 sigma is 16 %
+    hint = power_hint({"Cm_q": 9.7, "Cm_alpha_dot": 2.4}, {"Cm_q": 0.8, "Cm_alpha_dot": 7.9}, "trim", Jsb())
+    assert "Cm_q +9.7 %" in hint and "Cm_alpha_dot" not in hint
     assert power_hint({"Cm_q": 9.7}, {"Cm_q": 1.0}, "trim", object()) == ""
     assert power_hint({"Cm_q": 3.0}, {"Cm_q": 1.0}, "trim", Jsb()) == ""
