@@ -22,8 +22,12 @@ import click
 @click.option("--no-refine", is_flag=True,
               help="Predict with the run's residual only (skip the one noisy simulated flight of the design "
                    "through the pipeline that measures how the manoeuvre changes the estimation error).")
+@click.option("--power", type=click.Choice(["trim", "idle"]), default="trim", show_default=True,
+              help="JSBSim aircraft: fly at the simulator's trimmed power, or power-off ('idle': a glide trimmed at "
+                   "idle throttle, the input gets throttle_cmd_norm = 0) so the propeller's moment stays out of "
+                   "the pitch-damping fit.")
 @click.option("--quiet", is_flag=True, help="No progress lines.")
-def design(run_dir, effect, size, versus, out_dir, mach_half_width, no_refine, quiet):
+def design(run_dir, effect, size, versus, out_dir, mach_half_width, no_refine, power, quiet):
     """Propose a manoeuvre that makes an effect detectable (or separates two terms).
 
     Uses the run's identified model and residual and the vehicle file's limits
@@ -42,7 +46,7 @@ def design(run_dir, effect, size, versus, out_dir, mach_half_width, no_refine, q
     say = (lambda msg: None) if quiet else (lambda msg: click.echo(f"  .. {msg}", err=True))
     try:
         d = run_design(run_dir, effect, size, versus, mach_half_width=mach_half_width, refine=not no_refine,
-                       progress=say)
+                       progress=say, power=power)
     except (DesignError, VersionError, VehicleError) as exc:
         raise click.ClickException(str(exc)) from exc
     except ImportError as exc:

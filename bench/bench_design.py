@@ -107,21 +107,32 @@ def one_c172x(job: tuple) -> dict:
     return row
 
 
-def oracle_scan(duration_s: float = 90.0, amplitude_rad: float = 0.07) -> str:
+def oracle_scan(duration_s: float = 90.0, amplitude_rad: float = 0.07, power: str | None = None) -> str:
     """c172x: every candidate shape at one amplitude, noise-free; the default Cm model (1, alpha,
     delta_p, q_hat, alpha_dot_hat, |beta|) fitted to what the gyros see (aerodynamic Cm + the
-    propeller's moment) with the true regressors: the model's own error on that manoeuvre."""
+    propeller's moment) with the true regressors: the model's own error on that manoeuvre.
+    power="idle": flown in the power-off glide (throttle_cmd_norm = 0); the table then also
+    gives the fit to the aerodynamic Cm alone and the propeller moment's spread."""
     from aerosid.design.core import _lateral_doublets
     from aerosid.design.waveforms import candidate_waveforms
     from aerosid.simulation.jsbsim_flight import simulate_jsbsim
 
     t = np.arange(int(round(duration_s / 0.01)) + 1) * 0.01
     extra = _lateral_doublets(t, duration_s - 16.0)
-    rows = [f"c172x oracle scan: {duration_s:g} s, elevator command amplitude {amplitude_rad:g} rad", "",
-            "| shape | oracle Cm_q % | oracle Cm_alpha_dot % | load factor | alpha deg |", "|---|---|---|---|---|"]
+    if power is None:
+        rows = [f"c172x oracle scan: {duration_s:g} s, elevator command amplitude {amplitude_rad:g} rad", "",
+                "| shape | oracle Cm_q % | oracle Cm_alpha_dot % | load factor | alpha deg |", "|---|---|---|---|---|"]
+    else:
+        rows = [f"c172x oracle scan, power {power} (throttle_cmd_norm 0: trimmed glide at idle): {duration_s:g} s, "
+                f"elevator command amplitude {amplitude_rad:g} rad", "",
+                "| shape | oracle Cm_q % (Cm + Cm_prop) | oracle Cm_alpha_dot % (Cm + Cm_prop) | aero Cm only: Cm_q % "
+                "| aero Cm only: Cm_alpha_dot % | std Cm_prop / std Cm | load factor | alpha deg |",
+                "|---|---|---|---|---|---|---|---|"]
     for w in candidate_waveforms(t, 3.0, duration_s - 16.0, 0.34):
         tab = extra.copy()
         tab["elevator_cmd_rad"] = amplitude_rad * w.values
+        if power == "idle":
+            tab["throttle_cmd_norm"] = 0.0
         f = simulate_jsbsim("c172x", "3211", seed=0, faults=False, input_table=tab)
         T = f.truth
         X = np.column_stack([np.ones(len(T)), T["alpha_rad"], T["delta_p_rad"], T["q_hat"], T["alpha_dot_hat"],
@@ -129,7 +140,12 @@ def oracle_scan(duration_s: float = 90.0, amplitude_rad: float = 0.07) -> str:
         th = np.linalg.lstsq(X, T["Cm"].to_numpy() + T["Cm_prop"].to_numpy(), rcond=None)[0]
         c = f.coefficients
         n = -T["az_cg_m_s2"] / 9.80665
-        rows.append(f"| {w.label()} | {100 * (th[3] / c['Cm_q'] - 1):+.1f} | {100 * (th[4] / c['Cm_alpha_dot'] - 1):+.1f}"
+        cells = [f"{100 * (th[3] / c['Cm_q'] - 1):+.1f}", f"{100 * (th[4] / c['Cm_alpha_dot'] - 1):+.1f}"]
+        if power is not None:
+            ta = np.linalg.lstsq(X, T["Cm"].to_numpy(), rcond=None)[0]
+            cells += [f"{100 * (ta[3] / c['Cm_q'] - 1):+.1f}", f"{100 * (ta[4] / c['Cm_alpha_dot'] - 1):+.1f}",
+                      f"{T['Cm_prop'].std() / T['Cm'].std():.3f}"]
+        rows.append(f"| {w.label()} | {' | '.join(cells)}"
                     f" | {n.min():.2f}..{n.max():.2f} | {np.degrees(T.alpha_rad.min()):.1f}.."
                     f"{np.degrees(T.alpha_rad.max()):.1f} |")
     return "\n".join(rows) + "\n"
@@ -234,10 +250,12 @@ def main() -> None:
     ap.add_argument("--seeds", default="0-1")
     ap.add_argument("--jobs", type=int, default=1)
     ap.add_argument("--tag", default=None)
+    ap.add_argument("--power", choices=("idle",), default=None, help="oracle-scan: fly the power-off glide")
     args = ap.parse_args()
     if args.kind == "oracle-scan":
-        text = oracle_scan()
-        (RESULTS / "design_c172x_oracle_scan.md").write_text(text)
+        text = oracle_scan(power=args.power)
+        name = "design_c172x_oracle_scan.md" if args.power is None else f"design_c172x_oracle_scan_{args.power}.md"
+        (RESULTS / name).write_text(text)
         print(text)
         return
     if args.kind == "report":

@@ -27,6 +27,7 @@ import numpy as np
 import pandas as pd
 
 from aerosid.design.limits import Limits, read_limits
+from aerosid.design.power import POWER_SETTINGS, power_hint
 from aerosid.design.predict import POWER, Prediction, ResidualModel, predict_covariance
 from aerosid.design.waveforms import Waveform, candidate_waveforms
 
@@ -182,7 +183,7 @@ def _use(truth: pd.DataFrame, limits: Limits, dt: float, mask: np.ndarray | None
 # ----------------------------------------------------------------------------- design
 def design(run_dir: str | Path, effect: str, size: float | None = None, versus: str | None = None, *,
            mach_half_width: float = 0.5, kinds: tuple[str, ...] = ("3211", "doublet", "multisine"),
-           refine: bool = True, progress=None, flyer_factory=None) -> Design:
+           refine: bool = True, progress=None, flyer_factory=None, power: str = "trim") -> Design:
     from aerosid.diagnosis.candidates import derived_signals
     from aerosid.identify import mach_window_mask
     from aerosid.models import vehicle_signals
@@ -191,6 +192,8 @@ def design(run_dir: str | Path, effect: str, size: float | None = None, versus: 
     from aerosid.versions import latest_models, read_flight_data, run_vehicle
 
     say = progress or (lambda msg: None)
+    if power not in POWER_SETTINGS:
+        raise DesignError(f"unknown power setting {power!r}; choices: {', '.join(POWER_SETTINGS)}")
     run_dir = Path(run_dir)
     vref = run_vehicle(run_dir)
     vehicle = load_vehicle(vref)
@@ -260,8 +263,11 @@ def design(run_dir: str | Path, effect: str, size: float | None = None, versus: 
     # ---- the flyer
     notes = list(limits.assumed and [f"assumed limit: {a}" for a in limits.assumed])
     coefs = dict(zip(fit.names, np.asarray(fit.estimate, float))) if ch == "Cm" else {}
-    flyer, base, start, end, linear = (flyer_factory or default_flyer)(vehicle, limits, coefs, terms[0].effect,
-                                                                        sizes[0], say)
+    if flyer_factory is None:
+        flyer, base, start, end, linear = default_flyer(vehicle, limits, coefs, terms[0].effect, sizes[0], say,
+                                                        power=power)
+    else:
+        flyer, base, start, end, linear = flyer_factory(vehicle, limits, coefs, terms[0].effect, sizes[0], say)
     in_win = mach_window_mask(base["mach"].to_numpy(float), vehicle.mach_reference, mach_half_width)
     dt = flyer.dt
     t = flyer.t
@@ -353,16 +359,22 @@ def design(run_dir: str | Path, effect: str, size: float | None = None, versus: 
                    + ("; model error on the manoeuvre " + ", ".join(f"{t} {v:+.1f} %" for t, v in oracle.items())
                       if oracle else "")
                    + "; the aim is |model error| + 2 sigma <= 10 % of each.")
+        hint = power_hint(oracle, rel, power, flyer)
+        if hint:
+            verdict += " " + hint
     u = np.asarray(a * best.waveform.values)
     table = pd.DataFrame({"t_s": t, flyer.column: u})
     if getattr(flyer, "extra", None) is not None:
         for c in flyer.extra.columns:
             if c != "t_s":
                 table[c] = flyer.extra[c].to_numpy(float)
+    if getattr(flyer, "throttle", None) is not None:  # a fixed-throttle glide (--power idle)
+        table["throttle_cmd_norm"] = float(flyer.throttle)
     w = best.waveform
     wave = {"kind": w.kind, "label": w.label(), "time_unit_s": w.time_unit_s, "band_hz": list(w.band_hz),
             "amplitude_rad": float(a), "start_s": w.start_s, "end_s": w.end_s, "duration_s": float(t[-1]),
-            "ramp_s": ramp, "column": flyer.column}
+            "ramp_s": ramp, "column": flyer.column, "power": power,
+            "throttle_cmd_norm": getattr(flyer, "throttle", None)}
     cand_rows = tuple({"label": e.waveform.label(), "amplitude_rad": e.amplitude_rad,
                        **{f"sigma_{tt}": e.prediction.sigma(tt) for tt in targets},
                        **{f"model_error_pct_{tt}": v for tt, v in e.model_error_pct.items()},
@@ -400,8 +412,12 @@ def _oracle(truth: pd.DataFrame, signals: dict, mask: np.ndarray, model, ch: str
     return {t: float(100.0 * (est[t] / coefficients[t] - 1.0)) for t in targets if coefficients[t] != 0}
 
 
-def default_flyer(vehicle, limits: Limits, coefs: dict, effect: str | None, size: float, say):
-    """(flyer, baseline truth, input start [s], input end [s], linearised?) for the run's vehicle."""
+def default_flyer(vehicle, limits: Limits, coefs: dict, effect: str | None, size: float, say, power: str = "trim"):
+    """(flyer, baseline truth, input start [s], input end [s], linearised?) for the run's vehicle.
+    power: "trim" (the simulator's trim) or "idle" (JSBSim aircraft: a glide at idle throttle)."""
+    if power != "trim" and vehicle.name == "seed-rlv":
+        raise DesignError(f"--power {power}: the built-in simulator (seed-rlv) has no throttle; it is an option "
+                          "of the JSBSim aircraft (c172x)")
     if vehicle.name == "seed-rlv":
         from aerosid.design.flyers import RLVFlyer
         from aerosid.identify import mach_window_mask
@@ -423,8 +439,8 @@ def default_flyer(vehicle, limits: Limits, coefs: dict, effect: str | None, size
     duration = limits.duration_max_s
     end = duration - 16.0
     extra = _lateral_doublets(np.arange(int(round(duration / 0.01)) + 1) * 0.01, end)
-    flyer = JSBSimFlyer(vehicle.name, duration, extra=extra)
-    say(f"flying the baseline in JSBSim ({duration:g} s)")
+    flyer = JSBSimFlyer(vehicle.name, duration, extra=extra, throttle=POWER_SETTINGS[power])
+    say(f"flying the baseline in JSBSim ({duration:g} s{', power-off glide at idle throttle' if power == 'idle' else ''})")
     return flyer, flyer.fly(np.zeros_like(flyer.t)), 3.0, end, False
 
 

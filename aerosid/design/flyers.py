@@ -108,15 +108,19 @@ class RLVFlyer:
 
 
 class JSBSimFlyer:
-    """A JSBSim aircraft; the designed elevator command ``elevator_cmd_rad``."""
+    """A JSBSim aircraft; the designed elevator command ``elevator_cmd_rad``.  throttle: None
+    flies the simulator's own trim; a value (0 = idle) a glide trimmed at that fixed throttle
+    (the input's ``throttle_cmd_norm`` column, aerosid.design.io)."""
 
     column = "elevator_cmd_rad"
 
-    def __init__(self, aircraft: str, duration_s: float, dt: float = 0.01, extra: pd.DataFrame | None = None):
+    def __init__(self, aircraft: str, duration_s: float, dt: float = 0.01, extra: pd.DataFrame | None = None,
+                 throttle: float | None = None):
         self.aircraft = aircraft
         self.dt = dt
         self.t = np.arange(int(round(duration_s / dt)) + 1) * dt
         self.extra = extra  # other axes' inputs (e.g. the lateral doublets), on self.t
+        self.throttle = throttle
 
     def table(self, u: np.ndarray) -> pd.DataFrame:
         df = pd.DataFrame({"t_s": self.t, self.column: np.asarray(u, float)})
@@ -124,6 +128,8 @@ class JSBSimFlyer:
             for c in self.extra.columns:
                 if c != "t_s":
                     df[c] = self.extra[c].to_numpy(float)
+        if self.throttle is not None:
+            df["throttle_cmd_norm"] = float(self.throttle)
         return df
 
     def fly(self, u: np.ndarray) -> pd.DataFrame:

@@ -13,6 +13,11 @@ An input file holds ``t_s`` plus the control columns the simulator takes, radian
   JSBSim's signs: positive elevator = trailing edge down], converted to JSBSim's
   normalised commands through the aircraft's own control scaling; a missing column
   means no input on that axis.  The flight lasts the file's time span.
+  Optionally ``throttle_cmd_norm`` (JSBSim's normalised throttle, 0 = idle .. 1 = full;
+  constant over the file; c172x only): the flight is trimmed in a steady glide at this
+  fixed throttle (the flight-path angle is solved for) and flown at it -- 0 is the
+  power-off glide that keeps the propeller's moment out of the pitch-damping fit
+  (docs/design.md).  Without it the throttle is the trim's (simulation.toml).
 """
 from __future__ import annotations
 
@@ -22,7 +27,9 @@ import numpy as np
 import pandas as pd
 
 RLV_COLUMNS = ("delta_p_cmd_rad", "delta_y_cmd_rad", "phi_cmd_rad")
-JSBSIM_COLUMNS = ("elevator_cmd_rad", "aileron_cmd_rad", "rudder_cmd_rad")
+JSBSIM_COLUMNS = ("elevator_cmd_rad", "aileron_cmd_rad", "rudder_cmd_rad", "throttle_cmd_norm")
+#: settings rather than time histories: constant over the file, inside their range
+SETTING_RANGES = {"throttle_cmd_norm": (0.0, 1.0)}
 INPUT_COLUMNS = RLV_COLUMNS + JSBSIM_COLUMNS
 
 
@@ -53,6 +60,16 @@ def read_input(path: str | Path, allowed: tuple[str, ...] = INPUT_COLUMNS) -> pd
         if bad.size:
             raise InputFileError(f"{path}: column {c}: {bad.size} non-finite value(s), rows {_rows(bad)}")
         df[c] = v
+    for c, (lo, hi) in SETTING_RANGES.items():
+        if c in df.columns:
+            v = df[c].to_numpy(float)
+            bad = np.flatnonzero((v < lo) | (v > hi))
+            if bad.size:
+                raise InputFileError(f"{path}: column {c}: {bad.size} value(s) outside {lo:g}..{hi:g}, rows {_rows(bad)}")
+            bad = np.flatnonzero(v != v[0])
+            if bad.size:
+                raise InputFileError(f"{path}: column {c} must be constant (a trim setting: the flight is trimmed "
+                                     f"at it), but changes at rows {_rows(bad)}")
     t = df["t_s"].to_numpy(float)
     bad = np.flatnonzero(np.diff(t) <= 0) + 1
     if bad.size:

@@ -113,6 +113,9 @@ def simulate_aircraft(aircraft: str, seed: int = 0, *, faults: bool = True, prog
     """Fly JSBSim's `aircraft` through the generated flight design (or a designed input,
     ``input_table``: aerosid.simulation.jsbsim_input); noise and faults from `seed`.
     progress: an optional callback progress(stage, fraction)."""
+    if input_table is not None and "throttle_cmd_norm" in input_table.columns:
+        raise ValueError(f"{aircraft}: a designed input's throttle_cmd_norm (a fixed-throttle glide) is flown for "
+                         "c172x only; the generated flight design trims its own throttle")
     if progress is not None:
         progress("design and trim the flight", 0.0)
     jsbsim = _import_jsbsim()

@@ -208,11 +208,17 @@ _RECORD = [
 ]
 
 
-def _trimmed_fdm(jsbsim, sim_cfg: dict):
+def _trimmed_fdm(jsbsim, sim_cfg: dict, throttle: float | None = None):
+    """JSBSim's c172x trimmed as simulation.toml says (JSBSim's own trim: the throttle holds
+    the speed on the configured glide path), or, with `throttle` [0..1, 0 = idle], a steady
+    glide at that fixed throttle: the flight-path angle is then solved for
+    (aerosid.simulation.jsbsim_trim.trim, mode "glide"), the speed and height stay."""
     fdm = jsbsim.FGFDMExec(jsbsim.get_default_root_dir())
     fdm.set_debug_level(0)
     if not fdm.load_model(sim_cfg["jsbsim"]["model"]):
         raise RuntimeError(f"JSBSim could not load {sim_cfg['jsbsim']['model']!r}")
+    if throttle is not None:
+        fdm.disable_output()  # the trim initialises JSBSim many times (c172x's output file, one error each)
     for i, w in enumerate(sim_cfg["loading"]["pointmass_weights_lbs"]):
         fdm[f"inertia/pointmass-weight-lbs[{i}]"] = float(w)
     fdm.set_dt(float(sim_cfg["jsbsim"]["dt_s"]))
@@ -226,7 +232,16 @@ def _trimmed_fdm(jsbsim, sim_cfg: dict):
     fdm["fcs/flap-cmd-norm"] = 0.0
     fdm["propulsion/set-running"] = -1
     fdm.run_ic()
-    fdm["simulation/do_simple_trim"] = 1
+    if throttle is None:
+        fdm["simulation/do_simple_trim"] = 1
+        return fdm
+    from aerosid.simulation.jsbsim_trim import TrimError, trim as fixed_throttle_trim
+
+    fdm["propulsion/set-running"] = -1  # a piston engine set running before the first run_ic stays off
+    try:
+        fixed_throttle_trim(fdm, tr["h_m"], tr["V_m_s"], "glide", throttle=float(throttle))
+    except TrimError as exc:  # a ValueError: the CLI reports it as a bad parameter, no traceback
+        raise ValueError(f"the designed input's throttle_cmd_norm {throttle:g}: {exc}") from exc
     return fdm
 
 
@@ -465,7 +480,11 @@ def simulate_jsbsim(aircraft: str = "c172x", manoeuvre: str = "3211", seed: int 
     xml_root = ET.parse(xml_path).getroot()
     tables = AeroTables(xml_path)
 
-    fdm = _trimmed_fdm(jsbsim, sim_cfg)
+    # a designed input may fix the throttle (throttle_cmd_norm, e.g. 0 = idle: a power-off glide)
+    throttle = None
+    if input_table is not None and "throttle_cmd_norm" in input_table.columns:
+        throttle = float(input_table["throttle_cmd_norm"].iloc[0])
+    fdm = _trimmed_fdm(jsbsim, sim_cfg, throttle)
     dt = float(sim_cfg["jsbsim"]["dt_s"])
     n = int(round(float(sim_cfg["flight"]["duration_s"]) / dt)) + 1
     t = np.arange(n) * dt
@@ -481,7 +500,7 @@ def simulate_jsbsim(aircraft: str = "c172x", manoeuvre: str = "3211", seed: int 
                                      "metrics/aero-rp-x-in", "metrics/aero-rp-y-in", "metrics/aero-rp-z-in",
                                      "inertia/ixx-slugs_ft2", "inertia/iyy-slugs_ft2", "inertia/izz-slugs_ft2",
                                      "inertia/ixz-slugs_ft2", "inertia/ixy-slugs_ft2", "inertia/iyz-slugs_ft2",
-                                     "velocities/u-fps", "velocities/w-fps")})
+                                     "velocities/u-fps", "velocities/w-fps", "flight-path/gamma-rad")})
 
     # hysteresis take-up overshoots [normalised command]
     m = sim_cfg["manoeuvres"][manoeuvre]
@@ -632,6 +651,9 @@ def simulate_jsbsim(aircraft: str = "c172x", manoeuvre: str = "3211", seed: int 
             "pitch_trim_cmd_norm": trim["fcs/pitch-trim-cmd-norm"], "aileron_cmd_norm": trim["fcs/aileron-cmd-norm"],
             "rudder_cmd_norm": trim["fcs/rudder-cmd-norm"], "throttle_cmd_norm": trim["fcs/throttle-cmd-norm"],
             "thrust_N": trim["propulsion/engine/thrust-lbs"] * LBF,
+            "gamma_deg": trim["flight-path/gamma-rad"] * deg,
+            "power": ("JSBSim trim (throttle holds the speed on the configured glide path)" if throttle is None
+                      else f"glide at fixed throttle {throttle:g} (designed input's throttle_cmd_norm)"),
             "Cm_prop": trim["moments/m-prop-lbsft"] / (trim["aero/qbar-psf"] * S_ft2 * cbar_ft),
             "Cl_prop": trim["moments/l-prop-lbsft"] / (trim["aero/qbar-psf"] * S_ft2 * b_ft),
             "Cn_prop": trim["moments/n-prop-lbsft"] / (trim["aero/qbar-psf"] * S_ft2 * b_ft),
