@@ -131,18 +131,9 @@ def resolve_term(text: str, models: dict, vehicle):
 def _signals_from_truth(truth: pd.DataFrame, vehicle) -> dict:
     from aerosid.diagnosis.candidates import derived_signals
     from aerosid.diagnosis.synthetic import NO_NOISE, flight_data_from_truth
-    from aerosid.identification.band import signal_band_edge_hz
     from aerosid.models import vehicle_signals
 
     fd = flight_data_from_truth(truth, NO_NOISE)
-    # the pipeline differentiates alpha over a window set by the flight's own band edge
-    # (aerosid.identification.band): the same here, from this flight's rates, so that the
-    # model-error check sees the alpha-dot the pipeline will (a fixed +-0.25 s window put
-    # C_m_q at +11.5 % where the flown design measured +5.6 %)
-    rates = truth[["p_rad_s", "q_rad_s", "r_rad_s"]].to_numpy(float)
-    t = truth["t_s"].to_numpy(float)
-    if len(t) > 32 and np.all(np.isfinite(rates)):
-        fd = fd.assign(band_hz=signal_band_edge_hz(rates, float(np.median(np.diff(t)))))
     return derived_signals(vehicle_signals(fd, vehicle), vehicle.length_pitch_m, vehicle.length_lateral_m)
 
 
