@@ -134,31 +134,7 @@ def _signals_from_truth(truth: pd.DataFrame, vehicle) -> dict:
     from aerosid.models import vehicle_signals
 
     fd = flight_data_from_truth(truth, NO_NOISE)
-    if "band_hz" in truth:  # a _pipeline_view: differentiate over the pipeline's window
-        fd = fd.assign(band_hz=truth["band_hz"].to_numpy(float))
     return derived_signals(vehicle_signals(fd, vehicle), vehicle.length_pitch_m, vehicle.length_lateral_m)
-
-
-def _pipeline_view(truth: pd.DataFrame) -> pd.DataFrame:
-    """The noise-free flight as the pipeline's regression sees it (aerosid.identification.band):
-    every signal through the common zero-phase low-pass at the band edge of the flight's own
-    rates, and ``band_hz`` set, so alpha-dot is differentiated over the pipeline's window.
-    For the model-error check only: fitted to the raw truth with a fixed +-0.25 s alpha-dot
-    window, the check put C_m_q at +11.5 % on the c172x power-off design the pipeline then
-    measured at +5.6 % over 10 seeds."""
-    from aerosid.identification.band import low_pass_runs, signal_band_edge_hz
-
-    t = truth["t_s"].to_numpy(float)
-    rates = truth[["p_rad_s", "q_rad_s", "r_rad_s"]].to_numpy(float)
-    if len(t) < 32 or not np.all(np.isfinite(rates)):
-        return truth
-    dt = float(np.median(np.diff(t)))
-    band = signal_band_edge_hz(rates, dt)
-    out = truth.copy()
-    for c in out.columns:
-        if c != "t_s" and pd.api.types.is_float_dtype(out[c]) and np.all(np.isfinite(out[c].to_numpy(float))):
-            out[c] = low_pass_runs(out[c].to_numpy(float), 1.0 / dt, band, [slice(0, len(t))])
-    return out.assign(band_hz=band)
 
 
 def _max_amplitude(base: np.ndarray, d: np.ndarray, lo: float, hi: float) -> float:
@@ -307,8 +283,7 @@ def design(run_dir: str | Path, effect: str, size: float | None = None, versus: 
         bias = {}
         if not linear:  # the model's own error on this shape (at a_ref), then per unit amplitude
             mk = mach_window_mask(unit["mach"].to_numpy(float), vehicle.mach_reference, mach_half_width)
-            seen = _pipeline_view(unit)
-            bias = _oracle(seen, _signals_from_truth(seen, vehicle), mk, model, ch, targets,
+            bias = _oracle(unit, _signals_from_truth(unit, vehicle), mk, model, ch, targets,
                            getattr(flyer, "coefficients", None))
             unit = _scaled(base, unit, 1.0 / a_ref, cols)
         a = _limit_amplitude(base, unit, limits, dt)
@@ -337,9 +312,7 @@ def design(run_dir: str | Path, effect: str, size: float | None = None, versus: 
     in_win_full = mach_window_mask(tr["mach"].to_numpy(float), vehicle.mach_reference, mach_half_width)
     s = _signals_from_truth(tr, vehicle)
     Xf, _ = model.design({kk: np.asarray(v)[in_win_full] if np.ndim(v) else v for kk, v in s.items()})
-    seen = _pipeline_view(tr)
-    oracle = _oracle(seen, _signals_from_truth(seen, vehicle), in_win_full, model, ch, targets,
-                     getattr(flyer, "coefficients", None))
+    oracle = _oracle(tr, s, in_win_full, model, ch, targets, getattr(flyer, "coefficients", None))
     if oracle:
         notes.append("model error on this manoeuvre (the model fitted to the simulator's noise-free flight as the "
                      "sensors see it, true regressors): " + ", ".join(f"{t} {v:+.1f} %" for t, v in oracle.items()))
