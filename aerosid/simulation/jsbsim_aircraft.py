@@ -27,13 +27,13 @@ import xml.etree.ElementTree as ET
 import numpy as np
 import pandas as pd
 
-from aerosid.rigid_body import lever_arm_acceleration
 from aerosid.simulation import SimulatedFlight
-from aerosid.simulation.jsbsim_design import (DT_S, FT, INCH, LBF, PSF, SLUG, SLUG_FT2, SLUG_FT3, FlightDesign,
+from aerosid.simulation.jsbsim_design import (DT_S, FT, INCH, LBF, PSF, SLUG, SLUG_FT2, FlightDesign,
                                               UnsupportedAircraft, flight_design, symmetric_loading)
 from aerosid.simulation.jsbsim_linear import abs_beta_slope, mach_slopes, model_coefficients
-from aerosid.simulation.jsbsim_flight import (COMMON_PROPERTIES, _fly, _import_jsbsim, flight_statistics, _schedule, _takeup_steps, _truth_check,
-                                              make_telemetry, rates_at_the_moments)
+from aerosid.simulation.jsbsim_flight import (COMMON_PROPERTIES, _fly, _import_jsbsim, coefficient_columns,
+                                              flight_statistics, _schedule, _takeup_steps, _truth_check,
+                                              make_telemetry, state_columns)
 from aerosid.simulation.jsbsim_tables import DEG, AeroTables
 from aerosid.simulation.jsbsim_trim import initialise, open_fdm, start_engines
 from aerosid.simulation.jsbsim_vehicle import vehicle_toml
@@ -166,45 +166,22 @@ def simulate_aircraft(aircraft: str, seed: int = 0, *, faults: bool = True, prog
     offset = tuple(float(k) for k in inst["accelerometer"]["offset_m"])
 
     # ---- truth ----
-    mass_kg = rec["inertia/mass-slugs"] * SLUG
-    V = rec["velocities/vt-fps"] * FT
-    qbar_pa = rec["aero/qbar-psf"] * PSF
-    xdot = [rec[f"accelerations/{a}dot-rad_sec2"] for a in "pqr"]
-    state = [rec[f"velocities/{a}-rad_sec"] for a in "pqr"]
-    p, q, r = (rates_at_the_moments(x, xd, dt) for x, xd in zip(state, xdot))
-    f_cg = [rec[f"forces/fb{a}-total-lbs"] * LBF / mass_kg for a in "xyz"]
-    lever = lever_arm_acceleration(p, q, r, *xdot, offset)
-    f_sensor = [f + lv for f, lv in zip(f_cg, lever)]
-    qS_lbs = rec["aero/qbar-psf"] * S_ft2
-    alpha, beta = rec["aero/alpha-rad"], rec["aero/beta-rad"]
+    cols, mass_kg = state_columns(rec, t, dt, offset)
+    V, qbar_pa, alpha, beta = cols["V_m_s"], cols["qbar_pa"], cols["alpha_rad"], cols["beta_rad"]
+    p, q, r = cols["p_rad_s"], cols["q_rad_s"], cols["r_rad_s"]
+    f_sensor = [cols[f"a{a}_sensor_m_s2"] for a in "xyz"]
     channels, surface_names, mixing, limits = _surfaces(design, rec)
     ci2vel, bi2vel = rec["aero/ci2vel"], rec["aero/bi2vel"]
     prop_thrust = sum(rec.get(f"propulsion/engine[{i}]/thrust-lbs", 0.0) for i in range(n_eng)) * LBF
     truth = pd.DataFrame({
-        "t_s": t,
-        "h_m": rec["position/h-sl-ft"] * FT, "V_m_s": V, "mach": rec["velocities/mach"], "qbar_pa": qbar_pa,
-        "rho_kg_m3": rec["atmosphere/rho-slugs_ft3"] * SLUG_FT3, "g_m_s2": rec["accelerations/gravity-ft_sec2"] * FT,
-        "phi_rad": rec["attitude/phi-rad"], "theta_rad": rec["attitude/theta-rad"], "psi_rad": rec["attitude/psi-rad"],
-        "p_rad_s": p, "q_rad_s": q, "r_rad_s": r,
-        "p_state_rad_s": state[0], "q_state_rad_s": state[1], "r_state_rad_s": state[2],
-        "p_dot_rad_s2": xdot[0], "q_dot_rad_s2": xdot[1], "r_dot_rad_s2": xdot[2],
-        "ax_cg_m_s2": f_cg[0], "ay_cg_m_s2": f_cg[1], "az_cg_m_s2": f_cg[2],
-        "ax_sensor_m_s2": f_sensor[0], "ay_sensor_m_s2": f_sensor[1], "az_sensor_m_s2": f_sensor[2],
-        "alpha_rad": alpha, "beta_rad": beta, "alpha_dot_rad_s": rec["aero/alphadot-rad_sec"],
+        **cols,
         "delta_p_rad": rec[ctl.pitch], "delta_r_rad": rec[ctl.roll], "delta_y_rad": rec[ctl.yaw],
         "d1_rad": channels[0], "d2_rad": channels[1], "d3_rad": channels[2], "d4_rad": channels[3],
         "elevator_cmd_norm": rec["fcs/elevator-cmd-norm"], "aileron_cmd_norm": rec["fcs/aileron-cmd-norm"],
         "rudder_cmd_norm": rec["fcs/rudder-cmd-norm"],
         "p_hat": rec["velocities/p-aero-rad_sec"] * bi2vel, "q_hat": rec["velocities/q-aero-rad_sec"] * ci2vel,
         "r_hat": rec["velocities/r-aero-rad_sec"] * bi2vel, "alpha_dot_hat": rec["aero/alphadot-rad_sec"] * ci2vel,
-        "CA": -rec["forces/fbx-aero-lbs"] / qS_lbs, "CY": rec["forces/fby-aero-lbs"] / qS_lbs,
-        "CN": -rec["forces/fbz-aero-lbs"] / qS_lbs,
-        "Cl": rec["moments/l-aero-lbsft"] / (qS_lbs * b_ft), "Cm": rec["moments/m-aero-lbsft"] / (qS_lbs * cbar_ft),
-        "Cn": rec["moments/n-aero-lbsft"] / (qS_lbs * b_ft),
-        "CX_prop": rec["forces/fbx-prop-lbs"] / qS_lbs, "CZ_prop": rec["forces/fbz-prop-lbs"] / qS_lbs,
-        "Cl_prop": rec["moments/l-prop-lbsft"] / (qS_lbs * b_ft),
-        "Cm_prop": rec["moments/m-prop-lbsft"] / (qS_lbs * cbar_ft),
-        "Cn_prop": rec["moments/n-prop-lbsft"] / (qS_lbs * b_ft),
+        **coefficient_columns(rec, S_ft2, cbar_ft, b_ft),
         "thrust_N": prop_thrust * np.ones(n), "mass_kg": mass_kg, "x_cg_m": rec["inertia/cg-x-in"] * INCH,
     })
     xml_diff = _xml_check(tables, rec, truth)

@@ -454,6 +454,53 @@ def rates_at_the_moments(x: np.ndarray, x_dot: np.ndarray, dt: float) -> np.ndar
     sample k, its derivative matches the moment of sample k."""
     return x + 0.5 * dt * x_dot
 
+def state_columns(rec: dict, t: np.ndarray, dt: float, accel_offset_m) -> tuple[dict, np.ndarray]:
+    """The truth columns every JSBSim flight shares, from its record: air data, attitude, the
+    gyros' rates at the instant of the sample's moments (JSBSim's Euler step logs them half a
+    step late, :func:`rates_at_the_moments`; the state JSBSim's aerodynamics used stays in
+    p/q/r_state_rad_s), angular accelerations, the specific force at the CG (all external
+    non-gravitational forces / mass: JSBSim's forces/fb*-total are aero + propulsion + ground +
+    external) and at the accelerometer (offset [m], body axes), alpha, beta, alpha-dot.
+    Returns (columns in the truth frame's order, mass [kg] per sample)."""
+    mass_kg = rec["inertia/mass-slugs"] * SLUG
+    xdot = [rec[f"accelerations/{a}dot-rad_sec2"] for a in "pqr"]
+    state = [rec[f"velocities/{a}-rad_sec"] for a in "pqr"]
+    p, q, r = (rates_at_the_moments(x, xd, dt) for x, xd in zip(state, xdot))
+    f_cg = [rec[f"forces/fb{a}-total-lbs"] * LBF / mass_kg for a in "xyz"]
+    f_sensor = [f + lv for f, lv in zip(f_cg, lever_arm_acceleration(p, q, r, *xdot, accel_offset_m))]
+    cols = {
+        "t_s": t,
+        "h_m": rec["position/h-sl-ft"] * FT, "V_m_s": rec["velocities/vt-fps"] * FT, "mach": rec["velocities/mach"],
+        "qbar_pa": rec["aero/qbar-psf"] * PSF,
+        "rho_kg_m3": rec["atmosphere/rho-slugs_ft3"] * SLUG_FT3, "g_m_s2": rec["accelerations/gravity-ft_sec2"] * FT,
+        "phi_rad": rec["attitude/phi-rad"], "theta_rad": rec["attitude/theta-rad"], "psi_rad": rec["attitude/psi-rad"],
+        "p_rad_s": p, "q_rad_s": q, "r_rad_s": r,
+        "p_state_rad_s": state[0], "q_state_rad_s": state[1], "r_state_rad_s": state[2],
+        "p_dot_rad_s2": xdot[0], "q_dot_rad_s2": xdot[1], "r_dot_rad_s2": xdot[2],
+        "ax_cg_m_s2": f_cg[0], "ay_cg_m_s2": f_cg[1], "az_cg_m_s2": f_cg[2],
+        "ax_sensor_m_s2": f_sensor[0], "ay_sensor_m_s2": f_sensor[1], "az_sensor_m_s2": f_sensor[2],
+        "alpha_rad": rec["aero/alpha-rad"], "beta_rad": rec["aero/beta-rad"],
+        "alpha_dot_rad_s": rec["aero/alphadot-rad_sec"],
+    }
+    return cols, mass_kg
+
+
+def coefficient_columns(rec: dict, S_ft2: float, cbar_ft: float, b_ft: float) -> dict:
+    """The aerodynamic force and moment coefficients (moments about the CG) and the
+    propulsive ones, non-dimensionalised alike (the accelerometers and gyros feel both)."""
+    qS_lbs = rec["aero/qbar-psf"] * S_ft2
+    return {
+        "CA": -rec["forces/fbx-aero-lbs"] / qS_lbs, "CY": rec["forces/fby-aero-lbs"] / qS_lbs,
+        "CN": -rec["forces/fbz-aero-lbs"] / qS_lbs,
+        "Cl": rec["moments/l-aero-lbsft"] / (qS_lbs * b_ft), "Cm": rec["moments/m-aero-lbsft"] / (qS_lbs * cbar_ft),
+        "Cn": rec["moments/n-aero-lbsft"] / (qS_lbs * b_ft),
+        "CX_prop": rec["forces/fbx-prop-lbs"] / qS_lbs, "CZ_prop": rec["forces/fbz-prop-lbs"] / qS_lbs,
+        "Cl_prop": rec["moments/l-prop-lbsft"] / (qS_lbs * b_ft),
+        "Cm_prop": rec["moments/m-prop-lbsft"] / (qS_lbs * cbar_ft),
+        "Cn_prop": rec["moments/n-prop-lbsft"] / (qS_lbs * b_ft),
+    }
+
+
 # --------------------------------------------------------------------------------------
 # the flight
 # --------------------------------------------------------------------------------------
@@ -528,46 +575,16 @@ def simulate_jsbsim(aircraft: str = "c172x", manoeuvre: str = "3211", seed: int 
     accel_offset = tuple(float(v) for v in veh_cfg["sensors"]["accel_offset_m"])
 
     # ---- truth ----
-    mass_kg = rec["inertia/mass-slugs"] * SLUG
-    V = rec["velocities/vt-fps"] * FT
-    qbar_pa = rec["aero/qbar-psf"] * PSF
-    p, q, r = rec["velocities/p-rad_sec"], rec["velocities/q-rad_sec"], rec["velocities/r-rad_sec"]
-    pd_, qd_, rd_ = (rec["accelerations/pdot-rad_sec2"], rec["accelerations/qdot-rad_sec2"],
-                     rec["accelerations/rdot-rad_sec2"])
-    # the gyros' rates at the instant of the sample's moments (JSBSim's Euler step logs
-    # them half a step late; rates_at_the_moments); the state JSBSim's aerodynamics
-    # used stays in p/q/r_state_rad_s and p/q/r_hat
-    p_state, q_state, r_state = p, q, r
-    p, q, r = (rates_at_the_moments(x, xd, dt) for x, xd in ((p, pd_), (q, qd_), (r, rd_)))
-    # specific force at the CG: all external non-gravitational forces / mass (JSBSim's
-    # forces/fb*-total are aero + propulsion + ground + external; gravity is not in them)
-    f_cg = [rec[f"forces/fb{a}-total-lbs"] * LBF / mass_kg for a in "xyz"]
-    lever = lever_arm_acceleration(p, q, r, pd_, qd_, rd_, accel_offset)
-    f_sensor = [f + lv for f, lv in zip(f_cg, lever)]
-    qS_lbs = rec["aero/qbar-psf"] * S_ft2
-    CA = -rec["forces/fbx-aero-lbs"] / qS_lbs
-    CY = rec["forces/fby-aero-lbs"] / qS_lbs
-    CN = -rec["forces/fbz-aero-lbs"] / qS_lbs
-    Cl = rec["moments/l-aero-lbsft"] / (qS_lbs * b_ft)
-    Cm = rec["moments/m-aero-lbsft"] / (qS_lbs * cbar_ft)
-    Cn = rec["moments/n-aero-lbsft"] / (qS_lbs * b_ft)
-    alpha, beta = rec["aero/alpha-rad"], rec["aero/beta-rad"]
+    cols, mass_kg = state_columns(rec, t, dt, accel_offset)
+    V, qbar_pa, alpha, beta = cols["V_m_s"], cols["qbar_pa"], cols["alpha_rad"], cols["beta_rad"]
+    f_sensor = [cols[f"a{a}_sensor_m_s2"] for a in "xyz"]
     delta_p = rec["fcs/elevator-pos-rad"]
     delta_r = 0.5 * (rec["fcs/left-aileron-pos-rad"] - rec["fcs/right-aileron-pos-rad"])
     delta_y = rec["fcs/rudder-pos-rad"]
     V_fps = rec["velocities/vt-fps"]
     ci2vel, bi2vel = cbar_ft / (2 * V_fps), b_ft / (2 * V_fps)
     truth = pd.DataFrame({
-        "t_s": t,
-        "h_m": rec["position/h-sl-ft"] * FT, "V_m_s": V, "mach": rec["velocities/mach"], "qbar_pa": qbar_pa,
-        "rho_kg_m3": rec["atmosphere/rho-slugs_ft3"] * SLUG_FT3, "g_m_s2": rec["accelerations/gravity-ft_sec2"] * FT,
-        "phi_rad": rec["attitude/phi-rad"], "theta_rad": rec["attitude/theta-rad"], "psi_rad": rec["attitude/psi-rad"],
-        "p_rad_s": p, "q_rad_s": q, "r_rad_s": r,
-        "p_state_rad_s": p_state, "q_state_rad_s": q_state, "r_state_rad_s": r_state,
-        "p_dot_rad_s2": pd_, "q_dot_rad_s2": qd_, "r_dot_rad_s2": rd_,
-        "ax_cg_m_s2": f_cg[0], "ay_cg_m_s2": f_cg[1], "az_cg_m_s2": f_cg[2],
-        "ax_sensor_m_s2": f_sensor[0], "ay_sensor_m_s2": f_sensor[1], "az_sensor_m_s2": f_sensor[2],
-        "alpha_rad": alpha, "beta_rad": beta, "alpha_dot_rad_s": rec["aero/alphadot-rad_sec"],
+        **cols,
         "delta_p_rad": delta_p, "delta_r_rad": delta_r, "delta_y_rad": delta_y,
         "d1_rad": delta_p, "d2_rad": rec["fcs/left-aileron-pos-rad"], "d3_rad": rec["fcs/right-aileron-pos-rad"],
         "d4_rad": delta_y,
@@ -578,13 +595,7 @@ def simulate_jsbsim(aircraft: str = "c172x", manoeuvre: str = "3211", seed: int 
         "rudder_cmd_norm": rec["fcs/rudder-cmd-norm"],
         "p_hat": rec["velocities/p-aero-rad_sec"] * bi2vel, "q_hat": rec["velocities/q-aero-rad_sec"] * ci2vel,
         "r_hat": rec["velocities/r-aero-rad_sec"] * bi2vel, "alpha_dot_hat": rec["aero/alphadot-rad_sec"] * ci2vel,
-        "CA": CA, "CY": CY, "CN": CN, "Cl": Cl, "Cm": Cm, "Cn": Cn,
-        # propulsive force and moments, non-dimensionalised like the aerodynamic ones
-        # (the accelerometers and gyros see them too; they are not aerodynamic)
-        "CX_prop": rec["forces/fbx-prop-lbs"] / qS_lbs, "CZ_prop": rec["forces/fbz-prop-lbs"] / qS_lbs,
-        "Cl_prop": rec["moments/l-prop-lbsft"] / (qS_lbs * b_ft),
-        "Cm_prop": rec["moments/m-prop-lbsft"] / (qS_lbs * cbar_ft),
-        "Cn_prop": rec["moments/n-prop-lbsft"] / (qS_lbs * b_ft),
+        **coefficient_columns(rec, S_ft2, cbar_ft, b_ft),
         "thrust_N": rec["propulsion/engine/thrust-lbs"] * LBF, "mass_kg": mass_kg,
         "x_cg_m": cg_in[:, 0] * INCH,
     })
