@@ -25,7 +25,7 @@ from dataclasses import dataclass, fields, replace
 import numpy as np
 
 from aerosid.effects import Effect
-from aerosid.vehicle import PreflightAero, Vehicle
+from aerosid.vehicles.vehicle import PreflightAero, Vehicle
 
 
 @dataclass(frozen=True)

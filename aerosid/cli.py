@@ -256,7 +256,7 @@ def run(telemetry, vehicle, out_dir, flight, windows, model_spec, mach_half_widt
     """
     _hermetic_defaults()
     from aerosid.preprocess import TelemetryError
-    from aerosid.vehicle import VehicleError
+    from aerosid.vehicles.vehicle import VehicleError
 
     params, min_segment_s = _preprocess_options(preprocess_settings, min_segment_s)
     pooled = len(telemetry) > 1
@@ -401,7 +401,7 @@ def _preflight(telemetry: Path, vehicle: str | None, model_spec: str | None, pre
     from aerosid.models import default_models, load_models
     from aerosid.plausibility.units import check_units
     from aerosid.preprocess import TelemetryError
-    from aerosid.vehicle import load_vehicle
+    from aerosid.vehicles.vehicle import load_vehicle
     from schemas.telemetry import CHANNELS, MEASURED_AIR_DATA_CHANNELS, RAW_COLUMNS, RawTelemetry, sentinel_mask
     from tasks.runner import read_validated
 

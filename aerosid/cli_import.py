@@ -44,7 +44,7 @@ def _echo_written(imported, paths: dict, out_dir: Path) -> None:
 
 def _errors():
     from aerosid.preprocess import TelemetryError
-    from aerosid.vehicle import VehicleError
+    from aerosid.vehicles.vehicle import VehicleError
     from aerosid.vehicles.importers import ImportDataError
 
     return ImportDataError, TelemetryError, VehicleError

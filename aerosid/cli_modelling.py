@@ -30,7 +30,7 @@ The modelling loop:
 
 def _errors():
     from aerosid.models import ModelSpecError
-    from aerosid.vehicle import VehicleError
+    from aerosid.vehicles.vehicle import VehicleError
     from aerosid.versions import VersionError
 
     return (ModelSpecError, VersionError, VehicleError)
@@ -89,7 +89,7 @@ def diagnose(run_dir, model_spec, version_id, n_windows, mach_half_width, quiet)
     from aerosid.cli_progress import StageProgress
     from aerosid.diagnosis import diagnose as run_diagnosis
     from aerosid.io import write_json_atomic
-    from aerosid.vehicle import load_vehicle
+    from aerosid.vehicles.vehicle import load_vehicle
     from aerosid.versions import history, latest_models, read_flight_data, run_vehicle, spec_for_run
 
     spec_warnings: list[str] = []

@@ -18,7 +18,7 @@ from aerosid.preprocess import (DEFAULT_MIN_SEGMENT_S, PreprocessParams, Preproc
                                 preprocess)
 from aerosid.segments import plan_segments
 from aerosid.smoothing import SmoothedSegmentResult, smooth_segment_frame
-from aerosid.vehicle import Vehicle
+from aerosid.vehicles.vehicle import Vehicle
 
 
 @dataclass(frozen=True)

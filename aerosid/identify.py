@@ -18,7 +18,7 @@ from aerosid.identification.crb import identification_bounds
 from aerosid.models import ChannelModel, default_models, signals_from_flight_data, vehicle_signals
 from aerosid.plausibility.estimates import preflight_departure
 from aerosid.regression import LinearFit, fit_linear, with_corrected_estimate
-from aerosid.vehicle import Vehicle
+from aerosid.vehicles.vehicle import Vehicle
 
 #: Coefficients that are slopes per radian (the report prints them per degree); the rest are per unit term.
 ANGLE_TERMS = ("alpha", "beta", "alpha_r", "delta_p/2", "delta_y/2", "delta_r", "delta_p", "delta_y")

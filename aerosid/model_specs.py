@@ -182,7 +182,7 @@ def apply_spec(doc: dict, base: dict | None, source: str = "<memory>", mach_refe
 
 def read_spec(path: str | Path, base: dict | None = None, mach_reference: float = 12.4) -> SpecResult:
     """Read a TOML spec file and apply it to `base` (None: the default models)."""
-    from aerosid.vehicle import read_toml_file
+    from aerosid.vehicles.vehicle import read_toml_file
 
     src = str(path)
     if not Path(path).exists():

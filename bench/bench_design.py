@@ -77,7 +77,7 @@ def one_c172x(job: tuple) -> dict:
     from aerosid.design.io import read_input
     from aerosid.ebm import process_telemetry
     from aerosid.simulation.jsbsim_flight import simulate_jsbsim
-    from aerosid.vehicle import load_vehicle
+    from aerosid.vehicles.vehicle import load_vehicle
 
     design_dir, seed = job
     t0 = time.perf_counter()

@@ -95,7 +95,7 @@ def simulate_variant(vehicle_name: str, seed: int, workdir: Path, variant: str):
     import copy
 
     import aerosid.simulation.jsbsim_flight as jf
-    from aerosid.vehicle import load_vehicle
+    from aerosid.vehicles.vehicle import load_vehicle
 
     original = jf.load_jsbsim_config
 

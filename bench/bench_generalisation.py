@@ -78,7 +78,7 @@ def default_vehicles() -> list[str]:
 
 def simulate(vehicle: str, seed: int, workdir: Path):
     """(flight, Vehicle) as a user would have them."""
-    from aerosid.vehicle import load_vehicle
+    from aerosid.vehicles.vehicle import load_vehicle
 
     if vehicle == "seed-rlv":
         from aerosid.simulation import load_case, simulate as sim

@@ -139,7 +139,7 @@ def run_bench(args, work: Path, t0: float) -> str:
     from aerosid.identification.validate import validate
     from aerosid.identify import format_table
     from aerosid.io import write_json_atomic, write_parquet_atomic
-    from aerosid.vehicle import load_vehicle
+    from aerosid.vehicles.vehicle import load_vehicle
 
     c18, t18 = load(args.data, "lon_020213f1_018")
     (work / "twin-otter.toml").write_text(vehicle_toml(c18))

@@ -8,7 +8,7 @@ from pathlib import Path
 from prefect import task
 
 from aerosid.models import load_models
-from aerosid.vehicle import load_vehicle
+from aerosid.vehicles.vehicle import load_vehicle
 from aerosid.versions import run_default_models, run_vehicle
 from aerosid.modelling_loop import refresh
 from aerosid.provenance import sha256_file

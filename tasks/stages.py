@@ -20,7 +20,7 @@ from aerosid.models import default_models, load_models
 from aerosid.preprocess import PreprocessParams, preprocess
 from aerosid.segments import plan_segments
 from aerosid.smoothing import smooth_segment_frame
-from aerosid.vehicle import load_vehicle
+from aerosid.vehicles.vehicle import load_vehicle
 from schemas.coefficients import Coefficients
 from schemas.flight_data import FlightData
 from schemas.smoothed import SmoothedSegment

@@ -189,7 +189,7 @@ def test_every_candidate_fits_as_a_new_version(run_dir, tmp_path):
 
 def test_the_diagnosis_message_ends_with_the_lines_to_paste(flight_data):
     from aerosid.diagnosis import diagnose
-    from aerosid.vehicle import load_vehicle
+    from aerosid.vehicles.vehicle import load_vehicle
 
     d = diagnose(flight_data, load_vehicle("seed-rlv"), mach_half_width=1.0)
     # the look-alikes are compared first (aerosid.diagnosis.lookalikes); the message still ends

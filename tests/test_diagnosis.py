@@ -28,7 +28,7 @@ from aerosid.effects import CATALOGUE, Effect
 from aerosid.identify import identify
 from aerosid.models import ChannelModel, default_models, parse_term, signals_from_flight_data
 from aerosid.simulation import load_case, simulate
-from aerosid.vehicle import load_vehicle
+from aerosid.vehicles.vehicle import load_vehicle
 
 #: The logic tests run at a quarter of the real pipeline's errors on seed-rlv (the SNR of a quieter
 #: flight or a longer window), so that every catalogue effect sits clearly above the floor; what the

@@ -21,7 +21,7 @@ from aerosid.diagnosis.lookalikes import DELTA_MIN, compare, separating_manoeuvr
 from aerosid.diagnosis.synthetic import MEASURED_NOISE, flight_data_from_truth
 from aerosid.effects import CATALOGUE
 from aerosid.models import default_models, parse_term
-from aerosid.vehicle import load_vehicle
+from aerosid.vehicles.vehicle import load_vehicle
 
 NOISE = MEASURED_NOISE.scaled(0.25)
 WRONG = {"control_alpha": "alpha_nonlinearity", "alpha_nonlinearity": "control_alpha"}

@@ -20,7 +20,7 @@ from aerosid.effects import CATALOGUE
 from aerosid.models import parse_term
 from aerosid.simulation import flight_model, load_case, simulate
 from aerosid.simulation.hidden import HIDDEN, parse_hidden_spec
-from aerosid.vehicle import load_vehicle
+from aerosid.vehicles.vehicle import load_vehicle
 
 NOISE = MEASURED_NOISE.scaled(0.25)
 

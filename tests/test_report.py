@@ -32,7 +32,7 @@ def _make_run(root: Path):
     from aerosid.io import write_json_atomic
     from aerosid.models import default_models, parse_term
     from aerosid.simulation import load_case, simulate
-    from aerosid.vehicle import load_vehicle
+    from aerosid.vehicles.vehicle import load_vehicle
     from aerosid.versions import fit_version, latest_models, read_flight_data
     from flows.pipeline import process_flight
 

@@ -188,7 +188,7 @@ def design(run_dir: str | Path, effect: str, size: float | None = None, versus: 
     from aerosid.identify import mach_window_mask
     from aerosid.models import vehicle_signals
     from aerosid.regression import fit_linear
-    from aerosid.vehicle import load_vehicle
+    from aerosid.vehicles.vehicle import load_vehicle
     from aerosid.versions import latest_models, read_flight_data, run_vehicle
 
     say = progress or (lambda msg: None)

@@ -54,7 +54,7 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
-from aerosid.rigid_body import inertia_constants
+from aerosid.vehicles.rigid_body import inertia_constants
 
 #: Per-sample measurement-noise 1-sigma the run estimated (the EKF's R), flight-data columns,
 #: in the order of the measured outputs (ax, ay, az, p, q, r).

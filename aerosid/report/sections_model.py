@@ -109,7 +109,7 @@ def model_series(run: _Run, shown: Shown) -> dict:
     from aerosid.expressions import evaluate
     from aerosid.identify import mach_window_mask
     from aerosid.models import signals_from_flight_data
-    from aerosid.vehicle import load_vehicle
+    from aerosid.vehicles.vehicle import load_vehicle
 
     veh = load_vehicle(run.vehicle)
     fd = fd.sort_values(["flight", "t_s"], kind="stable").reset_index(drop=True)

@@ -37,7 +37,7 @@ from aerosid.simulation.jsbsim_flight import (COMMON_PROPERTIES, _fly, _import_j
 from aerosid.simulation.jsbsim_tables import DEG, AeroTables
 from aerosid.simulation.jsbsim_trim import initialise, open_fdm, start_engines
 from aerosid.simulation.jsbsim_vehicle import vehicle_toml
-from aerosid.vehicle import DATA_DIR
+from aerosid.vehicles.vehicle import DATA_DIR
 
 __all__ = ["simulate_aircraft", "XML_TOLERANCE", "RESERVED"]
 

@@ -4,7 +4,7 @@ be finite and inside its range, every vector and matrix of the right shape.
 
 To add a key, add one line to :data:`TABLES` (a table may be given a whole new entry,
 e.g. ``TABLES["preprocess"] = {...}``); :func:`check_document` and the error messages
-follow.  ``load_vehicle`` (aerosid/vehicle.py) runs the check before it reads any value,
+follow.  ``load_vehicle`` (aerosid/vehicles/vehicle.py) runs the check before it reads any value,
 so its own checks (required keys, Gamma > 0, ...) see only well-formed numbers.
 
 The ranges are wide, physical sanity bounds (a 1e300 m accelerometer offset, a NaN CG,

@@ -37,7 +37,7 @@ def small_run(tmp_path_factory):
     """RUN_DIR as `aerosid run` lays it out (flight_data.parquet, coefficients.parquet,
     run.json), from the in-memory method on a 20 s seed-rlv flight; plus other manoeuvres."""
     from aerosid.ebm import process_telemetry
-    from aerosid.vehicle import load_vehicle
+    from aerosid.vehicles.vehicle import load_vehicle
 
     tmp = tmp_path_factory.mktemp("validate")
     own = _telemetry(tmp, "f0", 0)

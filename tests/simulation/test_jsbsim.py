@@ -12,7 +12,7 @@ import pytest
 
 pytest.importorskip("jsbsim")
 
-from aerosid.rigid_body import body_rate_derivatives, inertia_constants, lever_arm_acceleration  # noqa: E402
+from aerosid.vehicles.rigid_body import body_rate_derivatives, inertia_constants, lever_arm_acceleration  # noqa: E402
 from aerosid.simulation.jsbsim_flight import (  # noqa: E402
     TELEMETRY_COLUMNS,
     JSBSimUnavailable,
@@ -20,7 +20,7 @@ from aerosid.simulation.jsbsim_flight import (  # noqa: E402
     load_jsbsim_config,
     simulate_jsbsim,
 )
-from aerosid.vehicle import DATA_DIR  # noqa: E402
+from aerosid.vehicles.vehicle import DATA_DIR  # noqa: E402
 
 DEG = math.pi / 180.0
 

@@ -16,8 +16,8 @@ import scipy.io as sio
 from click.testing import CliRunner
 
 from aerosid.io import telemetry_vehicle
-from aerosid.rigid_body import lever_arm_acceleration
-from aerosid.vehicle import load_vehicle
+from aerosid.vehicles.rigid_body import lever_arm_acceleration
+from aerosid.vehicles.vehicle import load_vehicle
 from aerosid.vehicles.accel import recover_accel_offset
 from aerosid.vehicles.csv_import import import_csv, load_csv_map
 from aerosid.vehicles.importers import ImportDataError

@@ -16,10 +16,10 @@ from pathlib import Path
 import numpy as np
 
 from aerosid.plausibility.envelope import Plausibility, plausibility_for
-from aerosid.rigid_body import InertiaConstants, inertia_constants
+from aerosid.vehicles.rigid_body import InertiaConstants, inertia_constants
 from aerosid.vehicles.keys import MAX_DATABASE_BYTES, MAX_VEHICLE_FILE_BYTES, VehicleKeyError, check_document
 
-DATA_DIR = Path(__file__).parent / "data"
+DATA_DIR = Path(__file__).parents[1] / "data"
 
 
 class VehicleError(ValueError):
