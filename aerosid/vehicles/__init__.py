@@ -4,7 +4,9 @@
 ``aerodb``         a vehicle's aerodynamic database (tables) and ``aerodb_build`` that writes it
 ``atmosphere``     air data: US Standard Atmosphere 1976 or measured density / pressures
 ``rigid_body``     rigid-body rotational dynamics shared by the simulator and the estimator
-``accel``, ``keys``, ``units``   accelerometer lever arm, vehicle-file keys, unit conversion
+``keys``           the keys a vehicle file may hold, and the check of a parsed file against them
+``accel``          where the accelerometer sits, from accelerations at the sensor and at the CG
+``units``          unit conversion of imported flight data (pint)
 Importers of real flight data (SIDPAC .mat, flight-test CSV) into aerosid's raw telemetry
 contract, with the vehicle file beside it: ``importers``, ``sidpac``, ``csv_import``,
 ``vehicle_toml``.
