@@ -321,7 +321,7 @@ def run(telemetry, vehicle, out_dir, flight, windows, model_spec, mach_half_widt
     if "coefficients" in summary:
         import pandas as pd
 
-        from aerosid.identify import format_table
+        from aerosid.identification.identify import format_table
 
         if pooled:
             click.echo(f"pooled {len(summary['flights'])} manoeuvres into one identification: {summary['status']}")
@@ -461,7 +461,7 @@ def _preflight(telemetry: Path, vehicle: str | None, model_spec: str | None, pre
         load_models(model_spec, base=default_models(veh), mach_reference=veh.mach_reference)
     if windows:  # windows too short to smooth are refused now, naming the limit (gaps are seen later)
         from aerosid.preprocess import DEFAULT_MIN_SEGMENT_S
-        from aerosid.segments import plan_segments
+        from aerosid.preprocess.segments import plan_segments
 
         min_seg = next(v for v in (min_segment_s, veh.min_segment_s, DEFAULT_MIN_SEGMENT_S) if v is not None)
         plan = plan_segments(frame["t_s"].to_numpy(), [], [tuple(w) for w in windows], float(min_seg))

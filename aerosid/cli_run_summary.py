@@ -16,7 +16,7 @@ def _count(n: int) -> str:
 
 def regression_window_line(run_dir: Path, mach_half_width: float | None) -> str | None:
     """'regressed 7 633 of 60 001 samples, Mach 11.90–12.90 (|M − 12.4| ≤ 0.5)', as identify() selects them."""
-    from aerosid.identify import mach_window_mask
+    from aerosid.identification.identify import mach_window_mask
     from aerosid.vehicles.vehicle import load_vehicle
     from aerosid.versions import run_vehicle
 

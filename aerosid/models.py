@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from aerosid.derivatives import smooth_derivative
+from aerosid.identification.derivatives import smooth_derivative
 from aerosid.effects import CATALOGUE
 from aerosid.expressions import ExpressionError, evaluate, parse, signal_names
 

@@ -26,7 +26,7 @@ from pathlib import Path
 
 import pandas as pd
 
-from aerosid.identify import identify
+from aerosid.identification.identify import identify
 from aerosid.io import write_json_atomic, write_parquet_atomic, write_text_atomic
 from aerosid.models import CHANNELS, ChannelModel, ModelSpecError, default_models, load_models, models_to_toml
 

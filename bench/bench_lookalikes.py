@@ -69,7 +69,7 @@ def one(job: tuple) -> dict:
     from aerosid.diagnosis.floor import excess
     from aerosid.effects import CATALOGUE
     from aerosid.identification.band import low_pass_runs
-    from aerosid.identify import identify, mach_window_mask
+    from aerosid.identification.identify import identify, mach_window_mask
     from aerosid.models import default_models, parse_term
     from aerosid.simulation import load_case
 

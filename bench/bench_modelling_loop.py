@@ -45,7 +45,7 @@ def one(job: tuple[str, float, int, float]) -> dict:
     from aerosid.diagnosis import diagnose
     from aerosid.effects import CATALOGUE
     from aerosid.ebm import process_telemetry
-    from aerosid.identify import identify, mach_window_mask
+    from aerosid.identification.identify import identify, mach_window_mask
     from aerosid.diagnosis.synthetic import NO_NOISE, flight_data_from_truth
     from aerosid.models import default_models, parse_term, signals_from_flight_data
     from aerosid.simulation import load_case, simulate

@@ -97,7 +97,7 @@ def reference(data: Path, veh) -> list[tuple]:
     from aerosid.identification.identified import IdentifiedModel
     from aerosid.identification.output_prediction import predict_axis, prediction_inputs
     from aerosid.identification.validate import fit_metric
-    from aerosid.inversion import total_angles
+    from aerosid.identification.inversion import total_angles
     from aerosid.models import default_models
 
     p = sio.loadmat(data / "sidpac_results_018.mat", squeeze_me=True)["p"]
@@ -137,7 +137,7 @@ def main() -> None:
 def run_bench(args, work: Path, t0: float) -> str:
     from aerosid.ebm import process_telemetry
     from aerosid.identification.validate import validate
-    from aerosid.identify import format_table
+    from aerosid.identification.identify import format_table
     from aerosid.io import write_json_atomic, write_parquet_atomic
     from aerosid.vehicles.vehicle import load_vehicle
 

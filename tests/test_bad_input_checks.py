@@ -17,7 +17,7 @@ from click.testing import CliRunner
 
 from aerosid.cli import main
 from aerosid.diagnosis.synthetic import MEASURED_NOISE, flight_data_from_truth
-from aerosid.identify import format_table, identify
+from aerosid.identification.identify import format_table, identify
 from aerosid.models import ModelSpecError, load_models
 from aerosid.vehicles.vehicle import load_vehicle
 from tests.test_bad_input import flight, run_fails, run_fails_fast, vehicle_file, write  # noqa: F401 (fixture)

@@ -22,7 +22,7 @@ from aerosid.cli_modelling import fit as fit_cmd
 from aerosid.diagnosis import default_candidates
 from aerosid.diagnosis.synthetic import MEASURED_NOISE, flight_data_from_truth
 from aerosid.effects import CATALOGUE
-from aerosid.identify import format_table
+from aerosid.identification.identify import format_table
 from aerosid.model_specs import apply_spec, paste_lines, read_spec
 from aerosid.models import (ModelSpecError, default_models, load_models, models_to_toml, parse_term,
                             signals_from_flight_data)
@@ -202,7 +202,7 @@ def test_the_diagnosis_message_ends_with_the_lines_to_paste(flight_data):
 
 # --------------------------------------------------------------------------- units
 def test_per_degree_converts_by_pi_over_180_per_power_of_angle(run_dir, tmp_path):
-    from aerosid.coefficient_units import angle_power, per_degree_factor
+    from aerosid.identification.coefficient_units import angle_power, per_degree_factor
 
     assert per_degree_factor("alpha") == math.pi / 180
     assert per_degree_factor("q_hat") == math.pi / 180  # damping like slopes

@@ -87,7 +87,7 @@ def test_compare_separates_lookalikes_when_the_noise_allows_and_picks_the_true_t
     assert a.estimate == pytest.approx(0.5, abs=0.02)  # the true coefficient
     assert abs(a.t_joint) > 3 and abs(b.t_joint) < 3
     # the shift each forces on the base coefficients, in units of their sigma in the base fit
-    from aerosid.regression import fit_linear
+    from aerosid.identification.regression import fit_linear
 
     fb = fit_linear(y, base, names=["c0", "c1"], channel="Cm")
     fa = fit_linear(y, np.column_stack([base, x1]), names=["c0", "c1", "a"], channel="Cm")

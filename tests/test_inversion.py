@@ -4,7 +4,7 @@ import pytest
 
 from aerosid.vehicles.aerodb import AeroDatabase
 from aerosid.aeromodel import AeroModel
-from aerosid.inversion import invert_alpha_beta
+from aerosid.identification.inversion import invert_alpha_beta
 from aerosid.vehicles.vehicle import load_vehicle
 
 VEH = load_vehicle("seed-rlv")

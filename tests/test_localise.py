@@ -187,7 +187,7 @@ def test_identity_channel_is_not_localised(reference_flight, vehicle):
     fd = flight_data_from_truth(reference_flight.truth, NOISE, seed=1)
     from aerosid.diagnosis.candidates import derived_signals
     from aerosid.diagnosis.localise import localise
-    from aerosid.identify import mach_window_mask
+    from aerosid.identification.identify import mach_window_mask
     from aerosid.models import default_models, vehicle_signals
 
     fd = fd.loc[mach_window_mask(fd["mach"].to_numpy(), 12.4, 0.5)].reset_index(drop=True)

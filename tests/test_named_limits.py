@@ -10,7 +10,7 @@ from click.testing import CliRunner
 
 from aerosid.cli import main
 from aerosid.preprocess import PreprocessParams, TelemetryError, preprocess, write_raw_parquet
-from aerosid.segments import plan_segments
+from aerosid.preprocess.segments import plan_segments
 from tests.test_preprocess import make_flight
 
 T = np.round(np.arange(0, 401) * 0.02, 10)  # 8 s at 50 Hz, like the Twin Otter manoeuvre 018
@@ -58,7 +58,7 @@ def test_a_clock_jump_names_max_time_gap_s_and_how_to_raise_it():
 
 
 def test_the_mach_window_refusal_names_mach_half_width_and_the_option():
-    from aerosid.identify import identify
+    from aerosid.identification.identify import identify
     from aerosid.vehicles.vehicle import load_vehicle
 
     fd = pd.DataFrame({"flight": "f", "t_s": np.arange(200) * 0.01, "mach": np.full(200, 0.9)})

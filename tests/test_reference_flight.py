@@ -87,8 +87,8 @@ def test_flight_derived_cm_error_below_0_6_hz_sits_at_the_gyro_noise_bound(refer
     through the same low-pass (the regression's band is shared by both sides)."""
     import scipy.signal
 
-    from aerosid.derivatives import zero_phase_low_pass
-    from aerosid.identify import mach_window_mask
+    from aerosid.identification.derivatives import zero_phase_low_pass
+    from aerosid.identification.identify import mach_window_mask
     from aerosid.vehicles.rigid_body import inertia_constants
     from aerosid.simulation import load_case
 

@@ -185,9 +185,9 @@ def design(run_dir: str | Path, effect: str, size: float | None = None, versus: 
            mach_half_width: float = 0.5, kinds: tuple[str, ...] = ("3211", "doublet", "multisine"),
            refine: bool = True, progress=None, flyer_factory=None, power: str = "trim") -> Design:
     from aerosid.diagnosis.candidates import derived_signals
-    from aerosid.identify import mach_window_mask
+    from aerosid.identification.identify import mach_window_mask
     from aerosid.models import vehicle_signals
-    from aerosid.regression import fit_linear
+    from aerosid.identification.regression import fit_linear
     from aerosid.vehicles.vehicle import load_vehicle
     from aerosid.versions import latest_models, read_flight_data, run_vehicle
 
@@ -420,7 +420,7 @@ def default_flyer(vehicle, limits: Limits, coefs: dict, effect: str | None, size
                           "of the JSBSim aircraft (c172x)")
     if vehicle.name == "seed-rlv":
         from aerosid.design.flyers import RLVFlyer
-        from aerosid.identify import mach_window_mask
+        from aerosid.identification.identify import mach_window_mask
 
         flyer = RLVFlyer(coefs, effect, size)
         say("flying the baseline and the impulse response (built-in simulator, identified pitch model)")
@@ -450,9 +450,9 @@ def _pipeline_residual(telemetry: pd.DataFrame, vehicle, model, ch: str, mach_ha
 
     from aerosid.diagnosis.candidates import derived_signals
     from aerosid.ebm import process_telemetry
-    from aerosid.identify import mach_window_mask
+    from aerosid.identification.identify import mach_window_mask
     from aerosid.models import vehicle_signals
-    from aerosid.regression import fit_linear
+    from aerosid.identification.regression import fit_linear
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")

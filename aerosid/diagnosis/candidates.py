@@ -20,7 +20,7 @@ import numpy as np
 from aerosid.effects import CATALOGUE
 from aerosid.expressions import evaluate
 
-from aerosid.derivatives import DERIVATIVE_HALF_WINDOW_S, smooth_derivative  # noqa: F401  (re-exported)
+from aerosid.identification.derivatives import DERIVATIVE_HALF_WINDOW_S, smooth_derivative  # noqa: F401  (re-exported)
 
 
 @dataclass(frozen=True)

@@ -60,11 +60,11 @@ from aerosid.diagnosis.candidates import Candidate, default_candidates, derived_
 from aerosid.diagnosis.lookalikes import heldout_sse as _heldout_sse, scaled_lstsq as _scaled_lstsq
 from aerosid.diagnosis.lookalikes import windows_index as _windows_index
 from aerosid.expressions import evaluate
-from aerosid.identify import angle_cutoff_hz, mach_window_mask
-from aerosid.eiv import with_angle_noise
+from aerosid.identification.identify import angle_cutoff_hz, mach_window_mask
+from aerosid.identification.eiv import with_angle_noise
 from aerosid.model_specs import paste_lines
 from aerosid.models import ChannelModel, default_models, vehicle_signals
-from aerosid.regression import LinearFit, fit_linear, residual_autocovariance
+from aerosid.identification.regression import LinearFit, fit_linear, residual_autocovariance
 
 __all__ = [
     "diagnose", "Diagnosis", "EffectEvidence", "ChannelReport", "WindowStat", "RegimeBin", "Whiteness",
@@ -777,7 +777,7 @@ def diagnose(flight_data: pd.DataFrame, vehicle, models: dict[str, ChannelModel]
 def identity_channels(vehicle, channels) -> tuple[str, ...]:
     """The channels that are identities by construction: C_N and C_Y when alpha and beta
     are inverted from them (no vanes), as aerosid.identify reports them."""
-    from aerosid.identify import INVERSION_CHANNELS
+    from aerosid.identification.identify import INVERSION_CHANNELS
 
     if getattr(vehicle, "air_data_source", None) == "vanes":
         return ()

@@ -128,7 +128,7 @@ def angle_part(model, estimate: np.ndarray, fd, vehicle, sig_a: np.ndarray, sig_
     """Per-sample error the angles' sigma puts into the model output: sqrt((dm/dalpha sig_a)^2 +
     (dm/dbeta sig_b)^2), the derivatives by finite differences of the fitted model."""
     from aerosid.diagnosis.candidates import derived_signals
-    from aerosid.inversion import total_angles
+    from aerosid.identification.inversion import total_angles
     from aerosid.models import vehicle_signals
 
     def out(da: float, db: float) -> np.ndarray:
@@ -176,7 +176,7 @@ def angle_floor_parts(fd, vehicle, models: dict, reports: dict) -> dict:
     sig = angle_sigmas(fd)
     if sig is None:
         return {}
-    from aerosid.identify import INVERSION_CHANNELS
+    from aerosid.identification.identify import INVERSION_CHANNELS
 
     skip = INVERSION_CHANNELS if vehicle.air_data_source != "vanes" else ()
     return {ch: angle_part(models[ch], rep.fit.estimate, fd, vehicle, *sig)

@@ -16,7 +16,7 @@ import numpy as np
 import pandas as pd
 
 from aerosid.diagnosis.lookalikes import heldout_sse, windows_index
-from aerosid.identify import mach_window_mask
+from aerosid.identification.identify import mach_window_mask
 from aerosid.models import vehicle_signals
 
 __all__ = ["heldout_rms", "HELDOUT_WINDOWS"]

@@ -1,7 +1,8 @@
 """Estimation core of aerosid (method.md §2-§6): filter initialisation, the 21-state
 EKF, Bierman's Modified Bryson-Frazier smoother, NIS and automatic tuning.
 
-Imports only numpy, scipy and numba.  Units: SI, radians.  The L, M, N chain
+The filter and smoother import only numpy, scipy and numba; ``smoothing`` is the stage's
+adapter from a preprocessed segment (pandas frame) to the smoothed-states frame.  Units: SI, radians.  The L, M, N chain
 states are moments divided by Ixx, Iyy, Izz [rad/s^2] (aerosid.vehicles.rigid_body).
 """
 from .ekf import EKFUpdate, MBFResult, ekf_predict, ekf_update, gate_channels, mbf_smooth, run_reference

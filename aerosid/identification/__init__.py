@@ -1,5 +1,16 @@
 """Identification: from flight signals to coefficients, and using an identified model.
 
+``flight_data``        from a smoothed segment to the flight data the regression reads
+``flight_coefficients`` flight force and moment coefficients from smoothed states
+``inversion``          angle of attack and sideslip from the preflight force database
+``derivatives``        zero-phase low-pass of vanes, smoothing derivatives (alpha-dot, beta-dot)
+``eiv``                errors in the regressors: SIMEX correction for air-data vane noise
+``regression``         linear least squares with the coloured-residual covariance (``fit_linear``)
+``structure``          model structure determination (stepwise term selection)
+``identify``           the regression stage: every channel's model fitted, the coefficients table
+``coefficient_units``  per radian or per degree: a coefficient's unit from its term
+``crb``                Cramer-Rao bounds of a run's coefficients
+``term_report``        the fitted terms of a model version as text
 ``band``               the regression's common band: band-limited rates, accelerations and regressors
 ``identified``         the identified model of a run folder (coefficients and each channel's terms)
 ``output_prediction``  simulating the model driven by another manoeuvre's measured controls

@@ -243,7 +243,7 @@ def coefficient_bounds(fd: pd.DataFrame, vehicle, designs: dict, report: dict | 
 
 def identification_bounds(fd: pd.DataFrame, vehicle, models: dict, fits: dict, identities=(),
                           outputs: tuple = OUTPUTS) -> CramerRaoBounds:
-    """The bounds of the fits of aerosid.identify.identify: fd the flight data they used (inside
+    """The bounds of the fits of aerosid.identification.identify.identify: fd the flight data they used (inside
     the Mach window, sorted by flight and time), models/fits per channel, identities the
     channels reported without numbers."""
     from aerosid.models import vehicle_signals

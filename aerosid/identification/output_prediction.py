@@ -51,7 +51,7 @@ import pandas as pd
 from scipy.optimize import least_squares
 
 from aerosid.identification.identified import IdentifiedModel
-from aerosid.inversion import total_angles
+from aerosid.identification.inversion import total_angles
 from aerosid.vehicles.rigid_body import body_rate_derivatives, lever_arm_acceleration
 from aerosid.vehicles.vehicle import Vehicle
 
@@ -97,7 +97,7 @@ def gravity_less_relief(h_m, V_m_s, alpha, beta, phi, theta) -> np.ndarray:
 
 
 def prediction_inputs(fd: pd.DataFrame, vehicle: Vehicle, phi_rad, theta_rad, span) -> pd.DataFrame:
-    """The inputs frame of a manoeuvre from its flight data (aerosid.flight_data columns,
+    """The inputs frame of a manoeuvre from its flight data (aerosid.identification.flight_data columns,
     sorted by time within each segment), the attitude [rad] on the same rows and a span
     id per row (contiguous samples simulated together; negative: not simulated)."""
     from aerosid.models import vehicle_signals

@@ -30,7 +30,7 @@ from aerosid.identification.identified import IdentifiedModel, load_identified_m
 from aerosid.identification.output_prediction import (AXIS_CHANNELS, AXIS_OUTPUTS, BIAS_MODES, OUTPUT_UNITS,
                                                       predict_axis, prediction_inputs,
                                                       theil_inequality)
-from aerosid.identify import mach_window_mask
+from aerosid.identification.identify import mach_window_mask
 from aerosid.models import vehicle_signals
 from aerosid.vehicles.vehicle import Vehicle
 

@@ -177,7 +177,7 @@ def _per_flight(run: _Run, section: Callable[[_Run], str]) -> str:
 
 
 # --------------------------------------------------------------------------- the model shown
-#: coefficients.parquet's note on a channel that is an identity by construction (aerosid.identify)
+#: coefficients.parquet's note on a channel that is an identity by construction (aerosid.identification.identify)
 IDENTITY_PREFIX = "not identifiable from this telemetry"
 
 

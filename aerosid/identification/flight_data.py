@@ -11,13 +11,13 @@ import pandas as pd
 
 from aerosid.vehicles.aerodb import AeroDatabase
 from aerosid.vehicles.atmosphere import MEASURED, H_MAX_M, H_MIN_M, AirDataError, air_data, air_data_sources
-from aerosid.flight_coefficients import flight_coefficients
-from aerosid.derivatives import zero_phase_low_pass
+from aerosid.identification.flight_coefficients import flight_coefficients
+from aerosid.identification.derivatives import zero_phase_low_pass
 from aerosid.estimation.findings import DEPARTURE_MIN_S, DEPARTURE_SIGMA, Finding, dilate, span_findings
 from aerosid.identification.band import (accel_at_cg, band_limited_signals, band_noise_gain, bridge_spikes,
                                          finite_runs, low_pass_runs)
 from aerosid.identification.crb import R_COLUMNS
-from aerosid.inversion import invert_alpha_beta, total_angles
+from aerosid.identification.inversion import invert_alpha_beta, total_angles
 from aerosid.vehicles.vehicle import Vehicle
 
 FIN_COLUMNS = ("d1_rad", "d2_rad", "d3_rad", "d4_rad")
@@ -152,7 +152,7 @@ def build_flight_data(smoothed: pd.DataFrame, measured: pd.DataFrame, vehicle: V
             drop_rows = dilate(edge, margin)
     # errors in variables: the 1-sigma of the white noise whose band-limited part is in the
     # angles (vanes: the vehicle file's vane noise; inverted angles: the accelerometers' noise
-    # through the inversion's sensitivity), for the SIMEX correction of aerosid.eiv
+    # through the inversion's sensitivity), for the SIMEX correction of aerosid.identification.eiv
     eiv_a = eiv_b = np.full(len(V), vehicle.vane_noise_rad if vanes else 0.0)
     if not vanes and signals == "band":
         eiv_a, eiv_b = _inversion_noise(fc, delta_p, delta_y, vehicle, db, alpha, beta, bl.accel_noise_m_s2)
