@@ -95,7 +95,7 @@ def simulate(case_name, effects, hidden, seed, out_dir, duration, rate, no_fault
     (true states, alpha, beta, coefficients and fault masks per sample) and
     DIR/truth.json (the true flight coefficients, SI per radian, about the CG).
     """
-    from aerosid.effects import catalogue_table, parse_effect_spec
+    from aerosid.modelling.effects import catalogue_table, parse_effect_spec
 
     from aerosid.simulation.hidden import hidden_table, parse_hidden_spec
 
@@ -398,7 +398,7 @@ def _preflight(telemetry: Path, vehicle: str | None, model_spec: str | None, pre
     import pyarrow.parquet as pq
 
     from aerosid.io import telemetry_vehicle
-    from aerosid.models import default_models, load_models
+    from aerosid.modelling.models import default_models, load_models
     from aerosid.plausibility.units import check_units
     from aerosid.preprocess import TelemetryError
     from aerosid.vehicles.vehicle import load_vehicle

@@ -13,7 +13,7 @@ import pandas as pd
 from aerosid.estimation.findings import Finding
 from aerosid.identification.flight_data import build_flight_data_segments, build_pooled_flight_data, load_database
 from aerosid.identification.identify import Identification, identify
-from aerosid.models import ChannelModel
+from aerosid.modelling.models import ChannelModel
 from aerosid.preprocess import (DEFAULT_MIN_SEGMENT_S, PreprocessParams, PreprocessResult, merge_settings,
                                 preprocess)
 from aerosid.preprocess.segments import plan_segments

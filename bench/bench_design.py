@@ -37,7 +37,7 @@ def one_rlv(job: tuple) -> dict:
     from aerosid.design.io import as_case_inputs, read_input
     from aerosid.diagnosis import diagnose
     from aerosid.ebm import process_telemetry
-    from aerosid.effects import CATALOGUE
+    from aerosid.modelling.effects import CATALOGUE
     from aerosid.simulation import load_case, simulate
 
     design_dir, effect, scale, seed = job

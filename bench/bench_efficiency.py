@@ -135,7 +135,7 @@ def estimator_noise_std(run, vehicle, replicates: int = 200, seed: int = 0) -> d
     from aerosid.identification.band import low_pass_runs
     from aerosid.identification.crb import R_COLUMNS, rate_coupling_matrix, runs_of
     from aerosid.identification.identify import mach_window_mask
-    from aerosid.models import vehicle_signals
+    from aerosid.modelling.models import vehicle_signals
 
     ident = run.identification
     fd = run.flight_data.sort_values(["flight", "t_s"], kind="stable").reset_index(drop=True)

@@ -125,7 +125,7 @@ def estimate_of(ident, name: str) -> tuple[float, float]:
 def oracle(flight, vehicle) -> dict[str, float]:
     """The vehicle's default models fitted to the noise-free truth (what the sensors see:
     aerodynamic + propulsive coefficients) with the true regressors (aircraft only)."""
-    from aerosid.models import default_models
+    from aerosid.modelling.models import default_models
 
     T = flight.truth
     if vehicle.vehicle_class != "aircraft" or "q_hat" not in T:

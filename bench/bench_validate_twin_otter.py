@@ -98,7 +98,7 @@ def reference(data: Path, veh) -> list[tuple]:
     from aerosid.identification.output_prediction import predict_axis, prediction_inputs
     from aerosid.identification.validate import fit_metric
     from aerosid.identification.inversion import total_angles
-    from aerosid.models import default_models
+    from aerosid.modelling.models import default_models
 
     p = sio.loadmat(data / "sidpac_results_018.mat", squeeze_me=True)["p"]
     vals = {"CN_0": -p[2], "CN_alpha": -p[0], "CN_delta_p": -p[1], "Cm_0": p[6], "Cm_alpha": p[3], "Cm_q": p[4],

@@ -16,7 +16,7 @@ from prefect import task
 from aerosid.identification.flight_data import (build_flight_data_segments, build_pooled_flight_data, flight_air_data_sources,
                                  load_database)
 from aerosid.identification.identify import identify
-from aerosid.models import default_models, load_models
+from aerosid.modelling.models import default_models, load_models
 from aerosid.preprocess import PreprocessParams, preprocess
 from aerosid.preprocess.segments import plan_segments
 from aerosid.estimation.smoothing import smooth_segment_frame

@@ -11,7 +11,7 @@ import pytest
 
 from aerosid.identification.flight_coefficients import flight_coefficients
 from aerosid.identification.flight_data import build_flight_data, load_database
-from aerosid.models import default_models, signals_from_flight_data, vehicle_signals
+from aerosid.modelling.models import default_models, signals_from_flight_data, vehicle_signals
 from aerosid.preprocess import preprocess
 from aerosid.vehicles.vehicle import VehicleError, load_vehicle
 

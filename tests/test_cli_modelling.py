@@ -21,12 +21,12 @@ from click.testing import CliRunner
 from aerosid.cli_modelling import fit as fit_cmd
 from aerosid.diagnosis import default_candidates
 from aerosid.diagnosis.synthetic import MEASURED_NOISE, flight_data_from_truth
-from aerosid.effects import CATALOGUE
+from aerosid.modelling.effects import CATALOGUE
 from aerosid.identification.identify import format_table
-from aerosid.model_specs import apply_spec, paste_lines, read_spec
-from aerosid.models import (ModelSpecError, default_models, load_models, models_to_toml, parse_term,
+from aerosid.modelling.model_specs import apply_spec, paste_lines, read_spec
+from aerosid.modelling.models import (ModelSpecError, default_models, load_models, models_to_toml, parse_term,
                             signals_from_flight_data)
-from aerosid.versions import fit_version, history, models_from_spec
+from aerosid.modelling.versions import fit_version, history, models_from_spec
 
 MACH = ["--mach-half-width", "1.0"]  # the 20 s flight spans Mach 12.75..13.1
 

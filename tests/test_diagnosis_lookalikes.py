@@ -19,8 +19,8 @@ from aerosid.diagnosis.floor import channel_floor, excess
 from aerosid.diagnosis.heldout import heldout_rms
 from aerosid.diagnosis.lookalikes import DELTA_MIN, compare, separating_manoeuvre
 from aerosid.diagnosis.synthetic import MEASURED_NOISE, flight_data_from_truth
-from aerosid.effects import CATALOGUE
-from aerosid.models import default_models, parse_term
+from aerosid.modelling.effects import CATALOGUE
+from aerosid.modelling.models import default_models, parse_term
 from aerosid.vehicles.vehicle import load_vehicle
 
 NOISE = MEASURED_NOISE.scaled(0.25)
@@ -197,7 +197,7 @@ def test_heldout_error_prefers_the_true_term_over_its_lookalike(data, vehicle):
 
 
 def test_history_ranks_versions_by_heldout_error(tmp_path, data, vehicle):
-    from aerosid.versions import fit_version, history
+    from aerosid.modelling.versions import fit_version, history
 
     run = tmp_path / "run"
     run.mkdir()

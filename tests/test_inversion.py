@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 
 from aerosid.vehicles.aerodb import AeroDatabase
-from aerosid.aeromodel import AeroModel
+from aerosid.modelling.aeromodel import AeroModel
 from aerosid.identification.inversion import invert_alpha_beta
 from aerosid.vehicles.vehicle import load_vehicle
 

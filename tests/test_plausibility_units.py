@@ -11,7 +11,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from aerosid.effects import parse_effect_spec
+from aerosid.modelling.effects import parse_effect_spec
 from aerosid.plausibility import units as U
 from aerosid.plausibility.units import check_units, unit_findings
 from aerosid.preprocess import TelemetryError

@@ -69,7 +69,7 @@ def test_pitch_plane_coefficients_within_the_accuracy_bars_and_intervals(referen
 
 
 def test_moment_transfer_nose_to_cg_matches_the_seed():
-    from aerosid.aeromodel import AeroModel
+    from aerosid.modelling.aeromodel import AeroModel
     from aerosid.vehicles.vehicle import load_vehicle
 
     ref = AeroModel.preflight(load_vehicle("seed-rlv")).linear_truth()

@@ -17,8 +17,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from aerosid.effects import CATALOGUE
-from aerosid.expressions import evaluate
+from aerosid.modelling.effects import CATALOGUE
+from aerosid.modelling.expressions import evaluate
 
 from aerosid.identification.derivatives import DERIVATIVE_HALF_WINDOW_S, smooth_derivative  # noqa: F401  (re-exported)
 

@@ -59,11 +59,11 @@ from statsmodels.stats.diagnostic import acorr_ljungbox
 from aerosid.diagnosis.candidates import Candidate, default_candidates, derived_signals
 from aerosid.diagnosis.lookalikes import heldout_sse as _heldout_sse, scaled_lstsq as _scaled_lstsq
 from aerosid.diagnosis.lookalikes import windows_index as _windows_index
-from aerosid.expressions import evaluate
+from aerosid.modelling.expressions import evaluate
 from aerosid.identification.identify import angle_cutoff_hz, mach_window_mask
 from aerosid.identification.eiv import with_angle_noise
-from aerosid.model_specs import paste_lines
-from aerosid.models import ChannelModel, default_models, vehicle_signals
+from aerosid.modelling.model_specs import paste_lines
+from aerosid.modelling.models import ChannelModel, default_models, vehicle_signals
 from aerosid.identification.regression import LinearFit, fit_linear, residual_autocovariance
 
 __all__ = [

@@ -129,7 +129,7 @@ def angle_part(model, estimate: np.ndarray, fd, vehicle, sig_a: np.ndarray, sig_
     (dm/dbeta sig_b)^2), the derivatives by finite differences of the fitted model."""
     from aerosid.diagnosis.candidates import derived_signals
     from aerosid.identification.inversion import total_angles
-    from aerosid.models import vehicle_signals
+    from aerosid.modelling.models import vehicle_signals
 
     def out(da: float, db: float) -> np.ndarray:
         f = fd.copy()

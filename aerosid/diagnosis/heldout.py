@@ -17,7 +17,7 @@ import pandas as pd
 
 from aerosid.diagnosis.lookalikes import heldout_sse, windows_index
 from aerosid.identification.identify import mach_window_mask
-from aerosid.models import vehicle_signals
+from aerosid.modelling.models import vehicle_signals
 
 __all__ = ["heldout_rms", "HELDOUT_WINDOWS"]
 

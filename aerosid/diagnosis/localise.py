@@ -43,7 +43,7 @@ import pandas as pd
 import scipy.stats
 
 from aerosid.diagnosis.finding import Finding, localisation_hint, localisation_text
-from aerosid.expressions import evaluate, signal_names
+from aerosid.modelling.expressions import evaluate, signal_names
 from aerosid.identification.regression import fit_linear
 
 __all__ = ["Finding", "localise", "localisation_text", "localisation_hint", "LAG_SCAN_S", "IDENTITY_RATIO",

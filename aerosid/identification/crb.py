@@ -246,7 +246,7 @@ def identification_bounds(fd: pd.DataFrame, vehicle, models: dict, fits: dict, i
     """The bounds of the fits of aerosid.identification.identify.identify: fd the flight data they used (inside
     the Mach window, sorted by flight and time), models/fits per channel, identities the
     channels reported without numbers."""
-    from aerosid.models import vehicle_signals
+    from aerosid.modelling.models import vehicle_signals
 
     signals = vehicle_signals(fd, vehicle)
     designs = {ch: (model.design(signals)[0].to_numpy(float), model.names, np.asarray(fits[ch].identifiable))

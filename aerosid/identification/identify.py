@@ -12,10 +12,10 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 import pandas as pd
 
-from aerosid.aeromodel import AeroModel
+from aerosid.modelling.aeromodel import AeroModel
 from aerosid.identification.eiv import simex_estimates
 from aerosid.identification.crb import identification_bounds
-from aerosid.models import ChannelModel, default_models, signals_from_flight_data, vehicle_signals
+from aerosid.modelling.models import ChannelModel, default_models, signals_from_flight_data, vehicle_signals
 from aerosid.plausibility.estimates import preflight_departure
 from aerosid.identification.regression import LinearFit, fit_linear, with_corrected_estimate
 from aerosid.vehicles.vehicle import Vehicle

@@ -100,7 +100,7 @@ def prediction_inputs(fd: pd.DataFrame, vehicle: Vehicle, phi_rad, theta_rad, sp
     """The inputs frame of a manoeuvre from its flight data (aerosid.identification.flight_data columns,
     sorted by time within each segment), the attitude [rad] on the same rows and a span
     id per row (contiguous samples simulated together; negative: not simulated)."""
-    from aerosid.models import vehicle_signals
+    from aerosid.modelling.models import vehicle_signals
 
     sig = vehicle_signals(fd, vehicle)
     qS = fd["qbar_pa"].to_numpy(float) * vehicle.S_m2

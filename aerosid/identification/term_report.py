@@ -67,7 +67,7 @@ def significance_warnings(table: pd.DataFrame, p_max: float = P_MAX) -> list[str
 
 
 def _is_constant(expression: str) -> bool:
-    from aerosid.expressions import parse
+    from aerosid.modelling.expressions import parse
 
     try:
         parse(expression, frozenset())

@@ -31,7 +31,7 @@ from aerosid.identification.output_prediction import (AXIS_CHANNELS, AXIS_OUTPUT
                                                       predict_axis, prediction_inputs,
                                                       theil_inequality)
 from aerosid.identification.identify import mach_window_mask
-from aerosid.models import vehicle_signals
+from aerosid.modelling.models import vehicle_signals
 from aerosid.vehicles.vehicle import Vehicle
 
 MIN_SPAN_S = 1.0  # contiguous in-window stretches shorter than this are not predicted

@@ -106,9 +106,9 @@ def model_series(run: _Run, shown: Shown) -> dict:
     table = shown.table
     if fd is None or table is None or table.empty or fd.empty:
         return {}
-    from aerosid.expressions import evaluate
+    from aerosid.modelling.expressions import evaluate
     from aerosid.identification.identify import mach_window_mask
-    from aerosid.models import signals_from_flight_data
+    from aerosid.modelling.models import signals_from_flight_data
     from aerosid.vehicles.vehicle import load_vehicle
 
     veh = load_vehicle(run.vehicle)

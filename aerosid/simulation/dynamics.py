@@ -15,7 +15,7 @@ from typing import Callable
 
 import numpy as np
 
-from aerosid.aeromodel import AeroModel
+from aerosid.modelling.aeromodel import AeroModel
 from aerosid.vehicles.atmosphere import FastAtmosphere
 from aerosid.vehicles.rigid_body import body_rate_derivatives
 from aerosid.vehicles.vehicle import Vehicle

@@ -5,7 +5,7 @@ from __future__ import annotations
 import sys
 
 from aerosid.vehicles.aerodb import tabulate
-from aerosid.aeromodel import AeroModel
+from aerosid.modelling.aeromodel import AeroModel
 from aerosid.io import write_text_atomic
 from aerosid.vehicles.vehicle import load_vehicle
 

@@ -31,7 +31,7 @@ class Key:
     kind: "number", "int", "bool", "string", "choice", "vector" (``length`` numbers, or
     any length >= 1 when None), "matrix" (``shape`` rows x columns), "range" (two
     numbers lo < hi), "strings" (a list of ``length`` strings), "terms" (a list of model
-    terms, checked by aerosid.models), "path" (a file name, checked by load_vehicle).
+    terms, checked by aerosid.modelling.models), "path" (a file name, checked by load_vehicle).
     """
 
     kind: str

@@ -288,13 +288,13 @@ def load_vehicle(name_or_path: str | Path = "seed-rlv") -> Vehicle:
         raise VehicleError(src, "controls.surfaces", "needs 4 names, one per column d1..d4")
     terms = doc.get("models")
     if terms is not None:
-        from aerosid.models import CHANNELS as MODEL_CHANNELS
+        from aerosid.modelling.models import CHANNELS as MODEL_CHANNELS
 
         bad = [k for k in terms if k not in MODEL_CHANNELS or not isinstance(terms[k], list)]
         if bad:
             raise VehicleError(src, "models", f"channels {bad}: each entry must be a channel "
                                f"({', '.join(MODEL_CHANNELS)}) with a list of terms")
-        from aerosid.models import ModelSpecError, parse_terms
+        from aerosid.modelling.models import ModelSpecError, parse_terms
 
         for ch, items in terms.items():
             try:

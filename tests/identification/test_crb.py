@@ -175,7 +175,7 @@ def test_coefficient_table_carries_the_bound():
     import pandera.errors
 
     from aerosid.identification.identify import Identification, format_table
-    from aerosid.models import ChannelModel, Term
+    from aerosid.modelling.models import ChannelModel, Term
     from aerosid.identification.regression import fit_linear
     from schemas.coefficients import Coefficients
 

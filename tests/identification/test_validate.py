@@ -55,7 +55,7 @@ def small_run(tmp_path_factory):
 def test_run_coefficients_are_the_model_and_a_version_takes_over(small_run, tmp_path):
     import shutil
 
-    from aerosid.versions import fit_version, models_from_spec
+    from aerosid.modelling.versions import fit_version, models_from_spec
 
     run = tmp_path / "run"
     shutil.copytree(small_run["run"], run)

@@ -8,7 +8,7 @@ import pytest
 from scipy import stats
 
 from aerosid.vehicles.atmosphere import FastAtmosphere, density_kg_m3, speed_of_sound_m_s
-from aerosid.effects import CATALOGUE, parse_effect_spec
+from aerosid.modelling.effects import CATALOGUE, parse_effect_spec
 from aerosid.simulation import load_case, simulate
 from aerosid.simulation.dynamics import R_EARTH_M, quat_to_dcm
 from aerosid.simulation.sensors import IMU_COLUMNS, RAW_COLUMNS

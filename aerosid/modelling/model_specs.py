@@ -21,7 +21,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
-from aerosid.models import (CHANNELS, MAX_SPEC_BYTES, MAX_TERMS, ChannelModel, ModelSpecError, Term, default_models,
+from aerosid.modelling.models import (CHANNELS, MAX_SPEC_BYTES, MAX_TERMS, ChannelModel, ModelSpecError, Term, default_models,
                             parse_terms)
 
 #: The keys a channel table may have.

@@ -2,7 +2,7 @@
 
 Layout under ``RUN_DIR/models/``::
 
-    v001/spec.toml            the model specification (aerosid.models TOML)
+    v001/spec.toml            the model specification (aerosid.modelling.models TOML)
     v001/metrics.json         per channel: residual RMS, R^2, PSE, F, coefficients with sigma
     v001/coefficients.parquet the coefficients table (as RUN_DIR/coefficients.parquet)
     v001/parent               id of the parent version (empty for the root)
@@ -28,7 +28,7 @@ import pandas as pd
 
 from aerosid.identification.identify import identify
 from aerosid.io import write_json_atomic, write_parquet_atomic, write_text_atomic
-from aerosid.models import CHANNELS, ChannelModel, ModelSpecError, default_models, load_models, models_to_toml
+from aerosid.modelling.models import CHANNELS, ChannelModel, ModelSpecError, default_models, load_models, models_to_toml
 
 __all__ = ["ModelVersion", "VersionHistory", "fit_version", "history", "load_version", "latest_models",
            "read_flight_data", "run_vehicle", "models_from_spec", "spec_for_run", "MODELS_DIR", "VersionError"]
@@ -411,9 +411,9 @@ def models_from_spec(spec: str | Path, run_dir: str | Path, parent: str | None =
 
 def spec_for_run(spec: str | Path, run_dir: str | Path, parent: str | None = None):
     """A spec file applied to the run's parent version (`parent`, else the latest, else the
-    defaults): an aerosid.model_specs.SpecResult (the models and what changed, with a
+    defaults): an aerosid.modelling.model_specs.SpecResult (the models and what changed, with a
     warning for every term a ``terms = [...]`` replacement dropped)."""
-    from aerosid.model_specs import read_spec
+    from aerosid.modelling.model_specs import read_spec
     from aerosid.vehicles.vehicle import load_vehicle
 
     h = history(run_dir)
