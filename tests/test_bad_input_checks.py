@@ -346,7 +346,7 @@ def test_u15b_a_running_prefect_server_is_reused_only_if_it_answers_with_this_ve
 
     import prefect
 
-    from aerosid.cli_prefect import running_server
+    from aerosid.cli.prefect_server import running_server
 
     version = {"v": prefect.__version__}
 

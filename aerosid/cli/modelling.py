@@ -86,7 +86,7 @@ def diagnose(run_dir, model_spec, version_id, n_windows, mach_half_width, quiet)
     recommendation only: add it, `aerosid fit`, and diagnose again.
     """
     _check_run_dir(run_dir)
-    from aerosid.cli_progress import StageProgress
+    from aerosid.cli.progress import StageProgress
     from aerosid.diagnosis import diagnose as run_diagnosis
     from aerosid.io import write_json_atomic
     from aerosid.vehicles.vehicle import load_vehicle
@@ -178,7 +178,7 @@ def fit(run_dir, model_spec, parent, note, mach_half_width, per_degree):
     functions sin cos tan arctan tanh exp log sqrt abs sign.
     """
     _check_run_dir(run_dir)
-    from aerosid.cli_progress import stage_progress
+    from aerosid.cli.progress import stage_progress
     from aerosid.modelling.versions import fit_version, history, spec_for_run
 
     try:

@@ -66,7 +66,7 @@ def validate(run_dir, other_telemetry, vehicle, out_dir, version_id, bias, axes,
     if not run_dir.is_dir():
         raise click.ClickException(f"{run_dir}: no such run folder (make one with `aerosid run TELEMETRY --out "
                                    f"{run_dir}`)")
-    from aerosid.cli_progress import stage_progress
+    from aerosid.cli.progress import stage_progress
 
     try:
         with stage_progress("validate") as progress:

@@ -24,8 +24,8 @@ def import_group() -> None:
 
 
 def _import(read, out_dir: Path) -> None:
-    """read() -> the imported flight; written to out_dir, with a stage display (aerosid.cli_progress)."""
-    from aerosid.cli_progress import stage_progress
+    """read() -> the imported flight; written to out_dir, with a stage display (aerosid.cli.progress)."""
+    from aerosid.cli.progress import stage_progress
 
     with stage_progress("import") as progress:
         progress("read, convert and check", 0.0)
