@@ -23,7 +23,7 @@ import numpy as np
 import scipy.signal
 import scipy.stats
 
-from aerosid.identification.regression import _group_slices, _parzen, _pooled_autocovariance, auto_max_lag
+from aerosid.identification.residual_covariance import _group_slices, _parzen, _pooled_autocovariance, auto_max_lag
 
 #: the diagnosis's significance level (aerosid.diagnosis.core.P_MAX)
 P_MAX = 0.001

@@ -6,6 +6,8 @@
 ``derivatives``        zero-phase low-pass of vanes, smoothing derivatives (alpha-dot, beta-dot)
 ``eiv``                errors in the regressors: SIMEX correction for air-data vane noise
 ``regression``         linear least squares with the coloured-residual covariance (``fit_linear``)
+``residual_covariance`` residual autocovariance, lag window, Morelli-Klein covariance
+``linear_fit``         ``LinearFit``, the result of ``fit_linear``
 ``structure``          model structure determination (stepwise term selection)
 ``identify``           the regression stage: every channel's model fitted, the coefficients table
 ``coefficient_units``  per radian or per degree: a coefficient's unit from its term
