@@ -31,11 +31,11 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from aerosid.vehicles.rigid_body import lever_arm_acceleration
 from aerosid.simulation import SimulatedFlight
-from aerosid.simulation.case import FaultSpec
+from aerosid.simulation.jsbsim_columns import (DEG, FT, INCH, LBF, PSF, SLUG, SLUG_FT2, SLUG_FT3, TELEMETRY_COLUMNS,
+                                               coefficient_columns, make_telemetry, state_columns)
 from aerosid.simulation.jsbsim_tables import AeroTables, body_coefficients
-from aerosid.simulation.sensors import IMU_COLUMNS, RAW_COLUMNS, apply_faults
+from aerosid.simulation.jsbsim_truth import _coefficient_table, _linearise, _truth_check, flight_statistics
 from aerosid.vehicles.vehicle import DATA_DIR
 
 __all__ = ["JSBSimUnavailable", "simulate_jsbsim", "SUPPORTED_AIRCRAFT", "GENERATED_AIRCRAFT", "MANOEUVRES", "AeroTables",
@@ -48,18 +48,6 @@ __all__ = ["JSBSimUnavailable", "simulate_jsbsim", "SUPPORTED_AIRCRAFT", "GENERA
 SUPPORTED_AIRCRAFT = ("c172x",)
 GENERATED_AIRCRAFT = ("pa28", "OV10", "T37", "F4N")
 MANOEUVRES = ("3211",)
-VANE_COLUMNS = ["alpha_vane_rad", "beta_vane_rad"]
-TELEMETRY_COLUMNS = RAW_COLUMNS + VANE_COLUMNS
-
-# unit conversions (exact definitions)
-FT = 0.3048                    # m
-INCH = 0.0254                  # m
-LBF = 4.4482216152605          # N
-SLUG = LBF / FT                # kg (14.5939...)
-SLUG_FT2 = SLUG * FT * FT      # kg m^2
-PSF = LBF / (FT * FT)          # Pa
-SLUG_FT3 = SLUG / FT**3        # kg/m^3
-DEG = math.pi / 180.0
 
 
 class JSBSimUnavailable(ImportError):
@@ -274,234 +262,6 @@ def _fly(fdm, t: np.ndarray, inputs: dict[str, np.ndarray], record: list[str] = 
 
 
 # --------------------------------------------------------------------------------------
-# truth
-# --------------------------------------------------------------------------------------
-
-_LINEAR_VARS = ["alpha", "beta", "delta_p", "delta_r", "delta_y", "p_hat", "q_hat", "r_hat", "alpha_dot_hat"]
-
-
-def _linearise(tables: AeroTables, point: dict, arm_ft, cbar_ft, span_ft) -> dict[str, dict[str, float]]:
-    """Derivatives of CA, CY, CN and the moment coefficients (about the CG and the
-    AERORP) at the trim point by central differences of c172x's own tables."""
-
-    def evaluate(x):
-        c = tables.coefficients(x["alpha"], x["beta"], x["delta_p"], x["delta_r"], x["delta_y"],
-                                x["p_hat"], x["q_hat"], x["r_hat"], x["alpha_dot_hat"])
-        return {k: float(v) for k, v in body_coefficients(c, x["alpha"], x["beta"], arm_ft, cbar_ft, span_ft).items()}
-
-    base = evaluate(point)
-    steps = {"alpha": 1e-4, "beta": 1e-4, "delta_p": 1e-4, "delta_r": 1e-4, "delta_y": 1e-4,
-             "p_hat": 1e-4, "q_hat": 1e-4, "r_hat": 1e-4, "alpha_dot_hat": 1e-4}
-    deriv = {}
-    for v in _LINEAR_VARS:
-        hi, lo = dict(point), dict(point)
-        hi[v] += steps[v]
-        lo[v] -= steps[v]
-        ch, cl = evaluate(hi), evaluate(lo)
-        deriv[v] = {k: (ch[k] - cl[k]) / (2 * steps[v]) for k in base}
-    return {"value": base, "d": deriv}
-
-
-_LINEAR_MODEL = {  # the regressors of each coefficient's linear model
-    "CN": ["alpha", "q_hat", "delta_p", "alpha_dot_hat"],
-    "CA": ["alpha", "delta_p"],
-    "Cm": ["alpha", "q_hat", "delta_p", "alpha_dot_hat"],
-    "CY": ["beta", "p_hat", "r_hat", "delta_r", "delta_y"],
-    "Cl": ["beta", "p_hat", "r_hat", "delta_r", "delta_y"],
-    "Cn": ["beta", "p_hat", "r_hat", "delta_r", "delta_y"],
-}
-_VAR_SUFFIX = {"alpha": "alpha", "beta": "beta", "delta_p": "delta_p", "delta_r": "delta_r", "delta_y": "delta_y",
-               "p_hat": "p", "q_hat": "q", "r_hat": "r", "alpha_dot_hat": "alpha_dot"}
-
-
-def _coefficient_table(lin: dict, point: dict, moment: str = "cg") -> dict[str, float]:
-    """The linear truth: derivatives and intercepts (so that the linear model passes
-    through the trim point).  moment="rp": the moments about the AERORP instead."""
-    out = {}
-    for coef, regs in _LINEAR_MODEL.items():
-        key = coef if (moment == "cg" or coef in ("CN", "CA", "CY")) else f"{coef}_rp"
-        intercept = lin["value"][key]
-        for r in regs:
-            d = lin["d"][r][key]
-            out[f"{coef}_{_VAR_SUFFIX[r]}"] = d
-            intercept -= d * point[r]
-        out[f"{coef}_0"] = intercept
-    out["Cm_q_plus_alpha_dot"] = out["Cm_q"] + out["Cm_alpha_dot"]
-    return out
-
-
-def _regressors(truth: pd.DataFrame, names: list[str]) -> np.ndarray:
-    cols = {"alpha": "alpha_rad", "beta": "beta_rad", "delta_p": "delta_p_rad", "delta_r": "delta_r_rad",
-            "delta_y": "delta_y_rad", "p_hat": "p_hat", "q_hat": "q_hat", "r_hat": "r_hat",
-            "alpha_dot_hat": "alpha_dot_hat"}
-    return np.column_stack([np.ones(len(truth))] + [truth[cols[n]].to_numpy() for n in names])
-
-
-def linear_prediction(truth: pd.DataFrame, coefficients: dict, coef: str) -> np.ndarray:
-    """A coefficient (CN, CA, Cm, CY, Cl, Cn) of the truth frame predicted by the linear truth."""
-    regs = _LINEAR_MODEL[coef]
-    X = _regressors(truth, regs)
-    beta = np.array([coefficients[f"{coef}_0"]] + [coefficients[f"{coef}_{_VAR_SUFFIX[r]}"] for r in regs])
-    return X @ beta
-
-
-def _fit(truth: pd.DataFrame, table: dict, coef: str, regs: list[str], mask: np.ndarray,
-         extra: dict[str, np.ndarray] | None = None) -> dict:
-    X = _regressors(truth, regs)[mask]
-    names = [f"{coef}_0"] + [f"{coef}_{_VAR_SUFFIX[r]}" for r in regs]
-    for k, v in (extra or {}).items():
-        X = np.column_stack([X, v[mask]])
-        names.append(k)
-    y = truth[coef].to_numpy()[mask]
-    sol, *_ = np.linalg.lstsq(X, y, rcond=None)
-    resid = y - X @ sol
-    return {
-        "regressors": ["1"] + regs + list(extra or {}),
-        "n_samples": int(mask.sum()),
-        "fit": {n: float(v) for n, v in zip(names, sol)},
-        "table": {n: float(table[n]) for n in names if n in table},
-        "rel_diff": {n: float((v - table[n]) / table[n]) for n, v in zip(names, sol)
-                     if n in table and not n.endswith("_0") and table[n] != 0},
-        "rms_residual": float(np.sqrt(np.mean(resid ** 2))),
-        "std_signal": float(np.std(y)),
-    }
-
-
-def _truth_check(truth: pd.DataFrame, table: dict, t_lateral_s: float) -> dict:
-    """Least-squares fits of the noise-free truth coefficients (about the CG) next to
-    the transferred table values: Cm on [1, α, q̂, δp, α̇̂] and CN on [1, α, q̂, δp]
-    over the longitudinal part of the flight (before the first lateral manoeuvre),
-    over the whole flight, and over the whole flight with |β| as an extra regressor
-    (c172x's drag grows with |β| and the AERORP sits 0.59 m above the CG, so the
-    lateral manoeuvres move Cm about the CG by ~0.067 |β|); Cl and Cn on
-    [1, β, p̂, r̂, δr, δy] over the whole flight."""
-    t = truth["t_s"].to_numpy()
-    lon = t < t_lateral_s
-    every = np.ones(len(t), dtype=bool)
-    abs_beta = {"Cm_abs_beta": np.abs(truth["beta_rad"].to_numpy())}
-    m_regs = ["alpha", "q_hat", "delta_p", "alpha_dot_hat"]
-    n_regs = ["alpha", "q_hat", "delta_p"]
-    lat = ["beta", "p_hat", "r_hat", "delta_r", "delta_y"]
-    return {
-        "longitudinal_window_s": [float(t[0]), float(t_lateral_s)],
-        "Cm": _fit(truth, table, "Cm", m_regs, lon),
-        "CN": _fit(truth, table, "CN", n_regs, lon),
-        "Cm_whole_flight": _fit(truth, table, "Cm", m_regs, every),
-        "Cm_whole_flight_abs_beta": _fit(truth, table, "Cm", m_regs, every, abs_beta),
-        "CN_whole_flight": _fit(truth, table, "CN", n_regs, every),
-        "Cl": _fit(truth, table, "Cl", lat, every),
-        "Cn": _fit(truth, table, "Cn", lat, every),
-    }
-
-
-
-def sensor_sigma(sens: dict) -> dict[str, float]:
-    """1-sigma noise per telemetry channel from a [sensors] table (simulation.toml)."""
-    sigma = dict(zip(IMU_COLUMNS, (*sens["accel_noise_m_s2"], *(g * DEG for g in sens["gyro_noise_deg_s"]))))
-    sigma.update({f"d{i}_rad": sens["surface_noise_deg"] * DEG for i in range(1, 5)})
-    sigma.update({"V_m_s": sens["V_noise_m_s"], "h_m": sens["h_noise_m"],
-                  "alpha_vane_rad": sens["vane_noise_deg"] * DEG, "beta_vane_rad": sens["vane_noise_deg"] * DEG})
-    return sigma
-
-
-def make_telemetry(clean: dict[str, np.ndarray], truth: pd.DataFrame, sens: dict, fcfg: dict, seed: int,
-                   faults: bool):
-    """Noise ([sensors]) and faults ([faults]) on the clean signals: each channel's noise
-    from its own child of SeedSequence(seed).  Adds the fault masks (fault_*) and the
-    noise actually added (noise_*) to `truth`.  Returns (telemetry, masks, FaultSpec, sigma)."""
-    t = clean["t_s"]
-    n = len(t)
-    sigma = sensor_sigma(sens)
-    channels = TELEMETRY_COLUMNS[1:]
-    children = np.random.SeedSequence(seed).spawn(2 + len(channels))
-    rng_drop, rng_out = np.random.default_rng(children[0]), np.random.default_rng(children[1])
-    noisy = {"t_s": t.copy()}
-    for child, col in zip(children[2:], channels):
-        noisy[col] = clean[col] + sigma[col] * np.random.default_rng(child).standard_normal(n)
-    spec = FaultSpec(
-        dropout_rate_per_s=fcfg["dropout_rate_per_s"], dropout_length_s=tuple(fcfg["dropout_length_s"]),
-        dropout_nan_fraction=fcfg["dropout_nan_fraction"], outlier_probability=fcfg["outlier_probability"],
-        outlier_size_sigma=tuple(fcfg["outlier_size_sigma"]), sync_gap_at=fcfg["sync_gap_at"],
-        sync_gap_s=fcfg["sync_gap_s"])
-    if not faults:
-        spec = spec.without_faults()
-    sigma_imu = np.array([sigma[c] for c in IMU_COLUMNS])
-    telemetry, masks = apply_faults({c: noisy[c] for c in RAW_COLUMNS}, sigma_imu, spec, rng_drop, rng_out)
-    keep = ~masks["dropout_missing_row"].to_numpy()
-    nan_rows = masks["dropout_nan"].to_numpy()
-    for col in VANE_COLUMNS:
-        v = noisy[col].copy()
-        v[nan_rows] = np.nan
-        telemetry[col] = v[keep]
-    telemetry = telemetry[TELEMETRY_COLUMNS]
-    for col in masks.columns[1:]:
-        truth[f"fault_{col}"] = masks[col].to_numpy()
-    for col in channels:
-        truth[f"noise_{col}"] = noisy[col] - clean[col]
-    return telemetry, masks, spec, sigma
-
-
-def rates_at_the_moments(x: np.ndarray, x_dot: np.ndarray, dt: float) -> np.ndarray:
-    """Body rates re-timed to the instant of the sample's moments.
-
-    JSBSim integrates the body rates with rectangular Euler (its default
-    simulation/integrator/rate/rotational = 1): x[k+1] = x[k] + dt x_dot[k], where
-    x_dot[k] comes from the moments of sample k.  Those moments therefore act at
-    t_k + dt/2 as far as the rates are concerned: the logged rates run half a step late
-    relative to the logged moments and accelerations (a derivative of the logged q is
-    (q_dot[k-1] + q_dot[k])/2, not q_dot[k]; docs/jsbsim.md).  The rate at t_k + dt/2 is
-    exactly x[k] + dt/2 x_dot[k] (x is linear over the step); as the gyros' reading at
-    sample k, its derivative matches the moment of sample k."""
-    return x + 0.5 * dt * x_dot
-
-def state_columns(rec: dict, t: np.ndarray, dt: float, accel_offset_m) -> tuple[dict, np.ndarray]:
-    """The truth columns every JSBSim flight shares, from its record: air data, attitude, the
-    gyros' rates at the instant of the sample's moments (JSBSim's Euler step logs them half a
-    step late, :func:`rates_at_the_moments`; the state JSBSim's aerodynamics used stays in
-    p/q/r_state_rad_s), angular accelerations, the specific force at the CG (all external
-    non-gravitational forces / mass: JSBSim's forces/fb*-total are aero + propulsion + ground +
-    external) and at the accelerometer (offset [m], body axes), alpha, beta, alpha-dot.
-    Returns (columns in the truth frame's order, mass [kg] per sample)."""
-    mass_kg = rec["inertia/mass-slugs"] * SLUG
-    xdot = [rec[f"accelerations/{a}dot-rad_sec2"] for a in "pqr"]
-    state = [rec[f"velocities/{a}-rad_sec"] for a in "pqr"]
-    p, q, r = (rates_at_the_moments(x, xd, dt) for x, xd in zip(state, xdot))
-    f_cg = [rec[f"forces/fb{a}-total-lbs"] * LBF / mass_kg for a in "xyz"]
-    f_sensor = [f + lv for f, lv in zip(f_cg, lever_arm_acceleration(p, q, r, *xdot, accel_offset_m))]
-    cols = {
-        "t_s": t,
-        "h_m": rec["position/h-sl-ft"] * FT, "V_m_s": rec["velocities/vt-fps"] * FT, "mach": rec["velocities/mach"],
-        "qbar_pa": rec["aero/qbar-psf"] * PSF,
-        "rho_kg_m3": rec["atmosphere/rho-slugs_ft3"] * SLUG_FT3, "g_m_s2": rec["accelerations/gravity-ft_sec2"] * FT,
-        "phi_rad": rec["attitude/phi-rad"], "theta_rad": rec["attitude/theta-rad"], "psi_rad": rec["attitude/psi-rad"],
-        "p_rad_s": p, "q_rad_s": q, "r_rad_s": r,
-        "p_state_rad_s": state[0], "q_state_rad_s": state[1], "r_state_rad_s": state[2],
-        "p_dot_rad_s2": xdot[0], "q_dot_rad_s2": xdot[1], "r_dot_rad_s2": xdot[2],
-        "ax_cg_m_s2": f_cg[0], "ay_cg_m_s2": f_cg[1], "az_cg_m_s2": f_cg[2],
-        "ax_sensor_m_s2": f_sensor[0], "ay_sensor_m_s2": f_sensor[1], "az_sensor_m_s2": f_sensor[2],
-        "alpha_rad": rec["aero/alpha-rad"], "beta_rad": rec["aero/beta-rad"],
-        "alpha_dot_rad_s": rec["aero/alphadot-rad_sec"],
-    }
-    return cols, mass_kg
-
-
-def coefficient_columns(rec: dict, S_ft2: float, cbar_ft: float, b_ft: float) -> dict:
-    """The aerodynamic force and moment coefficients (moments about the CG) and the
-    propulsive ones, non-dimensionalised alike (the accelerometers and gyros feel both)."""
-    qS_lbs = rec["aero/qbar-psf"] * S_ft2
-    return {
-        "CA": -rec["forces/fbx-aero-lbs"] / qS_lbs, "CY": rec["forces/fby-aero-lbs"] / qS_lbs,
-        "CN": -rec["forces/fbz-aero-lbs"] / qS_lbs,
-        "Cl": rec["moments/l-aero-lbsft"] / (qS_lbs * b_ft), "Cm": rec["moments/m-aero-lbsft"] / (qS_lbs * cbar_ft),
-        "Cn": rec["moments/n-aero-lbsft"] / (qS_lbs * b_ft),
-        "CX_prop": rec["forces/fbx-prop-lbs"] / qS_lbs, "CZ_prop": rec["forces/fbz-prop-lbs"] / qS_lbs,
-        "Cl_prop": rec["moments/l-prop-lbsft"] / (qS_lbs * b_ft),
-        "Cm_prop": rec["moments/m-prop-lbsft"] / (qS_lbs * cbar_ft),
-        "Cn_prop": rec["moments/n-prop-lbsft"] / (qS_lbs * b_ft),
-    }
-
-
-# --------------------------------------------------------------------------------------
 # the flight
 # --------------------------------------------------------------------------------------
 
@@ -705,28 +465,3 @@ def simulate_jsbsim(aircraft: str = "c172x", manoeuvre: str = "3211", seed: int 
     }
     return SimulatedFlight(case=aircraft, seed=int(seed), effects=(), telemetry=telemetry, truth=truth,
                            coefficients=coefficients, info=info)
-
-
-def flight_statistics(truth, telemetry, masks, spec, sigma, t, dt, qbar_pa, alpha, beta, V) -> dict:
-    """The part of a JSBSim flight's info every flight shares: sizes, faults, ranges of the
-    flight condition and the pitch-plane signal-to-noise ratios."""
-    deg = 1.0 / DEG
-    return {
-        "n_samples": int(len(t)), "sample_rate_hz": 1.0 / dt, "duration_s": float(t[-1]),
-        "n_telemetry_rows": int(len(telemetry)),
-        "n_dropout": int(masks["dropout"].sum()),
-        "n_outliers": int(sum(masks[f"outlier_{c}"].sum() for c in IMU_COLUMNS)),
-        "sync_gap_s": float(spec.sync_gap_s),
-        "mach_min": float(truth["mach"].min()), "mach_max": float(truth["mach"].max()),
-        "h_min_m": float(truth["h_m"].min()), "h_max_m": float(truth["h_m"].max()),
-        "qbar_min_pa": float(np.min(qbar_pa)), "qbar_max_pa": float(np.max(qbar_pa)),
-        "alpha_min_deg": float(np.min(alpha) * deg), "alpha_max_deg": float(np.max(alpha) * deg),
-        "beta_min_deg": float(np.min(beta) * deg), "beta_max_deg": float(np.max(beta) * deg),
-        "phi_min_deg": float(truth["phi_rad"].min() * deg), "phi_max_deg": float(truth["phi_rad"].max() * deg),
-        "V_min_m_s": float(np.min(V)), "V_max_m_s": float(np.max(V)),
-        "snr": {
-            "az": float(truth["az_sensor_m_s2"].std() / sigma["az_m_s2"]),
-            "q": float(truth["q_rad_s"].std() / sigma["q_rad_s"]),
-            "ax": float(truth["ax_sensor_m_s2"].std() / sigma["ax_m_s2"]),
-        },
-    }

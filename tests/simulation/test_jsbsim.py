@@ -16,10 +16,10 @@ from aerosid.vehicles.rigid_body import body_rate_derivatives, inertia_constants
 from aerosid.simulation.jsbsim_flight import (  # noqa: E402
     TELEMETRY_COLUMNS,
     JSBSimUnavailable,
-    linear_prediction,
     load_jsbsim_config,
     simulate_jsbsim,
 )
+from aerosid.simulation.jsbsim_truth import linear_prediction  # noqa: E402
 from aerosid.vehicles.vehicle import DATA_DIR  # noqa: E402
 
 DEG = math.pi / 180.0
