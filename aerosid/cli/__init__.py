@@ -3,6 +3,9 @@
 loads Prefect).
 
 ``app``            the command group ``main`` (the console script ``aerosid = aerosid.cli:main``)
+``simulate``       ``aerosid simulate`` (a flight with known truth)
+``run``            ``aerosid run`` and its pre-flight checks of the inputs
+``audit``          ``aerosid audit`` (a file's lineage through the ledger)
 ``modelling``      ``aerosid diagnose`` / ``fit`` / ``history`` (the modelling loop)
 ``import_``        ``aerosid import sidpac|csv`` (``import`` is a Python keyword)
 ``validate``       ``aerosid validate`` (predict another manoeuvre)

@@ -154,7 +154,7 @@ def test_noise_sigma_of_white_noise_on_a_smooth_signal():
 
 
 def test_written_telemetry_names_its_vehicle_and_passes_the_run_preflight(written18, to18):
-    from aerosid.cli.app import _preflight
+    from aerosid.cli.run import _preflight
 
     tel = written18["telemetry"]
     assert telemetry_vehicle(tel) == str(written18["vehicle"].resolve())
