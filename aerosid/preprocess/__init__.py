@@ -22,7 +22,8 @@ from .params import (
     parse_assignments,
     parse_settings,
 )
-from .core import PREPROCESS_VERSION, PreprocessResult, preprocess
+from .core import preprocess
+from .result import PREPROCESS_VERSION, PreprocessResult
 from .sensors import SensorProfile
 from .io import read_preprocessed_parquet, read_raw_parquet, write_preprocessed_parquet, write_raw_parquet
 

@@ -30,12 +30,11 @@ Pipeline (method.md §1), all vectorised:
 6. The output is enforced against ``PreprocessedTelemetry``.
 
 Durations: a run of n grid samples lasts n * dt (the time not covered by data).
+The result (frame, report, metadata) is :class:`~aerosid.preprocess.result.PreprocessResult`.
 """
 from __future__ import annotations
 
-import json
 import math
-from dataclasses import dataclass, field
 
 import numpy as np
 import pandas as pd
@@ -45,7 +44,6 @@ from schemas.telemetry import (
     CHANNELS,
     PHYSICAL_BOUNDS,
     RAW_COLUMNS,
-    UNITS,
     PreprocessedTelemetry,
     RawTelemetry,
     sentinel_mask,
@@ -56,155 +54,10 @@ from . import detect, sensors
 from .errors import TelemetryError
 from .flags import DETECTION, FAULT, FLAGS_DTYPE, UNUSABLE, QualityFlag
 from .params import DEFAULT_MIN_NOISE_SCALE, PreprocessParams  # noqa: F401  (re-exported)
-
-#: Version of the output layout / algorithm, recorded in the metadata.
-PREPROCESS_VERSION = "2"
+from .result import PreprocessResult
 
 #: Hard cap on the grid size (a clock jump would otherwise allocate without bound).
 MAX_GRID_ROWS = 50_000_000
-
-
-@dataclass(frozen=True, eq=False)
-class PreprocessResult:
-    """Output of :func:`preprocess` (treat every field as read-only).
-
-    frame:
-        The preprocessed frame (``schemas.telemetry.PreprocessedTelemetry``): ``t_s``
-        (uniform grid), ``t_raw_s``, the 12 raw channels as received (NaN on inserted
-        rows), ``<channel>_clean``, ``flags_<channel>`` and ``flags`` (uint16).
-    params, source:
-        What was asked, and the file the raw frame came from.
-    nominal_rate_hz, dt_s, rate_inferred:
-        The grid rate [Hz] and step [s]; whether the rate was inferred.
-    n_raw_rows, n_grid_rows, n_inserted_rows:
-        Row bookkeeping: ``n_grid_rows == n_raw_rows + n_inserted_rows``.
-    flag_counts:
-        Bit name -> number of grid rows where at least one channel has that bit.
-    flag_counts_by_channel:
-        Channel -> (bit name -> number of samples with that bit).
-    n_usable_rows:
-        Grid rows where every channel is usable (flags == 0: a new measurement, used
-        by the Kalman filter as it is).
-    n_usable_by_channel:
-        Channel -> number of usable samples.
-    n_used_rows:
-        Recorded rows where every contract channel holds no fault: a measurement, or a
-        held value between its sensor's updates (``HELD``).  The usable share of the
-        record is ``n_used_rows / n_raw_rows``.
-    n_used_by_channel:
-        Channel -> recorded samples without a fault.
-    sensors:
-        Channel -> :class:`~aerosid.preprocess.sensors.SensorProfile` as a dict
-        (resolution, update interval, at rest, frozen run length) plus the outlier
-        ``threshold_sigma`` used.
-    longest_gap_s:
-        Longest run of rows where every channel is bad [s] (0 if none).
-    longest_gap_s_by_channel:
-        Channel -> longest run of bad samples of that channel [s].
-    long_gaps:
-        ``(t_start_s, t_end_s)`` grid times of the first and last sample of each
-        all-channel gap longer than ``max_interp_gap_s`` (edges included).
-    noise_sigma:
-        Channel -> whole-record robust noise standard deviation (channel unit) used by
-        the outlier test (a diagnostic, not the R estimate of method.md §4).
-    ignored_columns:
-        Input columns outside the contract, not carried over.
-    """
-
-    frame: pd.DataFrame
-    params: PreprocessParams
-    source: str
-    nominal_rate_hz: float
-    dt_s: float
-    rate_inferred: bool
-    n_raw_rows: int
-    n_grid_rows: int
-    n_inserted_rows: int
-    flag_counts: dict
-    flag_counts_by_channel: dict
-    n_usable_rows: int
-    n_usable_by_channel: dict
-    longest_gap_s: float
-    longest_gap_s_by_channel: dict
-    long_gaps: tuple = ()
-    noise_sigma: dict = field(default_factory=dict)
-    ignored_columns: tuple = ()
-    n_used_rows: int = 0
-    n_used_by_channel: dict = field(default_factory=dict)
-    sensors: dict = field(default_factory=dict)
-
-    @property
-    def usable_share(self) -> dict:
-        """Rows used of rows recorded, overall (every contract channel) and per channel."""
-        rec = max(self.n_raw_rows, 1)
-        return {"recorded": self.n_raw_rows, "used": self.n_used_rows, "share": self.n_used_rows / rec,
-                "by_channel": {c: {"used": u, "share": u / rec} for c, u in self.n_used_by_channel.items()}}
-
-    @property
-    def summary_counts(self) -> dict:
-        """Rows of each kind: ``raw``, ``grid``, ``inserted``, ``usable`` and one entry
-        per flag bit (rows with that bit in any channel)."""
-        out = {"raw": self.n_raw_rows, "grid": self.n_grid_rows, "inserted": self.n_inserted_rows,
-               "usable": self.n_usable_rows}
-        out.update(self.flag_counts)
-        return out
-
-    def metadata(self) -> dict[str, str]:
-        """Key/value strings for the Parquet file's metadata (``aerosid.preprocess.*``)."""
-        p = "aerosid.preprocess."
-        return {
-            "aerosid.stage": "preprocess",
-            p + "version": PREPROCESS_VERSION,
-            p + "source": self.source,
-            p + "params": json.dumps(self.params.to_dict(), sort_keys=True),
-            p + "nominal_rate_hz": repr(self.nominal_rate_hz),
-            p + "dt_s": repr(self.dt_s),
-            p + "rate_inferred": json.dumps(self.rate_inferred),
-            p + "summary_counts": json.dumps(self.summary_counts, sort_keys=True),
-            p + "flag_counts_by_channel": json.dumps(self.flag_counts_by_channel, sort_keys=True),
-            p + "longest_gap_s": repr(self.longest_gap_s),
-            p + "longest_gap_s_by_channel": json.dumps(self.longest_gap_s_by_channel, sort_keys=True),
-            p + "long_gaps": json.dumps([list(g) for g in self.long_gaps]),
-            p + "noise_sigma": json.dumps(self.noise_sigma, sort_keys=True),
-            p + "ignored_columns": json.dumps(list(self.ignored_columns)),
-            p + "flag_bits": json.dumps({f.name: int(f) for f in QualityFlag}),
-            p + "physical_bounds": json.dumps(PHYSICAL_BOUNDS, sort_keys=True),
-            p + "usable_share": json.dumps(self.usable_share, sort_keys=True),
-            p + "sensors": json.dumps(self.sensors, sort_keys=True),
-        }
-
-    def summary(self) -> str:
-        """Human-readable per-flight summary."""
-        share = self.usable_share
-        lines = [
-            f"preprocess {self.source}: {self.n_raw_rows} raw rows -> {self.n_grid_rows} grid rows "
-            f"({self.n_inserted_rows} inserted) at {self.nominal_rate_hz:.6g} Hz "
-            f"({'inferred' if self.rate_inferred else 'given'})",
-            f"  rows used (every channel a measurement or a held value): {self.n_used_rows} of "
-            f"{self.n_raw_rows} recorded ({100.0 * share['share']:.2f} %)",
-            f"  usable rows (all channels): {self.n_usable_rows} "
-            f"({100.0 * self.n_usable_rows / max(self.n_grid_rows, 1):.2f} %)",
-            "  rows with flag: " + (", ".join(f"{k}={v}" for k, v in self.flag_counts.items() if v) or "none"),
-            f"  longest all-channel gap: {self.longest_gap_s:.3f} s; "
-            f"long gaps (> max_interp_gap_s = {self.params.max_interp_gap_s:g} s): {len(self.long_gaps)}"
-            + "".join(f"\n    {a:.3f} .. {b:.3f} s" for a, b in self.long_gaps),
-        ]
-        for c in self.flag_counts_by_channel:
-            counts = {k: v for k, v in self.flag_counts_by_channel[c].items() if v}
-            if counts:
-                lines.append(f"  {c}: used {100.0 * share['by_channel'][c]['share']:.1f} %, "
-                             f"usable {self.n_usable_by_channel[c]}, "
-                             f"longest bad run {self.longest_gap_s_by_channel[c]:.3f} s, "
-                             + ", ".join(f"{k}={v}" for k, v in counts.items()))
-        for c, prof in self.sensors.items():
-            text = sensors.SensorProfile(**{k: (tuple(v) if k == "given" else v) for k, v in prof.items()
-                                            if k != "threshold_sigma"}).describe(self.nominal_rate_hz,
-                                                                                UNITS.get(c, ""))
-            if text:
-                lines.append(f"  sensor {c}: {text}")
-        if self.ignored_columns:
-            lines.append(f"  ignored columns: {list(self.ignored_columns)}")
-        return "\n".join(lines)
 
 
 # ---------------------------------------------------------------------------

@@ -13,7 +13,7 @@ import pyarrow.parquet as pq
 
 from schemas.telemetry import PreprocessedTelemetry, RawTelemetry, validate
 
-from .core import PreprocessResult
+from .result import PreprocessResult
 
 
 def _write(df: pd.DataFrame, path: str | os.PathLike, metadata: dict[str, str]) -> Path:
