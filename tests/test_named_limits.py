@@ -11,7 +11,7 @@ from click.testing import CliRunner
 from aerosid.cli import main
 from aerosid.preprocess import PreprocessParams, TelemetryError, preprocess, write_raw_parquet
 from aerosid.preprocess.segments import plan_segments
-from tests.test_preprocess import make_flight
+from tests.preprocess.test_preprocess import make_flight
 
 T = np.round(np.arange(0, 401) * 0.02, 10)  # 8 s at 50 Hz, like the Twin Otter manoeuvre 018
 

@@ -122,7 +122,7 @@ TABLES: dict[str, dict[str, Key] | None] = {
             "Cn_delta_y_nose", "Cl_0", "Cl_alpha_r", "Cl_cos4phi", "Cl_delta_r", "CA_0", "CA_alpha2")},
         "mach_breakpoints": vec(None, 0.0, 50.0, positive=True), "slope_factor": vec(None, 0.0, 100.0, positive=True),
     },
-    # Smoother defaults: aerosid.estimation.EBMOptions fields (tests/test_vehicle_keys.py keeps
+    # Smoother defaults: aerosid.estimation.EBMOptions fields (tests/vehicles/test_vehicle_keys.py keeps
     # the two lists equal), plus band_hz (the regression's low-pass edge, read by load_vehicle).
     "estimation": {
         "f_max_hz": pos(1e4), "gate_probability": Key("number", 0.0, 1.0, positive=True),

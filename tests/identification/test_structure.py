@@ -8,7 +8,7 @@ import pandas as pd
 import pytest
 
 from aerosid.identification.structure import StepwiseResult, pse_search, stepwise
-from tests.test_regression import FS, N, TRUE, ar1, manoeuvre
+from tests.identification.test_regression import FS, N, TRUE, ar1, manoeuvre
 
 
 def pitch_candidates(seed: int):

@@ -22,7 +22,7 @@ from aerosid.preprocess import (
 )
 from aerosid.preprocess import detect, sensors
 from schemas.telemetry import CHANNELS, validate, PreprocessedTelemetry
-from tests.test_preprocess import NOISE, make_flight
+from tests.preprocess.test_preprocess import NOISE, make_flight
 
 F = QualityFlag
 DEG = math.pi / 180.0
