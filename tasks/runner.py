@@ -24,7 +24,7 @@ import pandera.pandas as pa
 from pyarrow.lib import ArrowException
 
 from aerosid.io import read_parquet_metadata, write_parquet_atomic
-from aerosid.preprocess.errors import TelemetryError
+from aerosid.preprocess.io import read_parquet_frame
 from aerosid.provenance import code_version, params_hash, sha256_file
 from schemas.telemetry import validate
 from tasks import ledger, progress
@@ -57,13 +57,7 @@ class Produced:
 
 def read_validated(path: str | Path, schema: type[pa.DataFrameModel]) -> pd.DataFrame:
     """Read a Parquet file and validate it; unreadable files name themselves."""
-    try:
-        frame = pd.read_parquet(path)
-    except (OSError, ArrowException, ValueError) as exc:
-        if isinstance(exc, FileNotFoundError):
-            raise
-        raise TelemetryError(f"not a readable Parquet file ({type(exc).__name__}: {exc})", file=str(path)) from exc
-    return validate(frame, schema, str(path))
+    return validate(read_parquet_frame(path), schema, str(path))
 
 
 @contextmanager

@@ -13,7 +13,24 @@ import pyarrow.parquet as pq
 
 from schemas.telemetry import PreprocessedTelemetry, RawTelemetry, validate
 
+from .errors import TelemetryError
 from .result import PreprocessResult
+
+#: What a damaged Parquet file can raise while it is read: Arrow's and the OS's errors, and
+#: the KeyError / TypeError / ValueError of pandas rebuilding the frame from a damaged
+#: ``pandas`` schema metadata entry (a hypothesis-found case: KeyError 'pandas_type').
+_UNREADABLE = (OSError, pa.ArrowException, ValueError, KeyError, TypeError, IndexError)
+
+
+def read_parquet_frame(path: str | os.PathLike) -> pd.DataFrame:
+    """``pd.read_parquet(path)``; a file that exists but cannot be read becomes a
+    TelemetryError naming it (a missing file stays FileNotFoundError)."""
+    try:
+        return pd.read_parquet(path)
+    except _UNREADABLE as exc:
+        if isinstance(exc, FileNotFoundError):
+            raise
+        raise TelemetryError(f"not a readable Parquet file ({type(exc).__name__}: {exc})", file=str(path)) from exc
 
 
 def _write(df: pd.DataFrame, path: str | os.PathLike, metadata: dict[str, str]) -> Path:
@@ -27,7 +44,7 @@ def _write(df: pd.DataFrame, path: str | os.PathLike, metadata: dict[str, str]) 
 
 def read_raw_parquet(path: str | os.PathLike) -> pd.DataFrame:
     """Read raw telemetry and enforce ``RawTelemetry`` (TelemetryError names the file)."""
-    df = pd.read_parquet(path)
+    df = read_parquet_frame(path)
     return validate(df, RawTelemetry, str(path))
 
 

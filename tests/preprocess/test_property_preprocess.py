@@ -115,3 +115,30 @@ def test_random_damage_to_the_columns_gives_a_result_or_telemetry_error(tmp_path
     except (ValueError, TypeError):  # pyarrow refuses to write it (e.g. duplicate names): nothing to read
         return
     read_then_preprocess(path)
+
+
+def test_damaged_pandas_metadata_is_a_telemetry_error_naming_the_file(tmp_path):
+    """The case hypothesis found: the file's Arrow data are intact but its ``pandas`` schema
+    metadata lost a key; pandas raised a bare KeyError('pandas_type')."""
+    import json
+
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    from aerosid.preprocess.io import read_raw_parquet
+
+    table = pa.Table.from_pandas(_RAW, preserve_index=False)
+    meta = dict(table.schema.metadata)
+    pandas_meta = json.loads(meta[b"pandas"])
+    for col in pandas_meta["columns"]:
+        col.pop("pandas_type", None)
+    meta[b"pandas"] = json.dumps(pandas_meta).encode()
+    path = tmp_path / "damaged_meta.parquet"
+    pq.write_table(table.replace_schema_metadata(meta), path)
+    for read in (lambda p: read_validated(p, RawTelemetry), read_raw_parquet):
+        try:
+            read(path)
+        except TelemetryError as e:
+            assert e.file == str(path) and str(path) in str(e)
+        else:  # pandas may learn to ignore the damage: then the frame must be the telemetry
+            pd.testing.assert_frame_equal(read(path), _RAW, check_dtype=False)
