@@ -226,7 +226,11 @@ def report(df: pd.DataFrame, seeds: list[int], label: str, load: tuple[str, str]
              "Flights and definitions: bench/bench_generalisation.py (docstring).  Errors in % of the truth "
              "(mean / RMS / worst over the completed runs); coverage = share of ALL runs whose 95 % interval (1.96 "
              "reported sigma) holds the truth; oracle = the default model fitted to the noise-free truth (the best "
-             "the model structure can give on this flight); coverage of the oracle = the same share against it.", ""]
+             "the model structure can give on this flight); coverage of the oracle = the same share against it.  "
+             "Truth = the at-trim truth (central differences of the model at the trim point); 'vs the flight-averaged "
+             "truth' = the same columns against the mean over the flight's samples of the central difference at each "
+             "sample's state (bench/generalisation_avg.py: by Stein's lemma what a linear fit estimates for Gaussian "
+             "excursions; seed-rlv: analytic and linear, the same truth).", ""]
     if label == "smoke":
         lines += ["**Smoke run** (a check of the harness on a shared machine, 2 seeds): not the bench result; the "
                   "full bench is `python bench/bench_generalisation.py --seeds 0-9`.", ""]
@@ -348,8 +352,9 @@ def truth_only(args) -> None:
         raise SystemExit("the at-trim truth recomputed differs from the CSV's (not the same simulation):\n"
                          + "\n".join(bad))
     merged.to_csv(path, index=False, float_format="%.6g")
-    print(f"{len(jobs)} run(s) re-simulated in {time.perf_counter() - t0:.0f} s; at-trim truth identical to the "
-          f"CSV's in every run; flight-averaged truth merged into {path}")
+    n_sim = sum(not r["analytic"] for r in results)
+    print(f"{n_sim} JSBSim run(s) re-simulated in {time.perf_counter() - t0:.0f} s (seed-rlv: analytic, not "
+          f"simulated); at-trim truth identical to the CSV's in every run; flight-averaged truth merged into {path}")
 
 
 def main() -> None:

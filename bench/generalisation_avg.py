@@ -15,7 +15,8 @@ model identified from that flight estimates.  The flight's excursions are NOT Ga
 (3-2-1-1s and doublets from a trimmed state): the least-squares slope weights a sample's
 derivative by how far the flight is from its mean there, the uniform mean does not, so
 the averaged truth is a physically motivated second reference, not the identity the
-oracle column is.  seed-rlv's truth is analytic and linear: its averaged truth IS its
+oracle column is (measured: pa28 CN_alpha, average +0.14 % of the at-trim truth, least-squares
+slope of the table along alpha +0.93 %, oracle +1.3 %; bench/bench_truth_weighting.py).  seed-rlv's truth is analytic and linear: its averaged truth IS its
 truth (not computed).
 
 Columns (per bench coefficient NAME): NAME_truth_avg, and against it NAME_err_pct_avg,
