@@ -49,7 +49,7 @@ def flight_average(evaluate: Evaluate, x: dict[str, np.ndarray], h: float = STEP
     """The flight-averaged truth table.  evaluate(x) -> {coefficient: array over the
     samples} (CA, CY, CN, Cl, Cm, Cn about the CG and Cl_rp, Cm_rp, Cn_rp), vectorised over
     the samples; x: the model's variables (jsbsim_flight._LINEAR_VARS) per sample."""
-    from aerosid.simulation.jsbsim_flight import _LINEAR_VARS, _coefficient_table
+    from aerosid.simulation.jsbsim_truth import _LINEAR_VARS, _coefficient_table
 
     missing = [v for v in _LINEAR_VARS if v not in x]
     if missing:
