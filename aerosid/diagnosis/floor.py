@@ -12,7 +12,7 @@ model completes, where the residual itself barely moves (docs/modelling-loop.md 
 How the floor is computed
 -------------------------
 ``flight_data.parquet`` carries per-sample ``sigma_<channel>`` columns: the EKF + MBF
-smoother's state sigma propagated to the coefficient (``aerosid.flight_coefficients``).
+smoother's state sigma propagated to the coefficient (``aerosid.identification.flight_coefficients``).
 The floor is their RMS over the samples the diagnosis uses.
 
 Is that sigma honest?  On the band path (the default) the regression's target *and* its

@@ -36,6 +36,7 @@ from aerosid.simulation.jsbsim_columns import coefficient_columns, make_telemetr
 from aerosid.simulation.jsbsim_truth import flight_statistics, _truth_check
 from aerosid.simulation.jsbsim_tables import DEG, AeroTables
 from aerosid.simulation.jsbsim_trim import initialise, open_fdm, start_engines
+from aerosid.simulation.jsbsim_truth_avg import generated_flight_average
 from aerosid.simulation.jsbsim_vehicle import vehicle_toml
 from aerosid.vehicles.vehicle import DATA_DIR
 
@@ -238,7 +239,6 @@ def simulate_aircraft(aircraft: str, seed: int = 0, *, faults: bool = True, prog
                         cm_abs_beta=cm_abs_beta, moved=moved, mach_slopes=d_mach)
 
     # ---- info ----
-    deg = 1.0 / DEG
     tr = design.trim
     info = {
         "simulator": f"JSBSim {jsbsim.__version__}", "aircraft": aircraft, "manoeuvre": "3211",
@@ -267,6 +267,7 @@ def simulate_aircraft(aircraft: str, seed: int = 0, *, faults: bool = True, prog
                           "model held at its trim value), forces to body axes as JSBSim does, moments transferred "
                           "from the AERORP to the CG; *_0 are the intercepts"),
         "coefficients_aerorp": {k: float(v) for k, v in design.derivatives_rp.items()},
+        **generated_flight_average(tables, rec, ctl, design.gains),  # jsbsim_truth_avg
         "inputs_held_at_trim_that_moved": moved,
         "Cm_abs_beta": cm_abs_beta,
         "truth_check": check,

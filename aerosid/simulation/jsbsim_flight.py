@@ -404,6 +404,8 @@ def simulate_jsbsim(aircraft: str = "c172x", manoeuvre: str = "3211", seed: int 
     telemetry, masks, spec, sigma = make_telemetry(clean, truth, sens, fcfg, seed, faults)
 
     # ---- info ----
+    from aerosid.simulation.jsbsim_truth_avg import c172x_flight_average
+
     deg = 1.0 / DEG
     check = _truth_check(truth, table_cg, float(m["aileron_start_s"]))
     trim_alpha = trim["aero/alpha-rad"]
@@ -457,6 +459,7 @@ def simulate_jsbsim(aircraft: str = "c172x", manoeuvre: str = "3211", seed: int 
                           "(alpha, beta, surface positions of the trim; zero rates), forces to body axes as JSBSim "
                           "does, moments transferred from the AERORP to the CG; *_0 are the intercepts"),
         "coefficients_aerorp": {k: float(v) for k, v in table_rp.items()},
+        **c172x_flight_average(tables, rec, truth, arm_ft, cbar_ft, b_ft),  # jsbsim_truth_avg
         "coefficients_extra_note": "CN_q, CN_alpha_dot, CA_*, CY_p, CY_r, CY_delta_r: also in c172x's model",
         "surfaces": {"d1": "fcs/elevator-pos-rad", "d2": "fcs/left-aileron-pos-rad",
                      "d3": "fcs/right-aileron-pos-rad", "d4": "fcs/rudder-pos-rad",
