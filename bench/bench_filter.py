@@ -87,10 +87,11 @@ def main(argv=None) -> int:
     zc = np.ascontiguousarray(sf.z)
     bufs = dict(xf=np.empty((N, 21)), sf=np.empty((N, 21)), nis=np.empty(N), dof=np.empty(N, np.int64),
                 used=np.empty((N, 6), bool), gated=np.empty((N, 6), bool), ckpt=np.empty((nseg, NP, NP)),
-                stats=np.zeros((5, 6)))
-    t_fwd, _ = _best(lambda: _fast.forward(zc, valid, x0p, P0p, model.params, Qp, R, gate, True, seg,
+                stats=np.zeros((5, 6)), innov=np.empty((N, 6)))
+    Qc, qm = np.zeros((6, NP, NP)), np.ones((0, 6))  # stationary process noise
+    t_fwd, _ = _best(lambda: _fast.forward(zc, valid, x0p, P0p, model.params, Qp, Qc, qm, R, gate, True, seg,
                                            bufs["xf"], bufs["sf"], bufs["nis"], bufs["dof"], bufs["used"],
-                                           bufs["gated"], bufs["ckpt"], bufs["stats"]))
+                                           bufs["gated"], bufs["ckpt"], bufs["stats"], bufs["innov"]))
 
     # ---- peak memory of ours
     tracemalloc.start()
