@@ -112,7 +112,13 @@ def smooth_flight_adaptive(t_s, z, valid, inertia_kg_m2, sensor_offset_m, z_fill
                                dataclasses.replace(opt, q_chain_scale=tuple(float(v) for v in scale)))
     rounds = ()
     if local_q:
-        final = dataclasses.replace(opt, q_chain_scale=tuple(float(v) for v in scale))
+        # the local rounds keep the stationary pass's Q scale: re-tuning it once the burst is absorbed
+        # moves Q for the whole segment (F4N seed 1: q_scale to its lower bound, a pitch manoeuvre at
+        # 6 s then gated); R is re-estimated (EM) from the stationary pass's values
+        tuned = [h for h in result.tuning_history if np.isfinite(h.mean_nis_filter)][-1:]
+        fix = dict(q_scale=tuned[0].q_scale, q_scale_bounds=(tuned[0].q_scale,) * 2,
+                   r_scale=tuple(tuned[0].r_scale)) if tuned else {}
+        final = dataclasses.replace(opt, q_chain_scale=tuple(float(v) for v in scale), **fix)
         result, _, rounds = follow_locally(
             lambda ql: smooth_flight(t_s, z, valid, inertia_kg_m2, sensor_offset_m, z_filled, final, q_local=ql),
             result, controls)

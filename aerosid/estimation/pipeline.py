@@ -67,7 +67,7 @@ class EBMOptions:
     attenuated (on seed-rlv: M1 gain 0.93, L1 0.73-0.84, biasing C_m and C_l
     slopes by -5 % and -20 %).  A vehicle file may set its own (seed-rlv:
     (1, 1, 1, 1000, 3, 3), calibrated on simulated flights, docs/estimation.md);
-    q_scale, r_scale: initial scalings.
+    q_scale, r_scale: initial scalings (r_scale: one factor or one per channel).
     """
 
     f_max_hz: float = 4.0
@@ -298,7 +298,7 @@ def smooth_flight(t_s, z, valid, inertia_kg_m2, sensor_offset_m, z_filled=None,
 
     gate = chi2.isf(opt.gate_probability, 1) if opt.gate_probability else np.inf
     q_scale = float(opt.q_scale)
-    r_fac = np.full(N_MEAS, float(opt.r_scale))
+    r_fac = np.broadcast_to(np.asarray(opt.r_scale, dtype=float), (N_MEAS,)).copy()  # one, or per channel
     history = []
     prev = None
     lo_q, hi_q = 0.0, np.inf
