@@ -155,11 +155,16 @@ def follow_locally(smooth, result, controls: np.ndarray | None = None):
     q_local = None
     rounds = []
     for _ in range(MAX_ROUNDS):
+        if result.diverged:  # a lost filter is not one event: the segment fails as it is
+            break
         events = classify(result, controls)
         if not any(ev.manoeuvre for ev in events):
             break
-        rounds.append(tuple(events))
         base = np.ones((result.t_s.size, 6)) if q_local is None else q_local
-        q_local = raise_locally(base, result.t_s, events)
-        result = smooth(q_local)
+        trial_q = raise_locally(base, result.t_s, events)
+        trial = smooth(trial_q)
+        if not (np.all(np.isfinite(trial.x_smooth)) and np.all(np.isfinite(trial.sigma_smooth))):
+            break  # numerically lost with the raised noise: keep the last finite result
+        rounds.append(tuple(events))
+        result, q_local = trial, trial_q
     return result, q_local, tuple(rounds)
