@@ -39,12 +39,43 @@ from ._fast_plant import NM, NP, NS, _measure, _propagate  # noqa: F401
 
 
 @njit(cache=True)
-def forward(z, cand, x0, P0, prm, Qd, rdiag, gate_thr, do_gate, seg,
-            xf, sf, nis, dof, used, gated, ckpt, stats):
-    """Forward EKF over all samples.  x0 (24,), P0, Qd (24,24) padded.  Writes xf, sf
+def _step_q(Qd, Qc, qm, k, Qk):
+    """The process noise of the transition into sample k: Qd itself when every chain's
+    multiplier qm[k] is one (the stationary path, bit for bit), else
+    Qk = Qd + sum_c (qm[k, c] - 1) Qc[c] (Qc[c]: chain c's share of Qd, its rate block
+    included) -- a chain's spectral intensity scaled locally.  qm with no rows: Qd throughout."""
+    if qm.shape[0] == 0:
+        return Qd
+    one = True
+    for c in range(qm.shape[1]):
+        if qm[k, c] != 1.0:
+            one = False
+    if one:
+        return Qd
+    for a in range(NP):
+        for b in range(NP):
+            Qk[a, b] = Qd[a, b]
+    for c in range(qm.shape[1]):
+        f = qm[k, c] - 1.0
+        if f != 0.0:
+            Qc_ = Qc[c]
+            for a in range(NP):
+                for b in range(NP):
+                    Qk[a, b] += f * Qc_[a, b]
+    return Qk
+
+
+@njit(cache=True)
+def forward(z, cand, x0, P0, prm, Qd, Qc, qm, rdiag, gate_thr, do_gate, seg,
+            xf, sf, nis, dof, used, gated, ckpt, stats, innov):
+    """Forward EKF over all samples.  x0 (24,), P0, Qd (24,24) padded; Qc (6,24,24) the
+    chains' shares of Qd and qm (N,6) their multipliers on the transition into sample k
+    (time-varying process noise, :func:`_step_q`; all ones or no rows: Qd itself).  Writes xf, sf
     (N,21) (filtered state and sigma), nis (NaN if no update), dof, used, gated,
-    stats[4] (per-channel sum of v^2/s) and the checkpoints ckpt[g] = P(k|k) at
-    k = g*seg - 1 (g >= 1).  Returns the count of non-positive variances (0 when healthy)."""
+    innov (N,6) the standardised conditional innovation squared v^2/s of every channel
+    tested, used or gated (NaN if not a candidate), stats[4] (per-channel sum of v^2/s)
+    and the checkpoints ckpt[g] = P(k|k) at k = g*seg - 1 (g >= 1).  Returns the count of
+    non-positive variances (0 when healthy)."""
     N = z.shape[0]
     dt = prm[12]
     x = x0.copy()
@@ -66,11 +97,12 @@ def forward(z, cand, x0, P0, prm, Qd, rdiag, gate_thr, do_gate, seg,
     dx = np.empty(NP)
     us = np.zeros(NM, dtype=np.bool_)
     gs = np.zeros(NM, dtype=np.bool_)
+    Qk = np.empty((NP, NP))
     bad = 0
     for k in range(N):
         if k > 0:
             _propagate(x, prm, xn, F, wv, Wi, J, accJ)
-            _predict_cov(P, F, Qd, dt, A, Pn)
+            _predict_cov(P, F, _step_q(Qd, Qc, qm, k, Qk), dt, A, Pn)
             tmpx = x
             x = xn
             xn = tmpx
@@ -84,6 +116,7 @@ def forward(z, cand, x0, P0, prm, Qd, rdiag, gate_thr, do_gate, seg,
         for j in range(NM):
             used[k, j] = us[j]
             gated[k, j] = gs[j]
+            innov[k, j] = v[j] * v[j] / s[j] if (us[j] or gs[j]) else np.nan
             if us[j]:
                 stats[4, j] += v[j] * v[j] / s[j]
         for i in range(NS):
@@ -102,7 +135,7 @@ def forward(z, cand, x0, P0, prm, Qd, rdiag, gate_thr, do_gate, seg,
 
 
 @njit(cache=True)
-def backward(z, used, x0, P0, prm, Qd, rdiag, seg, xf, ckpt,
+def backward(z, used, x0, P0, prm, Qd, Qc, qm, rdiag, seg, xf, ckpt,
              xs, ss, nis_s, aa, aa_sig, stats, Pb, Kb, Hb, vb, sb, Fb):
     """MBF backward sweep with segment-wise recomputation of the forward covariances.
 
@@ -151,6 +184,7 @@ def backward(z, used, x0, P0, prm, Qd, rdiag, seg, xf, ckpt,
     Jr = np.zeros((3, NP))
     y = np.empty(NP)
     xsk = np.zeros(NP)
+    Qk = np.empty((NP, NP))
     for g in range(nseg - 1, -1, -1):
         k0 = g * seg
         k1 = min(N, k0 + seg)
@@ -171,7 +205,7 @@ def backward(z, used, x0, P0, prm, Qd, rdiag, seg, xf, ckpt,
             Pi = Pb[i]
             if k > 0:
                 _propagate(x, prm, xn, Fb[i], wv, Wi, J, accJ)
-                _predict_cov(P if i == 0 else Pb[i - 1], Fb[i], Qd, dt, A, Pi)
+                _predict_cov(P if i == 0 else Pb[i - 1], Fb[i], _step_q(Qd, Qc, qm, k, Qk), dt, A, Pi)
                 tmpx = x
                 x = xn
                 xn = tmpx
@@ -316,12 +350,12 @@ def backward(z, used, x0, P0, prm, Qd, rdiag, seg, xf, ckpt,
 
 
 @njit(cache=True)
-def run(z, cand, x0, P0, prm, Qd, rdiag, gate_thr, do_gate, seg,
+def run(z, cand, x0, P0, prm, Qd, Qc, qm, rdiag, gate_thr, do_gate, seg,
         xf, sf, nis, dof, used, gated, ckpt,
-        xs, ss, nis_s, aa, aa_sig, stats, Pb, Kb, Hb, vb, sb, Fb):
+        xs, ss, nis_s, aa, aa_sig, stats, Pb, Kb, Hb, vb, sb, Fb, innov):
     """forward() then backward(); returns forward()'s count of bad variances."""
-    bad = forward(z, cand, x0, P0, prm, Qd, rdiag, gate_thr, do_gate, seg,
-                  xf, sf, nis, dof, used, gated, ckpt, stats)
-    backward(z, used, x0, P0, prm, Qd, rdiag, seg, xf, ckpt,
+    bad = forward(z, cand, x0, P0, prm, Qd, Qc, qm, rdiag, gate_thr, do_gate, seg,
+                  xf, sf, nis, dof, used, gated, ckpt, stats, innov)
+    backward(z, used, x0, P0, prm, Qd, Qc, qm, rdiag, seg, xf, ckpt,
              xs, ss, nis_s, aa, aa_sig, stats, Pb, Kb, Hb, vb, sb, Fb)
     return bad

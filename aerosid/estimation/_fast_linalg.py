@@ -268,6 +268,8 @@ def _update(x, P, zk, cand, rdiag, gate_thr, do_gate, hx, H, K, v, s, used, gate
                              + (h3 * u[ca] + h4 * u[12] + h5 * u[15] + h6 * u[18]))
         if do_gate and vj * vj > gate_thr * sj:
             gated[j] = True
+            v[j] = vj  # the rejected innovation, for the caller's diagnostics (not used again)
+            s[j] = sj
             continue
         used[j] = True
         inv = 1.0 / sj

@@ -11,7 +11,9 @@ systematic -- several gated runs, or 5 % of the segment -- (or the windowed NIS 
 excursions: then the channels whose mean standardised innovation exceeds 1.5, or the
 worst one), the chains that channel sees get ESCALATION times more process
 noise and the segment is smoothed again (at most MAX_ESCALATIONS times).  What is
-still gated afterwards is reported and cut (aerosid.estimation.findings).
+still gated afterwards is a single event: if it is a manoeuvre the model cannot follow
+(several channels out, controls moving), the process noise is raised over its span only
+(aerosid.estimation.local_q); what is left is reported and cut (aerosid.estimation.findings).
 """
 from __future__ import annotations
 
@@ -21,6 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from aerosid.estimation.findings import GATED_RUN_MIN_S, MERGE_GAP_S, dilate, true_runs
+from aerosid.estimation.local_q import follow_locally
 from aerosid.estimation.pipeline import EBMOptions, EBMResult, smooth_flight
 
 #: Factor on a chain's process-noise intensity per escalation.
@@ -39,12 +42,17 @@ class AdaptiveSmoothing:
     result: EBMResult
     q_chain_scale: tuple
     escalations: tuple  # (attempt, channels with gated runs) per re-run
+    local_rounds: tuple = ()  # per local round: the aerosid.estimation.local_q.LocalEvent's it classified
 
     def summary(self) -> str:
+        local = ""
+        if self.local_rounds:
+            local = "; raised locally: " + " | ".join(
+                f"round {i + 1}: " + ", ".join(ev.summary() for ev in evs) for i, evs in enumerate(self.local_rounds))
         if not self.escalations:
-            return "process noise: spectral, no escalation needed"
+            return "process noise: spectral, no escalation needed" + local
         steps = "; ".join(f"run {a}: gated {', '.join(ch)}" for a, ch in self.escalations)
-        return f"process noise escalated on gated channels ({steps}); chain factors {self.q_chain_scale}"
+        return f"process noise escalated on gated channels ({steps}); chain factors {self.q_chain_scale}" + local
 
 
 #: A channel's gating is the model's (escalate) rather than one local event (a sensor fault:
@@ -76,9 +84,11 @@ def gated_channels(result: EBMResult, min_run_s: float = GATED_RUN_MIN_S) -> lis
 
 
 def smooth_flight_adaptive(t_s, z, valid, inertia_kg_m2, sensor_offset_m, z_filled=None,
-                           options: EBMOptions | None = None) -> AdaptiveSmoothing:
+                           options: EBMOptions | None = None, controls=None,
+                           local_q: bool = True) -> AdaptiveSmoothing:
     """:func:`aerosid.estimation.pipeline.smooth_flight`, re-run with more process noise on
-    the chains of any channel that has a run of gated samples (module doc)."""
+    the chains of any channel that has a run of gated samples (module doc); controls (N, m)
+    control positions (or None) for the local decision; local_q=False: no local raise."""
     opt = options or EBMOptions()
     scale = np.asarray(opt.q_chain_scale, dtype=float).copy()
     escalations = []
@@ -100,4 +110,16 @@ def smooth_flight_adaptive(t_s, z, valid, inertia_kg_m2, sensor_offset_m, z_fill
         escalations.append((attempt, tuple(result.meas_names[j] for j in bad) or ("none: NIS excursion",)))
         result = smooth_flight(t_s, z, valid, inertia_kg_m2, sensor_offset_m, z_filled,
                                dataclasses.replace(opt, q_chain_scale=tuple(float(v) for v in scale)))
-    return AdaptiveSmoothing(result, tuple(float(v) for v in scale), tuple(escalations))
+    rounds = ()
+    if local_q:
+        # the local rounds keep the stationary pass's Q scale: re-tuning it once the burst is absorbed
+        # moves Q for the whole segment (F4N seed 1: q_scale to its lower bound, a pitch manoeuvre at
+        # 6 s then gated); R is re-estimated (EM) from the stationary pass's values
+        tuned = [h for h in result.tuning_history if np.isfinite(h.mean_nis_filter)][-1:]
+        fix = dict(q_scale=tuned[0].q_scale, q_scale_bounds=(tuned[0].q_scale,) * 2,
+                   r_scale=tuple(tuned[0].r_scale)) if tuned else {}
+        final = dataclasses.replace(opt, q_chain_scale=tuple(float(v) for v in scale), **fix)
+        result, _, rounds = follow_locally(
+            lambda ql: smooth_flight(t_s, z, valid, inertia_kg_m2, sensor_offset_m, z_filled, final, q_local=ql),
+            result, controls)
+    return AdaptiveSmoothing(result, tuple(float(v) for v in scale), tuple(escalations), rounds)

@@ -5,7 +5,8 @@ Each check below names its time span; the samples it condemns are cut from the
 regression (with a margin) and the rest of the segment is kept:
 
 * ``gated``: a run of samples the filter's innovation gate rejected on one channel, left
-  after the process noise was raised for systematic gating (aerosid.estimation.adaptive):
+  after the process noise was raised for systematic gating (aerosid.estimation.adaptive) and
+  over the manoeuvres the model could not follow (aerosid.estimation.local_q):
   one local event where the measurement and the other sensors disagree, a sensor step or
   bias jump -- cut (the measurement is what the regression reads);
 * ``nis_excursion``: the windowed NIS far outside its band (the divergence test of

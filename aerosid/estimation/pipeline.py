@@ -31,14 +31,12 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.linalg import cholesky, solve_triangular
 from scipy.stats import chi2
 
-from . import _fast
-from .ekf import run_reference
+from .core_run import CoreRun, chain_shares, run_filter_smoother  # noqa: F401  (re-exported)
 from .init import initial_state, measurement_noise_from_dispersion, process_noise_from_spectrum
-from .model import (IX_ANG, MEAS_NAMES, MEAS_UNITS, N_MEAS, N_STATE, STATE_NAMES, PlantModel,
-                    discrete_process_noise, measure, measure_many, rate_jacobian, rate_rhs)
+from .model import (MEAS_NAMES, MEAS_UNITS, N_MEAS, STATE_NAMES, PlantModel, discrete_process_noise,
+                    measure_many)
 
 
 @dataclass(frozen=True)
@@ -69,7 +67,7 @@ class EBMOptions:
     attenuated (on seed-rlv: M1 gain 0.93, L1 0.73-0.84, biasing C_m and C_l
     slopes by -5 % and -20 %).  A vehicle file may set its own (seed-rlv:
     (1, 1, 1, 1000, 3, 3), calibrated on simulated flights, docs/estimation.md);
-    q_scale, r_scale: initial scalings.
+    q_scale, r_scale: initial scalings (r_scale: one factor or one per channel).
     """
 
     f_max_hz: float = 4.0
@@ -100,123 +98,6 @@ class TuningRecord:
     r_scale: tuple
     mean_nis_filter: float
     mean_nis_smoother: float
-
-
-@dataclass(frozen=True)
-class CoreRun:
-    """Raw output of one filter + smoother pass (arrays per sample)."""
-
-    x_filter: np.ndarray
-    sigma_filter: np.ndarray
-    x_smooth: np.ndarray
-    sigma_smooth: np.ndarray
-    nis_filter: np.ndarray
-    nis_smoother: np.ndarray
-    dof: np.ndarray
-    used: np.ndarray
-    gated: np.ndarray
-    angacc: np.ndarray
-    angacc_sigma: np.ndarray
-    chan_nis_filter: np.ndarray
-    chan_nis_smoother: np.ndarray
-    chan_count: np.ndarray
-    em_R: np.ndarray
-    bad_variances: int
-
-    def summary(self) -> str:
-        return (f"core run: {self.x_filter.shape[0]} samples, mean NIS filter {np.nanmean(self.nis_filter):.3f}, "
-                f"smoother {np.nanmean(self.nis_smoother):.3f}")
-
-
-def run_filter_smoother(z, cand, x0, P0, model: PlantModel, Qd, R_diag, gate_threshold=np.inf,
-                        use_numba: bool = True, segment_length: int = 64) -> CoreRun:
-    """One EKF + MBF pass.  z (N,6), cand (N,6) bool (channels allowed), x0/P0 prior at
-    sample 0, Qd (21,21), R_diag (6,), gate_threshold (chi2(1) per channel, inf = off)."""
-    z = np.ascontiguousarray(z, dtype=np.float64)
-    cand = np.ascontiguousarray(cand, dtype=np.bool_) & np.isfinite(z)
-    zz = np.where(cand, z, 0.0)
-    N = z.shape[0]
-    R_diag = np.ascontiguousarray(R_diag, dtype=np.float64)
-    if not use_numba:
-        return _core_from_reference(run_reference(zz, cand, x0, P0, model, Qd, R_diag, gate_threshold),
-                                    zz, model, R_diag)
-    seg = int(segment_length)
-    nseg = (N + seg - 1) // seg
-    NP = _fast.NP
-    x0p = np.zeros(NP)
-    x0p[:N_STATE] = x0
-    P0p = np.zeros((NP, NP))
-    P0p[:N_STATE, :N_STATE] = P0
-    Qdp = np.zeros((NP, NP))
-    Qdp[:N_STATE, :N_STATE] = Qd
-    xf = np.empty((N, N_STATE))
-    sf = np.empty((N, N_STATE))
-    nis = np.empty(N)
-    dof = np.empty(N, dtype=np.int64)
-    used = np.empty((N, N_MEAS), dtype=np.bool_)
-    gated = np.empty((N, N_MEAS), dtype=np.bool_)
-    ckpt = np.empty((nseg, NP, NP))
-    xs = np.empty((N, N_STATE))
-    ss = np.empty((N, N_STATE))
-    nis_s = np.empty(N)
-    aa = np.empty((N, 3))
-    aas = np.empty((N, 3))
-    stats = np.zeros((5, N_MEAS))   # e2, var, n, chan nis smoother, chan nis filter
-    Pb = np.empty((seg, NP, NP))
-    Kb = np.zeros((seg, N_MEAS, NP))
-    Hb = np.zeros((seg, N_MEAS, NP))
-    vb = np.zeros((seg, N_MEAS))
-    sb = np.ones((seg, N_MEAS))
-    Fb = np.zeros((seg, 3, 12))
-    thr = float(gate_threshold)
-    do_gate = bool(np.isfinite(thr))
-    bad = _fast.run(zz, cand, x0p, P0p, model.params, Qdp, R_diag,
-                    thr if do_gate else 0.0, do_gate, seg, xf, sf, nis, dof, used, gated, ckpt,
-                    xs, ss, nis_s, aa, aas, stats, Pb, Kb, Hb, vb, sb, Fb)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        em_R = (stats[0] + stats[1]) / stats[2]
-    return CoreRun(xf, sf, xs, ss, nis, nis_s, dof, used, gated, aa, aas, stats[4], stats[3], stats[2],
-                   em_R, int(bad))
-
-
-def _core_from_reference(ref, z, model: PlantModel, R_diag) -> CoreRun:
-    """CoreRun from the plain-numpy run (same definitions as the compiled kernel)."""
-    N = z.shape[0]
-    prm = model.params
-    Bm = model.input_matrix
-    sf = np.sqrt(np.maximum(np.diagonal(ref.P_filter, axis1=1, axis2=2), 0.0))
-    ss = np.sqrt(np.maximum(np.diagonal(ref.P_smooth, axis1=1, axis2=2), 0.0))
-    aa = np.empty((N, 3))
-    aas = np.empty((N, 3))
-    cf = np.zeros(N_MEAS)
-    cs = np.zeros(N_MEAS)
-    cn = np.zeros(N_MEAS)
-    e2 = np.zeros(N_MEAS)
-    ev = np.zeros(N_MEAS)
-    for k in range(N):
-        xs = ref.x_smooth[k]
-        aa[k] = rate_rhs(xs[0:3], xs[list(IX_ANG)], prm)
-        J = np.zeros((3, N_STATE))
-        J[:, 0:3] = rate_jacobian(xs[0:3], prm)
-        J[:, list(IX_ANG)] = Bm
-        aas[k] = np.sqrt(np.maximum(np.einsum("ij,jk,ik->i", J, ref.P_smooth[k], J), 0.0))
-        up = ref.updates[k]
-        if up.dof == 0:
-            continue
-        idx = np.flatnonzero(up.used)
-        wv = solve_triangular(cholesky(up.S, lower=True), up.v, lower=True)
-        cf[idx] += wv**2
-        e = z[k, idx] - measure(xs, model)[idx]
-        r = R_diag[idx]
-        var_e = r - np.diag(up.H @ ref.P_smooth[k] @ up.H.T)   # = R D R (MBF), diagonal
-        cs[idx] += e * e / var_e
-        cn[idx] += 1.0
-        e2[idx] += e * e
-        ev[idx] += r - var_e
-    with np.errstate(invalid="ignore", divide="ignore"):
-        em_R = (e2 + ev) / cn
-    return CoreRun(ref.x_filter, sf, ref.x_smooth, ss, ref.nis_filter, ref.nis_smoother, ref.dof, ref.used,
-                   ref.gated, aa, aas, cf, cs, cn, em_R, 0)
 
 
 def chi2_band(dof: np.ndarray) -> tuple[float, float, float]:
@@ -310,6 +191,8 @@ class EBMResult:
     angacc: np.ndarray
     angacc_sigma: np.ndarray
     state_names: tuple = field(default=STATE_NAMES)
+    innovation_sq: np.ndarray | None = None  # (N,6) filter v^2/s per channel tested (gated too), NaN if not
+    q_local: np.ndarray | None = None  # (N,6) the chains' local process-noise multipliers (None: stationary)
     meas_names: tuple = field(default=MEAS_NAMES)
 
     def angular_acceleration(self) -> tuple[np.ndarray, np.ndarray]:
@@ -356,7 +239,7 @@ def _fill(t, y, ok):
 
 
 def smooth_flight(t_s, z, valid, inertia_kg_m2, sensor_offset_m, z_filled=None,
-                  options: EBMOptions | None = None) -> EBMResult:
+                  options: EBMOptions | None = None, q_local=None) -> EBMResult:
     """Estimation Before Modeling state estimation of one flight segment.
 
     t_s (N,) uniform time grid [s]; z (N,6) measurements ax, ay, az [m/s^2],
@@ -365,7 +248,9 @@ def smooth_flight(t_s, z, valid, inertia_kg_m2, sensor_offset_m, z_filled=None,
     with the valid subset); inertia_kg_m2 (Ixx, Iyy, Izz, Ixz) [kg m^2];
     sensor_offset_m accelerometer position relative to the CG [m, body axes];
     z_filled: optional gap-filled copy for the spectra (default: linear
-    interpolation over the valid samples); options: EBMOptions.
+    interpolation over the valid samples); options: EBMOptions; q_local: None or (N,6)
+    multipliers of the chains' intensities per sample (time-varying process noise,
+    aerosid.estimation.local_q; all ones is the stationary filter bit for bit).
     """
     opt = options or EBMOptions()
     t_s = np.asarray(t_s, dtype=float)
@@ -413,15 +298,16 @@ def smooth_flight(t_s, z, valid, inertia_kg_m2, sensor_offset_m, z_filled=None,
 
     gate = chi2.isf(opt.gate_probability, 1) if opt.gate_probability else np.inf
     q_scale = float(opt.q_scale)
-    r_fac = np.full(N_MEAS, float(opt.r_scale))
+    r_fac = np.broadcast_to(np.asarray(opt.r_scale, dtype=float), (N_MEAS,)).copy()  # one, or per channel
     history = []
     prev = None
     lo_q, hi_q = 0.0, np.inf
 
     def one(qs, rf):
         Qd = discrete_process_noise(q_chain0 * qs, model)
+        shares = None if q_local is None else chain_shares(q_chain0 * qs, model)
         return run_filter_smoother(z, cand, x0, P0, model, Qd, R0 * rf, gate, opt.use_numba,
-                                   opt.segment_length), Qd
+                                   opt.segment_length, q_local, shares), Qd
 
     n_iter = max(1, int(opt.max_tuning_iterations)) if opt.auto_tune else 1
     good = None  # the last iteration whose smoother output is finite
@@ -496,4 +382,5 @@ def smooth_flight(t_s, z, valid, inertia_kg_m2, sensor_offset_m, z_filled=None,
         P0_diag=np.diag(P0).copy(), gate_flags=run.gated, used=run.used, chan_nis_filter=cf,
         chan_nis_smoother=cs, tuning_history=tuple(history),
         diverged=_diverged(dflag, run, dt, opt), divergence_samples=div_idx,
-        angacc=run.angacc, angacc_sigma=run.angacc_sigma)
+        angacc=run.angacc, angacc_sigma=run.angacc_sigma, innovation_sq=run.innovation_sq,
+        q_local=None if q_local is None else np.asarray(q_local, float))

@@ -20,6 +20,7 @@ from aerosid.vehicles.vehicle import Vehicle
 from schemas.smoothed import RATE_DERIVATIVE_COLUMNS, STATE_COLUMNS
 
 IMU_CHANNELS = ("ax_m_s2", "ay_m_s2", "az_m_s2", "p_rad_s", "q_rad_s", "r_rad_s")
+CONTROL_CHANNELS = ("d1_rad", "d2_rad", "d3_rad", "d4_rad")  # for the local process noise (estimation.local_q)
 MIN_USABLE_SAMPLES = 16  # the seven-point parabola fits and the spectra need some data
 #: A segment whose condemned samples (gated runs, NIS excursions) exceed this share is failed.
 MAX_SUSPECT_FRACTION = 0.5
@@ -81,10 +82,12 @@ def smooth_segment_frame(rows: pd.DataFrame, vehicle: Vehicle, options: dict | N
                          f"{int(counts.min())} usable samples of {len(rows)} (the rest dropout or flagged); "
                          f"at least {MIN_USABLE_SAMPLES} per channel are needed to initialise the filter")
     filled = pd.DataFrame(z).interpolate(limit_direction="both").to_numpy()
+    ctl = [f"{c}_clean" for c in CONTROL_CHANNELS if f"{c}_clean" in rows]
     adaptive = smooth_flight_adaptive(t, np.where(valid, z, np.nan), valid,
                                       (vehicle.Ixx_kg_m2, vehicle.Iyy_kg_m2, vehicle.Izz_kg_m2, vehicle.Ixz_kg_m2),
                                       vehicle.accel_offset_m, z_filled=filled,
-                                      options=smoothing_options(vehicle, options))
+                                      options=smoothing_options(vehicle, options),
+                                      controls=rows[ctl].to_numpy(dtype=float) if ctl else None)
     res = adaptive.result
     data = {"t_s": t, "segment": np.full(len(t), segment_id, dtype=object)}
     for j, name in enumerate(res.state_names):
