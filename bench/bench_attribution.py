@@ -1,0 +1,268 @@
+"""Attribution of the C_m biases of the generalisation bench (issue 16) by substitution.
+
+    python bench/bench_attribution.py [--vehicles F4N,OV10,pa28] [--seeds 0-4]
+    -> bench/results/attribution.md and bench/results/attribution_runs.csv
+
+Per (vehicle, seed) the flight is simulated and estimated once (bench/attribution_cache.py:
+bench_generalisation.simulate + aerosid.ebm.estimate_flight_data, cached under
+/tmp/aerosid-attrib with the band-limiting each segment went through).  The C_m channel's
+default model is then refitted (ordinary least squares on the samples of the Mach window,
+as aerosid.identify.identify fits it before the SIMEX correction) with one group of the
+flight data's columns replaced by the noise-free truth, passed through THE SAME
+band-limiting the flight data went through (aerosid.identification.band.low_pass_runs
+with the segment's band edge and filter runs):
+
+  base         the pipeline's flight data (the naive fit, no SIMEX)
+  base+SIMEX   aerosid.identify.identify (the reported estimate)
+  a: Cm(gyro)  the dependent C_m from the noise-free gyros (low-passed, differentiated,
+               Euler equations with the vehicle file's inertia), the pipeline's qbar
+  a: Cm(JSB)   the dependent C_m from JSBSim's own aerodynamic + propulsive pitching
+               moment (low-passed), the pipeline's qbar
+  b: alpha     alpha (alpha_dot_hat follows: the pipeline's derivative of the new alpha)
+  b: alphadot  alpha_dot_hat alone: JSBSim's alpha-dot, low-passed (no derivative window)
+  b: beta      beta (the |beta| term)
+  c: q         the pitch rate (q_hat)
+  d: delta_p   the surface deflection (JSBSim's surface position the aerodynamics read:
+               the telemetry carries it plus white noise, after the actuator)
+  e: air data  V (q_hat, alpha_dot_hat) and qbar (the dependent's normalisation)
+  f: inertia   not a substitution: the vehicle file's I_yy, mass, CG against JSBSim's
+               (reported below the tables)
+  all          every group at once (a: Cm(JSB), b: alpha, c, d, e)
+  all+adot     every group and JSBSim's alpha-dot (what the band-limited truth gives)
+  oracle       the bench's oracle: the default model fitted to the unfiltered truth
+
+Errors are % of the linear truth (flight.coefficients); damping = C_m_q + C_m_alpha_dot.
+"""
+from __future__ import annotations
+
+import argparse
+import math
+import platform
+import sys
+import time
+import warnings
+from datetime import date
+from pathlib import Path
+from types import SimpleNamespace
+
+import numpy as np
+import pandas as pd
+
+sys.path.insert(0, str(Path(__file__).parent))
+import attribution_cache  # noqa: E402
+from bench_accuracy import parse_seeds  # noqa: E402
+
+TARGETS = {"Cm_alpha": "Cm_alpha", "Cm_delta": "Cm_delta_p", "damping": None}
+
+
+# ------------------------------------------------------------------------------ the truth, band-limited
+
+def band_limited_truth(data: dict, values: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """Truth signals (on the truth's grid) through each segment's low-pass, read at the
+    flight data's rows (in the flight data's order)."""
+    from aerosid.identification.band import low_pass_runs
+
+    fd, T = data["flight_data"], data["truth"]
+    tt = T["t_s"].to_numpy(float)
+    out = {k: np.full(len(fd), np.nan) for k in values}
+    seg_col = fd["segment"].astype(str).to_numpy()
+    for b in data["bands"]:
+        ts = b["t_s"]
+        fs = 1.0 / float(np.median(np.diff(ts)))
+        runs = [slice(a, c) for a, c in b["filter_runs"]]
+        rows = np.flatnonzero(seg_col == str(b["segment"]))
+        idx = np.searchsorted(ts, fd["t_s"].to_numpy(float)[rows] - 1e-9)
+        if np.any(np.abs(ts[np.clip(idx, 0, len(ts) - 1)] - fd["t_s"].to_numpy(float)[rows]) > 1e-6):
+            raise ValueError(f"segment {b['segment']}: flight-data rows not on the segment's grid")
+        for k, v in values.items():
+            x = np.interp(ts, tt, np.asarray(v, float))
+            out[k][rows] = low_pass_runs(x, fs, b["band_hz"], runs)[idx]
+    return out
+
+
+def gyro_moment(data: dict) -> np.ndarray:
+    """M_hat [rad/s^2] at the flight data's rows from the noise-free gyros, exactly as
+    band_limited_signals builds it from the measured ones (low-pass, central difference,
+    Euler equations with the vehicle file's inertia)."""
+    from aerosid.identification.band import aero_angular_acceleration, low_pass_runs
+
+    fd, T, veh = data["flight_data"], data["truth"], data["vehicle_obj"]
+    tt = T["t_s"].to_numpy(float)
+    w_true = T[["p_rad_s", "q_rad_s", "r_rad_s"]].to_numpy(float)
+    inertia = (veh.Ixx_kg_m2, veh.Iyy_kg_m2, veh.Izz_kg_m2, veh.Ixz_kg_m2)
+    out = np.full(len(fd), np.nan)
+    seg_col = fd["segment"].astype(str).to_numpy()
+    for b in data["bands"]:
+        ts = b["t_s"]
+        fs = 1.0 / float(np.median(np.diff(ts)))
+        runs = [slice(a, c) for a, c in b["filter_runs"]]
+        w = np.column_stack([np.interp(ts, tt, w_true[:, j]) for j in range(3)])
+        wf = low_pass_runs(w, fs, b["band_hz"], runs)
+        wd = np.full_like(wf, np.nan)
+        for r in runs:
+            wd[r] = np.gradient(wf[r], ts[r], axis=0)
+        ang = aero_angular_acceleration(wf, wd, inertia)
+        rows = np.flatnonzero(seg_col == str(b["segment"]))
+        idx = np.searchsorted(ts, fd["t_s"].to_numpy(float)[rows] - 1e-9)
+        out[rows] = ang[idx, 1]
+    return out
+
+
+# ------------------------------------------------------------------------------ the fits
+
+def fit_cm(fd: pd.DataFrame, vehicle, overrides: dict | None = None, mach_half_width: float | None = 0.5) -> dict:
+    """OLS of the default C_m model on fd (its Mach window), signals overridden by name
+    (arrays in fd's row order).  Returns coefficient -> estimate."""
+    from aerosid.identify import mach_window_mask
+    from aerosid.models import default_models, vehicle_signals
+
+    order = np.lexsort((fd["t_s"].to_numpy(float), fd["flight"].astype(str).to_numpy()))
+    f = fd.iloc[order].reset_index(drop=True)
+    sig = vehicle_signals(f, vehicle)
+    for k, v in (overrides or {}).items():
+        sig[k] = np.asarray(v, float)[order]
+    model = default_models(vehicle)["Cm"]
+    X = model.regressors(sig).to_numpy(float)
+    y = f["Cm"].to_numpy(float)
+    ok = mach_window_mask(f["mach"].to_numpy(float), vehicle.mach_reference, mach_half_width)
+    ok &= np.all(np.isfinite(X), axis=1) & np.isfinite(y)
+    beta = np.linalg.lstsq(X[ok], y[ok], rcond=None)[0]
+    return dict(zip(model.names, beta))
+
+
+def simex_cm(fd: pd.DataFrame, vehicle) -> dict:
+    """The C_m estimates aerosid.identify.identify reports (SIMEX-corrected for vanes)."""
+    from aerosid.identify import identify
+    from aerosid.models import default_models
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        ident = identify(fd, vehicle, {"Cm": default_models(vehicle)["Cm"]})
+    fit = ident.fits["Cm"]
+    return dict(zip(fit.names, np.asarray(fit.estimate, float)))
+
+
+def targets(sol: dict) -> dict:
+    return {"Cm_alpha": sol.get("Cm_alpha", math.nan), "Cm_delta": sol.get("Cm_delta_p", math.nan),
+            "damping": sol.get("Cm_q", math.nan) + sol.get("Cm_alpha_dot", 0.0)}
+
+
+def truth_targets(coef: dict) -> dict:
+    return {"Cm_alpha": coef["Cm_alpha"], "Cm_delta": coef["Cm_delta_p"],
+            "damping": coef.get("Cm_q_plus_alpha_dot", coef.get("Cm_q", math.nan) + coef.get("Cm_alpha_dot", 0.0))}
+
+
+def substitutions(data: dict) -> dict[str, dict]:
+    """Substitution name -> C_m estimates (the table's rows, in order)."""
+    from bench_generalisation import oracle
+
+    fd, T, veh = data["flight_data"], data["truth"], data["vehicle_obj"]
+    fd = fd.copy()
+    c, S = veh.length_pitch_m, veh.S_m2
+    qbar_p = fd["qbar_pa"].to_numpy(float)
+    V_p = fd["V_m_s"].to_numpy(float)
+    moment_true = (T["Cm"] + T["Cm_prop"]).to_numpy(float) * T["qbar_pa"].to_numpy(float)
+    lp = band_limited_truth(data, {
+        "alpha": T["alpha_rad"], "beta": T["beta_rad"], "q": T["q_rad_s"], "V": T["V_m_s"],
+        "delta_p": T["delta_p_rad"], "alpha_dot": T["alpha_dot_rad_s"], "moment": moment_true})
+    qbar_true = np.interp(fd["t_s"].to_numpy(float), T["t_s"].to_numpy(float), T["qbar_pa"].to_numpy(float))
+    cm_gyro = veh.Iyy_kg_m2 * gyro_moment(data) / (qbar_p * S * c)
+    cm_jsb = lp["moment"] / qbar_p
+    adot_hat_true = lp["alpha_dot"] * c / (2 * V_p)
+
+    def with_cols(**cols) -> pd.DataFrame:
+        f = fd.copy()
+        for k, v in cols.items():
+            f[k] = v
+        return f
+
+    no_eiv = {"eiv_sigma_alpha_rad": 0.0, "eiv_sigma_beta_rad": 0.0}
+    out = {}
+    out["base"] = fit_cm(fd, veh)
+    out["base+SIMEX"] = simex_cm(fd, veh)
+    out["a: Cm(gyro)"] = fit_cm(with_cols(Cm=cm_gyro), veh)
+    out["a: Cm(JSB)"] = fit_cm(with_cols(Cm=cm_jsb), veh)
+    out["a: Cm(JSB)+SIMEX"] = simex_cm(with_cols(Cm=cm_jsb), veh)
+    out["b: alpha"] = fit_cm(with_cols(alpha_rad=lp["alpha"]), veh)
+    out["b: alphadot"] = fit_cm(fd, veh, {"alpha_dot_hat": adot_hat_true})
+    out["b: alpha+alphadot"] = fit_cm(with_cols(alpha_rad=lp["alpha"]), veh, {"alpha_dot_hat": adot_hat_true})
+    out["b: beta"] = fit_cm(with_cols(beta_rad=lp["beta"]), veh)
+    out["c: q"] = fit_cm(with_cols(q_rad_s=lp["q"]), veh)
+    out["d: delta_p"] = fit_cm(with_cols(delta_p_rad=lp["delta_p"]), veh)
+    out["e: air data"] = fit_cm(with_cols(V_m_s=lp["V"], qbar_pa=qbar_true, Cm=fd["Cm"] * qbar_p / qbar_true), veh)
+    every = dict(alpha_rad=lp["alpha"], beta_rad=lp["beta"], q_rad_s=lp["q"], delta_p_rad=lp["delta_p"],
+                 V_m_s=lp["V"], qbar_pa=qbar_true, Cm=lp["moment"] / qbar_true, **no_eiv)
+    out["all"] = fit_cm(with_cols(**every), veh)
+    out["all+adot"] = fit_cm(with_cols(**every), veh, {"alpha_dot_hat": lp["alpha_dot"] * c / (2 * lp["V"])})
+    out["all but a"] = fit_cm(with_cols(**{**every, "Cm": fd["Cm"] * qbar_p / qbar_true}), veh)
+    out["all but b"] = fit_cm(with_cols(**{k: v for k, v in every.items() if k not in ("alpha_rad",)}), veh)
+    out["oracle"] = oracle(SimpleNamespace(truth=T), veh)
+    out["oracle"] = {"Cm_alpha": out["oracle"].get("Cm_alpha"), "Cm_delta_p": out["oracle"].get("Cm_delta"),
+                     "Cm_q": out["oracle"].get("damping"), "Cm_alpha_dot": 0.0}
+    return out
+
+
+def mass_check(data: dict) -> dict:
+    """Group f: the vehicle file's mass properties against JSBSim's over the flight."""
+    T, veh, m = data["truth"], data["vehicle_obj"], data["info_mass"]
+    return {"mass_change_pct": 100 * (T["mass_kg"].iloc[-1] / T["mass_kg"].iloc[0] - 1),
+            "mass_file_vs_jsb_pct": 100 * (veh.mass_kg / float(T["mass_kg"].mean()) - 1),
+            "Iyy_file_vs_jsb_pct": 100 * (veh.Iyy_kg_m2 / m["Iyy_kg_m2"] - 1) if m.get("Iyy_kg_m2") else math.nan,
+            "x_cg_span_mm": 1000 * float(np.ptp(T["x_cg_m"]))}
+
+
+def run(vehicles: list[str], seeds: list[int]) -> pd.DataFrame:
+    rows = []
+    for v in vehicles:
+        for s in seeds:
+            t0 = time.perf_counter()
+            data = attribution_cache.load(v, s)
+            truth = truth_targets(data["coefficients"])
+            for name, sol in substitutions(data).items():
+                est = targets(sol)
+                row = {"vehicle": v, "seed": s, "substitution": name}
+                for k in TARGETS:
+                    row[f"{k}_pct"] = 100 * (est[k] / truth[k] - 1)
+                rows.append(row)
+            rows.append({"vehicle": v, "seed": s, "substitution": "f: mass check", **mass_check(data)})
+            print(f"{v} seed {s}: {time.perf_counter() - t0:.0f} s", flush=True)
+    return pd.DataFrame(rows)
+
+
+def report(df: pd.DataFrame, seeds: list[int]) -> str:
+    lines = [f"# Attribution of the C_m biases by substitution ({len(seeds)} seeds per vehicle)", "",
+             f"{date.today()}, Python {platform.python_version()}; seeds {seeds[0]}..{seeds[-1]}; "
+             "bench/bench_attribution.py (docstring: what each row substitutes).  Mean error % of the linear "
+             "truth over the seeds (in brackets: the seeds' spread, 1 sd).  Every fit but `base+SIMEX` and "
+             "`a: Cm(JSB)+SIMEX` is the naive OLS of the default C_m model on the Mach window.", ""]
+    for v, g in df.groupby("vehicle", sort=False):
+        lines += [f"## {v}", "", "| substitution | Cm_alpha % | Cm_delta % | damping % |", "|---|---|---|---|"]
+        for name, h in g[g["substitution"] != "f: mass check"].groupby("substitution", sort=False):
+            cells = [f"{h[f'{k}_pct'].mean():+.1f} ({h[f'{k}_pct'].std():.1f})" for k in TARGETS]
+            lines.append(f"| {name} | " + " | ".join(cells) + " |")
+        m = g[g["substitution"] == "f: mass check"]
+        if len(m):
+            lines += ["", f"f (mass properties): mass change over the flight {m['mass_change_pct'].mean():+.2f} %, "
+                      f"file mass vs JSBSim {m['mass_file_vs_jsb_pct'].mean():+.2f} %, file I_yy vs JSBSim's "
+                      f"{m['Iyy_file_vs_jsb_pct'].mean():+.2f} %, CG travel {m['x_cg_span_mm'].mean():.1f} mm"]
+        lines.append("")
+    return "\n".join(lines) + "\n"
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--vehicles", default="F4N,OV10,pa28")
+    ap.add_argument("--seeds", default="0-4")
+    ap.add_argument("--out", default="attribution")
+    args = ap.parse_args()
+    seeds = parse_seeds(args.seeds)
+    df = run(args.vehicles.split(","), seeds)
+    out = Path(__file__).parent / "results"
+    df.to_csv(out / f"{args.out}_runs.csv", index=False, float_format="%.5g")
+    text = report(df, seeds)
+    (out / f"{args.out}.md").write_text(text)
+    print(text)
+
+
+if __name__ == "__main__":
+    main()
