@@ -20,15 +20,17 @@ with the segment's band edge and filter runs):
                moment (low-passed), the pipeline's qbar
   b: alpha     alpha (alpha_dot_hat follows: the pipeline's derivative of the new alpha)
   b: alphadot  alpha_dot_hat alone: JSBSim's alpha-dot, low-passed (no derivative window)
-  b: beta      beta (the |beta| term)
+  beta         beta (the |beta| term)
   c: q         the pitch rate (q_hat)
   d: delta_p   the surface deflection (JSBSim's surface position the aerodynamics read:
                the telemetry carries it plus white noise, after the actuator)
   e: air data  V (q_hat, alpha_dot_hat) and qbar (the dependent's normalisation)
   f: inertia   not a substitution: the vehicle file's I_yy, mass, CG against JSBSim's
                (reported below the tables)
-  all          every group at once (a: Cm(JSB), b: alpha, c, d, e)
+  b + X        the true alpha and group X (SIMEX aims at the true-alpha answer)
+  all          every group at once (a: Cm(JSB), b: alpha, c, d, e, beta)
   all+adot     every group and JSBSim's alpha-dot (what the band-limited truth gives)
+  all but X    every group but X (the error X's noise makes when all else is true)
   oracle       the bench's oracle: the default model fitted to the unfiltered truth
 
 Errors are % of the linear truth (flight.coefficients); damping = C_m_q + C_m_alpha_dot.
@@ -177,6 +179,26 @@ def substitutions(data: dict) -> dict[str, dict]:
         return f
 
     no_eiv = {"eiv_sigma_alpha_rad": 0.0, "eiv_sigma_beta_rad": 0.0}
+    # the groups: flight-data columns (and signal overrides) replaced by the band-limited truth
+    groups = {
+        "a": ({"Cm": lp["moment"] / qbar_p}, {}),
+        "b": ({"alpha_rad": lp["alpha"], **no_eiv}, {}),
+        "c": ({"q_rad_s": lp["q"]}, {}),
+        "d": ({"delta_p_rad": lp["delta_p"]}, {}),
+        "e": ({"V_m_s": lp["V"], "qbar_pa": qbar_true, "Cm": fd["Cm"] * qbar_p / qbar_true}, {}),
+        "beta": ({"beta_rad": lp["beta"]}, {}),
+    }
+
+    def combined(names) -> tuple[dict, dict]:
+        cols, over = {}, {}
+        for g in names:
+            c_, o_ = groups[g]
+            cols.update(c_)
+            over.update(o_)
+        if "a" in names and "e" in names:  # the true moment normalised with the true qbar
+            cols["Cm"] = lp["moment"] / qbar_true
+        return cols, over
+
     out = {}
     out["base"] = fit_cm(fd, veh)
     out["base+SIMEX"] = simex_cm(fd, veh)
@@ -186,16 +208,20 @@ def substitutions(data: dict) -> dict[str, dict]:
     out["b: alpha"] = fit_cm(with_cols(alpha_rad=lp["alpha"]), veh)
     out["b: alphadot"] = fit_cm(fd, veh, {"alpha_dot_hat": adot_hat_true})
     out["b: alpha+alphadot"] = fit_cm(with_cols(alpha_rad=lp["alpha"]), veh, {"alpha_dot_hat": adot_hat_true})
-    out["b: beta"] = fit_cm(with_cols(beta_rad=lp["beta"]), veh)
+    out["beta"] = fit_cm(with_cols(beta_rad=lp["beta"]), veh)
     out["c: q"] = fit_cm(with_cols(q_rad_s=lp["q"]), veh)
     out["d: delta_p"] = fit_cm(with_cols(delta_p_rad=lp["delta_p"]), veh)
-    out["e: air data"] = fit_cm(with_cols(V_m_s=lp["V"], qbar_pa=qbar_true, Cm=fd["Cm"] * qbar_p / qbar_true), veh)
-    every = dict(alpha_rad=lp["alpha"], beta_rad=lp["beta"], q_rad_s=lp["q"], delta_p_rad=lp["delta_p"],
-                 V_m_s=lp["V"], qbar_pa=qbar_true, Cm=lp["moment"] / qbar_true, **no_eiv)
-    out["all"] = fit_cm(with_cols(**every), veh)
-    out["all+adot"] = fit_cm(with_cols(**every), veh, {"alpha_dot_hat": lp["alpha_dot"] * c / (2 * lp["V"])})
-    out["all but a"] = fit_cm(with_cols(**{**every, "Cm": fd["Cm"] * qbar_p / qbar_true}), veh)
-    out["all but b"] = fit_cm(with_cols(**{k: v for k, v in every.items() if k not in ("alpha_rad",)}), veh)
+    out["e: air data"] = fit_cm(with_cols(**groups["e"][0]), veh)
+    for g in ("a", "c", "d", "e"):  # on top of the true angle (what SIMEX aims at)
+        cols, over = combined(["b", g])
+        out[f"b + {g}"] = fit_cm(with_cols(**cols), veh, over)
+    every = ["a", "b", "c", "d", "e", "beta"]
+    cols, over = combined(every)
+    out["all"] = fit_cm(with_cols(**cols), veh, over)
+    out["all+adot"] = fit_cm(with_cols(**cols), veh, {"alpha_dot_hat": lp["alpha_dot"] * c / (2 * lp["V"])})
+    for g in every:
+        cols, over = combined([x for x in every if x != g])
+        out[f"all but {g}"] = fit_cm(with_cols(**cols), veh, over)
     out["oracle"] = oracle(SimpleNamespace(truth=T), veh)
     out["oracle"] = {"Cm_alpha": out["oracle"].get("Cm_alpha"), "Cm_delta_p": out["oracle"].get("Cm_delta"),
                      "Cm_q": out["oracle"].get("damping"), "Cm_alpha_dot": 0.0}
@@ -211,12 +237,12 @@ def mass_check(data: dict) -> dict:
             "x_cg_span_mm": 1000 * float(np.ptp(T["x_cg_m"]))}
 
 
-def run(vehicles: list[str], seeds: list[int]) -> pd.DataFrame:
+def run(vehicles: list[str], seeds: list[int], cache_dir: Path = attribution_cache.CACHE_DIR) -> pd.DataFrame:
     rows = []
     for v in vehicles:
         for s in seeds:
             t0 = time.perf_counter()
-            data = attribution_cache.load(v, s)
+            data = attribution_cache.load(v, s, cache_dir)
             truth = truth_targets(data["coefficients"])
             for name, sol in substitutions(data).items():
                 est = targets(sol)
@@ -254,9 +280,11 @@ def main() -> None:
     ap.add_argument("--vehicles", default="F4N,OV10,pa28")
     ap.add_argument("--seeds", default="0-4")
     ap.add_argument("--out", default="attribution")
+    ap.add_argument("--cache-dir", default=str(attribution_cache.CACHE_DIR),
+                    help="where the simulated flights are cached (one folder per simulator version)")
     args = ap.parse_args()
     seeds = parse_seeds(args.seeds)
-    df = run(args.vehicles.split(","), seeds)
+    df = run(args.vehicles.split(","), seeds, Path(args.cache_dir))
     out = Path(__file__).parent / "results"
     df.to_csv(out / f"{args.out}_runs.csv", index=False, float_format="%.5g")
     text = report(df, seeds)
