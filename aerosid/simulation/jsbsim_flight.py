@@ -245,26 +245,24 @@ def _trimmed_fdm(jsbsim, sim_cfg: dict, throttle: float | None = None):
     return fdm
 
 
-#: JSBSim integration steps per telemetry sample.  JSBSim's rectangular Euler leaves the
-#: logged rates and the moments of a sample half an integration step apart (whichever of
-#: the two the gyros are aligned with, the other is off by dt/2: 5 ms at 100 Hz, which
-#: moved C_m_delta and the damping by +2.5 % on F4N through the strong pitch damping,
-#: bench/results/attribution.md); integrating at dt/SUBSTEPS and logging every sample
-#: shrinks that skew by SUBSTEPS.
-SUBSTEPS = 10
-#: rec key of the integration step [s] (:func:`_fly` records it; :func:`state_columns` re-times with it)
-STEP_KEY = "simulation/integration-step-sec"
+#: JSBSim's integrator of the body rates during the flight: 3 = Adams-Bashforth 2 (JSBSim's
+#: default, 1 = rectangular Euler, leaves a logged rate and the sample's moment half a step
+#: apart: re-timing the rates to the moments then put the gyros dt/2 = 5 ms off the state the
+#: aerodynamics used, which inflated F4N's C_m_delta and damping by ~2.5 %,
+#: bench/results/attribution.md).  With AB2 the central difference of the logged rates is
+#: centred on the sample's moment (to second order) and the rates are the aerodynamics' own.
+ROTATIONAL_INTEGRATOR = 3
+#: rec key of the rate integrator (:func:`_fly` records it, :func:`state_columns` reads it)
+INTEGRATOR_KEY = "simulation/integrator/rate/rotational"
 
 
 def _fly(fdm, t: np.ndarray, inputs: dict[str, np.ndarray], record: list[str] = _RECORD,
-         progress=None, substeps: int = SUBSTEPS) -> dict[str, np.ndarray]:
+         progress=None, integrator: int = ROTATIONAL_INTEGRATOR) -> dict[str, np.ndarray]:
     """Fly the input increments on top of the current (trimmed) commands; the properties
-    `record` at every sample.  JSBSim integrates `substeps` steps per sample interval
-    (the commands held over the sample), see SUBSTEPS.  progress: optional callback
-    progress("fly", fraction)."""
-    if len(t) > 1 and substeps > 1:
-        fdm.set_dt(float(t[1] - t[0]) / substeps)
-    substeps = max(1, int(substeps))
+    `record` at every sample, the body rates integrated with `integrator` (JSBSim's
+    simulation/integrator/rate/rotational, see ROTATIONAL_INTEGRATOR).  progress: optional
+    callback progress("fly", fraction)."""
+    fdm[INTEGRATOR_KEY] = int(integrator)
     every = max(1, len(t) // 200)
     trim_cmd = {"elevator": fdm["fcs/elevator-cmd-norm"], "aileron": fdm["fcs/aileron-cmd-norm"],
                 "rudder": fdm["fcs/rudder-cmd-norm"]}
@@ -278,16 +276,13 @@ def _fly(fdm, t: np.ndarray, inputs: dict[str, np.ndarray], record: list[str] = 
             # frame that ends at t_k see it (JSBSim propagates first, then runs the
             # models at the new state: recorded state, positions and forces are
             # all at the same instant)
-            # (sub-steps: the command moves linearly from the previous sample's to this one's)
-            for j in range(1, substeps + 1):
-                w = j / substeps
-                for name, prop in (("elevator", "fcs/elevator-cmd-norm"), ("aileron", "fcs/aileron-cmd-norm"),
-                                   ("rudder", "fcs/rudder-cmd-norm")):
-                    fdm[prop] = trim_cmd[name] + (1.0 - w) * inputs[name][k - 1] + w * inputs[name][k]
-                fdm.run()
+            for name, prop in (("elevator", "fcs/elevator-cmd-norm"), ("aileron", "fcs/aileron-cmd-norm"),
+                               ("rudder", "fcs/rudder-cmd-norm")):
+                fdm[prop] = trim_cmd[name] + inputs[name][k]
+            fdm.run()
         out[k] = [get(p) for p in record]
     rec = {p: out[:, j] for j, p in enumerate(record)}
-    rec[STEP_KEY] = np.full(len(t), float(fdm.get_delta_t()))
+    rec[INTEGRATOR_KEY] = np.full(len(t), float(fdm[INTEGRATOR_KEY]))
     if np.max(np.abs(rec["simulation/sim-time-sec"] - rec["simulation/sim-time-sec"][0] - t)) > 1e-6:
         raise RuntimeError("JSBSim time does not follow the sample grid")
     return rec
@@ -476,17 +471,19 @@ def rates_at_the_moments(x: np.ndarray, x_dot: np.ndarray, dt: float) -> np.ndar
 
 def state_columns(rec: dict, t: np.ndarray, dt: float, accel_offset_m) -> tuple[dict, np.ndarray]:
     """The truth columns every JSBSim flight shares, from its record: air data, attitude, the
-    gyros' rates at the instant of the sample's moments (JSBSim's Euler step logs them half a
-    step late, :func:`rates_at_the_moments`; the state JSBSim's aerodynamics used stays in
-    p/q/r_state_rad_s), angular accelerations, the specific force at the CG (all external
+    gyros' rates (with _fly's Adams-Bashforth 2 the state JSBSim's aerodynamics used, whose
+    central difference is centred on the sample's moments; with rectangular Euler re-timed half
+    a step, :func:`rates_at_the_moments`; the state stays in p/q/r_state_rad_s), angular accelerations, the specific force at the CG (all external
     non-gravitational forces / mass: JSBSim's forces/fb*-total are aero + propulsion + ground +
     external) and at the accelerometer (offset [m], body axes), alpha, beta, alpha-dot.
     Returns (columns in the truth frame's order, mass [kg] per sample)."""
     mass_kg = rec["inertia/mass-slugs"] * SLUG
     xdot = [rec[f"accelerations/{a}dot-rad_sec2"] for a in "pqr"]
     state = [rec[f"velocities/{a}-rad_sec"] for a in "pqr"]
-    step = float(rec[STEP_KEY][0]) if STEP_KEY in rec else dt  # JSBSim's integration step (_fly's sub-steps)
-    p, q, r = (rates_at_the_moments(x, xd, step) for x, xd in zip(state, xdot))
+    if INTEGRATOR_KEY in rec and int(rec[INTEGRATOR_KEY][0]) != 1:  # AB2 (_fly): the state is centred already
+        p, q, r = state
+    else:  # rectangular Euler: re-timed half a step
+        p, q, r = (rates_at_the_moments(x, xd, dt) for x, xd in zip(state, xdot))
     f_cg = [rec[f"forces/fb{a}-total-lbs"] * LBF / mass_kg for a in "xyz"]
     f_sensor = [f + lv for f, lv in zip(f_cg, lever_arm_acceleration(p, q, r, *xdot, accel_offset_m))]
     cols = {
