@@ -7,7 +7,7 @@ substitutions refit in seconds.
 Each cache file holds the flight's truth frame and linear truth, the vehicle file's
 folder, the pipeline's preprocessed frame, its smoothed segment frames, its flight data
 and, per segment, the band-limiting the flight data went through (band edge and the
-filter runs of aerosid.identification.band, captured from aerosid.flight_data)."""
+filter runs of aerosid.identification.band, captured from aerosid.identification.flight_data)."""
 from __future__ import annotations
 
 import argparse
@@ -29,7 +29,7 @@ def cache_path(vehicle: str, seed: int, root: Path = CACHE_DIR) -> Path:
 
 def build(vehicle: str, seed: int, root: Path = CACHE_DIR) -> Path:
     """Simulate, estimate the flight data (capturing each segment's band-limiting), save."""
-    import aerosid.flight_data as fdmod
+    import aerosid.identification.flight_data as fdmod
     from aerosid.ebm import estimate_flight_data
     from bench_generalisation import simulate
 
@@ -73,7 +73,7 @@ def build(vehicle: str, seed: int, root: Path = CACHE_DIR) -> Path:
 
 def load(vehicle: str, seed: int, root: Path = CACHE_DIR) -> dict:
     """The cached flight (built first if missing), with its Vehicle loaded."""
-    from aerosid.vehicle import load_vehicle
+    from aerosid.vehicles.vehicle import load_vehicle
 
     path = cache_path(vehicle, seed, root)
     if not path.exists():

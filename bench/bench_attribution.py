@@ -7,13 +7,13 @@ Per (vehicle, seed) the flight is simulated and estimated once (bench/attributio
 bench_generalisation.simulate + aerosid.ebm.estimate_flight_data, cached under
 /tmp/aerosid-attrib with the band-limiting each segment went through).  The C_m channel's
 default model is then refitted (ordinary least squares on the samples of the Mach window,
-as aerosid.identify.identify fits it before the SIMEX correction) with one group of the
+as aerosid.identification.identify.identify fits it before the SIMEX correction) with one group of the
 flight data's columns replaced by the noise-free truth, passed through THE SAME
 band-limiting the flight data went through (aerosid.identification.band.low_pass_runs
 with the segment's band edge and filter runs):
 
   base         the pipeline's flight data (the naive fit, no SIMEX)
-  base+SIMEX   aerosid.identify.identify (the reported estimate)
+  base+SIMEX   aerosid.identification.identify.identify (the reported estimate)
   a: Cm(gyro)  the dependent C_m from the noise-free gyros (low-passed, differentiated,
                Euler equations with the vehicle file's inertia), the pipeline's qbar
   a: Cm(JSB)   the dependent C_m from JSBSim's own aerodynamic + propulsive pitching
@@ -115,8 +115,8 @@ def gyro_moment(data: dict) -> np.ndarray:
 def fit_cm(fd: pd.DataFrame, vehicle, overrides: dict | None = None, mach_half_width: float | None = 0.5) -> dict:
     """OLS of the default C_m model on fd (its Mach window), signals overridden by name
     (arrays in fd's row order).  Returns coefficient -> estimate."""
-    from aerosid.identify import mach_window_mask
-    from aerosid.models import default_models, vehicle_signals
+    from aerosid.identification.identify import mach_window_mask
+    from aerosid.modelling.models import default_models, vehicle_signals
 
     order = np.lexsort((fd["t_s"].to_numpy(float), fd["flight"].astype(str).to_numpy()))
     f = fd.iloc[order].reset_index(drop=True)
@@ -133,9 +133,9 @@ def fit_cm(fd: pd.DataFrame, vehicle, overrides: dict | None = None, mach_half_w
 
 
 def simex_cm(fd: pd.DataFrame, vehicle) -> dict:
-    """The C_m estimates aerosid.identify.identify reports (SIMEX-corrected for vanes)."""
-    from aerosid.identify import identify
-    from aerosid.models import default_models
+    """The C_m estimates aerosid.identification.identify.identify reports (SIMEX-corrected for vanes)."""
+    from aerosid.identification.identify import identify
+    from aerosid.modelling.models import default_models
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
@@ -243,11 +243,11 @@ SIMEX_LAMBDAS = (0.0, 0.5, 1.0, 1.5, 2.0)
 def simex_curve(data: dict, replicates: int = 30, seed: int = 1) -> dict:
     """SIMEX's premise checked where alpha's noise is the only error: every other group is
     the band-limited truth; the naive C_m_alpha [% of the truth] with extra vane-like noise
-    of variance lambda sigma^2 (aerosid.eiv.with_angle_noise, as identify adds it), averaged
+    of variance lambda sigma^2 (aerosid.identification.eiv.with_angle_noise, as identify adds it), averaged
     over `replicates` draws, against the answer with the true alpha (lambda = -1, what the
-    extrapolation must reach) and aerosid.eiv.extrapolate's quadratic."""
-    from aerosid.eiv import extrapolate, with_angle_noise
-    from aerosid.identify import angle_cutoff_hz
+    extrapolation must reach) and aerosid.identification.eiv.extrapolate's quadratic."""
+    from aerosid.identification.eiv import extrapolate, with_angle_noise
+    from aerosid.identification.identify import angle_cutoff_hz
 
     fd, T, veh = data["flight_data"], data["truth"], data["vehicle_obj"]
     lp = band_limited_truth(data, {"beta": T["beta_rad"], "q": T["q_rad_s"], "V": T["V_m_s"],
