@@ -86,18 +86,26 @@ def rates_at_the_moments(x: np.ndarray, x_dot: np.ndarray, dt: float) -> np.ndar
     sample k, its derivative matches the moment of sample k."""
     return x + 0.5 * dt * x_dot
 
+#: rec key of JSBSim's body-rate integrator during the flight (jsbsim_flight._fly records it,
+#: :func:`state_columns` reads it)
+INTEGRATOR_KEY = "simulation/integrator/rate/rotational"
+
+
 def state_columns(rec: dict, t: np.ndarray, dt: float, accel_offset_m) -> tuple[dict, np.ndarray]:
     """The truth columns every JSBSim flight shares, from its record: air data, attitude, the
-    gyros' rates at the instant of the sample's moments (JSBSim's Euler step logs them half a
-    step late, :func:`rates_at_the_moments`; the state JSBSim's aerodynamics used stays in
-    p/q/r_state_rad_s), angular accelerations, the specific force at the CG (all external
+    gyros' rates (with _fly's Adams-Bashforth 2 the state JSBSim's aerodynamics used, whose
+    central difference is centred on the sample's moments; with rectangular Euler re-timed half
+    a step, :func:`rates_at_the_moments`; the state stays in p/q/r_state_rad_s), angular accelerations, the specific force at the CG (all external
     non-gravitational forces / mass: JSBSim's forces/fb*-total are aero + propulsion + ground +
     external) and at the accelerometer (offset [m], body axes), alpha, beta, alpha-dot.
     Returns (columns in the truth frame's order, mass [kg] per sample)."""
     mass_kg = rec["inertia/mass-slugs"] * SLUG
     xdot = [rec[f"accelerations/{a}dot-rad_sec2"] for a in "pqr"]
     state = [rec[f"velocities/{a}-rad_sec"] for a in "pqr"]
-    p, q, r = (rates_at_the_moments(x, xd, dt) for x, xd in zip(state, xdot))
+    if INTEGRATOR_KEY in rec and int(rec[INTEGRATOR_KEY][0]) != 1:  # AB2 (_fly): the state is centred already
+        p, q, r = state
+    else:  # rectangular Euler: re-timed half a step
+        p, q, r = (rates_at_the_moments(x, xd, dt) for x, xd in zip(state, xdot))
     f_cg = [rec[f"forces/fb{a}-total-lbs"] * LBF / mass_kg for a in "xyz"]
     f_sensor = [f + lv for f, lv in zip(f_cg, lever_arm_acceleration(p, q, r, *xdot, accel_offset_m))]
     cols = {

@@ -32,7 +32,8 @@ import numpy as np
 import pandas as pd
 
 from aerosid.simulation import SimulatedFlight
-from aerosid.simulation.jsbsim_columns import (DEG, FT, INCH, LBF, PSF, SLUG, SLUG_FT2, SLUG_FT3, TELEMETRY_COLUMNS,
+from aerosid.simulation.jsbsim_columns import (DEG, FT, INCH, INTEGRATOR_KEY, LBF, PSF, SLUG, SLUG_FT2, SLUG_FT3,
+                                               TELEMETRY_COLUMNS,
                                                coefficient_columns, make_telemetry, state_columns)
 from aerosid.simulation.jsbsim_tables import AeroTables, body_coefficients
 from aerosid.simulation.jsbsim_truth import _coefficient_table, _linearise, _truth_check, flight_statistics
@@ -233,10 +234,22 @@ def _trimmed_fdm(jsbsim, sim_cfg: dict, throttle: float | None = None):
     return fdm
 
 
+#: JSBSim's integrator of the body rates during the flight: 3 = Adams-Bashforth 2 (JSBSim's
+#: default, 1 = rectangular Euler, leaves a logged rate and the sample's moment half a step
+#: apart: re-timing the rates to the moments then put the gyros dt/2 = 5 ms off the state the
+#: aerodynamics used, which inflated F4N's C_m_delta and damping by ~2.5 %,
+#: bench/results/attribution.md).  With AB2 the central difference of the logged rates is
+#: centred on the sample's moment (to second order) and the rates are the aerodynamics' own.
+ROTATIONAL_INTEGRATOR = 3
+
+
 def _fly(fdm, t: np.ndarray, inputs: dict[str, np.ndarray], record: list[str] = _RECORD,
-         progress=None) -> dict[str, np.ndarray]:
+         progress=None, integrator: int = ROTATIONAL_INTEGRATOR) -> dict[str, np.ndarray]:
     """Fly the input increments on top of the current (trimmed) commands; the properties
-    `record` at every sample.  progress: optional callback progress("fly", fraction)."""
+    `record` at every sample, the body rates integrated with `integrator` (JSBSim's
+    simulation/integrator/rate/rotational, see ROTATIONAL_INTEGRATOR).  progress: optional
+    callback progress("fly", fraction)."""
+    fdm[INTEGRATOR_KEY] = int(integrator)
     every = max(1, len(t) // 200)
     trim_cmd = {"elevator": fdm["fcs/elevator-cmd-norm"], "aileron": fdm["fcs/aileron-cmd-norm"],
                 "rudder": fdm["fcs/rudder-cmd-norm"]}
@@ -256,6 +269,7 @@ def _fly(fdm, t: np.ndarray, inputs: dict[str, np.ndarray], record: list[str] = 
             fdm.run()
         out[k] = [get(p) for p in record]
     rec = {p: out[:, j] for j, p in enumerate(record)}
+    rec[INTEGRATOR_KEY] = np.full(len(t), float(fdm[INTEGRATOR_KEY]))
     if np.max(np.abs(rec["simulation/sim-time-sec"] - rec["simulation/sim-time-sec"][0] - t)) > 1e-6:
         raise RuntimeError("JSBSim time does not follow the sample grid")
     return rec
