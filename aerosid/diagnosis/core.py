@@ -392,7 +392,8 @@ class Diagnosis:
         floors = [e for e in self.effects if e.catalogue and math.isfinite(e.detectable_size)]
         if floors:
             strongest += (" This flight could not have detected effects smaller than: "
-                          + ", ".join(f"{e.name} |{e.coefficient}| {e.detectable_size:.3g}" for e in floors) + ".")
+                          + ", ".join(f"{e.name} |{e.coefficient}| {e.detectable_size:.3g}" for e in floors)
+                          + " (`aerosid design RUN_DIR --effect NAME --out DIR` proposes a manoeuvre that would).")
         unident = [e.name for e in self.effects if not e.identifiable]
         cannot = (f" Not separable from the model's own terms on this flight (so not tested): "
                   f"{', '.join(unident)}." if unident else "")
