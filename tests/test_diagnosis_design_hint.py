@@ -54,3 +54,39 @@ def test_nothing_significant_names_the_design_command(reference_flight):
     assert d.nothing_significant, d.summary()
     assert "could not have detected" in d.message
     assert "aerosid design RUN_DIR --effect NAME --out DIR" in d.message
+
+
+def test_unresolved_lookalikes_leave_no_spec_lines_to_paste():
+    """The guess's `[Cm] add = [...]` lines would contradict 'no recommendation' (seen on seed-rlv
+    seed 0 with alpha_nonlinearity hidden: the message ended with add = ["mach_cm0"])."""
+    from aerosid.diagnosis.lookalikes import lookalike_message
+
+    y, base, x1, x2 = _lookalikes(noise_sd=3.0)
+    c = compare("Cm", y, base, ["Cm_0"], _cands(), [x1, x2])
+    guess = ("Most likely missing: alpha_nonlinearity in Cm (non-linear static stability). It explains 2% of the "
+             "Cm residual variance; add it with the lines below. Where the model is worst: Cm: t 0-10 s (x1.5)."
+             '\n\n[Cm]\nadd = ["alpha_nonlinearity"]')
+    msg = lookalike_message(SimpleNamespace(lookalikes=[c]), guess)
+    assert "no recommendation" in msg and "Where the model is worst: Cm: t 0-10 s" in msg
+    assert "add = [" not in msg
+
+
+def test_run_summary_names_the_design_command_for_an_unresolved_pair(tmp_path):
+    """`aerosid run` prints only the message's first sentence: the separating manoeuvre and the
+    design command get a line of their own, with the run folder filled in."""
+    import json
+
+    from aerosid.cli_run_summary import verdict_lines
+
+    pair = {"verdict": "unresolved", "in_model": None, "alternatives": [{"name": "alpha_nonlinearity"},
+                                                                        {"name": "control_alpha"}],
+            "separating_manoeuvre": "fly pitch-fin deflection excursions at two distinct alpha levels"}
+    doc = {"message": "alpha_nonlinearity and control_alpha cannot be told apart in Cm on this flight.",
+           "recommended": None, "effects": [], "lookalikes": [pair]}
+    (tmp_path / "diagnosis.json").write_text(json.dumps(doc))
+    text = "\n".join(verdict_lines(tmp_path))
+    assert f"aerosid design {tmp_path} --effect alpha_nonlinearity --versus control_alpha --out DIR" in text
+    assert "two distinct alpha levels" in text
+    doc.update(recommended="alpha_nonlinearity", lookalikes=[dict(pair, verdict="separated")])
+    (tmp_path / "diagnosis.json").write_text(json.dumps(doc))
+    assert "aerosid design" not in "\n".join(verdict_lines(tmp_path))

@@ -449,5 +449,6 @@ def lookalike_message(diagnosis, base_message: str) -> str:
     if top is not None and top.verdict == "unresolved" and msg.startswith("Most likely missing"):
         msg = (f"Something is missing in {top.channel}, but the candidates that explain it are look-alikes "
                f"({', '.join(top.names)}): no recommendation." + msg[msg.find(" Where the model") if
-                                                                       " Where the model" in msg else len(msg):])
+                                                                       " Where the model" in msg else len(msg):]
+               .split("\n\n[", 1)[0])  # no spec lines to paste: they were the guess's
     return " ".join(texts) + " " + msg
