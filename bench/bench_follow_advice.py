@@ -159,7 +159,8 @@ def report(df: pd.DataFrame, wall_s: float, args) -> str:
     from machine import cpu_model, loadavg
 
     L = ["# Following the diagnosis' advice end to end (issues 18 and 20)", "",
-         f"{date.today()}, {cpu_model()}, {os.cpu_count()} cores, load {loadavg()}; wall {wall_s / 60:.1f} min. "
+         f"{date.today()}, {cpu_model()}, {os.cpu_count()} cores shared with other jobs, load {loadavg()}; the CLI steps "
+         f"took {df['seconds'].sum() / 60:.0f} min in all ({args.jobs} chains at a time). "
          f"`python bench/bench_follow_advice.py --jobs {args.jobs} --seeds {args.seeds} --ca-seeds {args.ca_seeds} "
          f"--none-seeds {args.none_seeds}`. Per-flight rows: `bench/results/follow_advice_runs.csv`.", ""]
     an = df[df["effect"] == "alpha_nonlinearity"]
@@ -228,7 +229,7 @@ def report(df: pd.DataFrame, wall_s: float, args) -> str:
 
 def _seeds(text: str) -> list[int]:
     out = []
-    for part in text.split(","):
+    for part in filter(None, text.split(",")):
         a, _, b = part.partition("-")
         out += list(range(int(a), int(b) + 1)) if b else [int(a)]
     return out
@@ -240,15 +241,17 @@ def main() -> None:
     ap.add_argument("--ca-seeds", default="1", help="control_alpha seeds (1: its unresolved one)")
     ap.add_argument("--none-seeds", default="0-4", help="no-effect seeds")
     ap.add_argument("--variants", default="plain,versus")
+    ap.add_argument("--none-variants", default=None, help="design variants flown without an effect (default: --variants)")
     ap.add_argument("--jobs", type=int, default=1)
     ap.add_argument("--work", default="/tmp/aerosid_follow_advice")
     ap.add_argument("--out", default=str(Path(__file__).parent / "results"))
     ap.add_argument("--report-only", action="store_true", help="rebuild the report from --work's rows")
     args = ap.parse_args()
     variants = tuple(v for v in args.variants.split(",") if v)
+    none_variants = tuple(v for v in (args.none_variants or args.variants).split(",") if v)
     jobs = ([("alpha_nonlinearity", s, variants, args.work) for s in _seeds(args.seeds)]
-            + [("control_alpha", s, variants, args.work) for s in _seeds(args.ca_seeds) if args.ca_seeds]
-            + [("none", s, variants, args.work) for s in _seeds(args.none_seeds) if args.none_seeds])
+            + [("control_alpha", s, variants, args.work) for s in _seeds(args.ca_seeds)]
+            + [("none", s, none_variants, args.work) for s in _seeds(args.none_seeds)])
     t0 = time.perf_counter()
     rows: list[dict] = []
     if args.report_only:
