@@ -64,9 +64,9 @@ def verdict_lines(run_dir: Path) -> list[str]:
     open_pair = next((c for c in doc.get("lookalikes") or [] if c.get("verdict") == "unresolved"
                       and len(c.get("alternatives") or []) > 1), None) if not name else None
     if open_pair:  # the manoeuvre that would separate them, and the command that designs it
-        a, b = (x["name"] for x in open_pair["alternatives"][:2])
         lines.append(f"to separate them: {open_pair.get('separating_manoeuvre', 'another manoeuvre')}; "
-                     f"`aerosid design {run_dir} --effect {a} --versus {b} --out DIR` proposes one")
+                     f"`aerosid design {run_dir} --effect {open_pair['alternatives'][0]['name']} --out DIR` proposes "
+                     "one; fly it and `aerosid run` this flight's and the new flight's telemetry together")
     lines.append(f"details: `aerosid diagnose {run_dir}`, {run_dir / 'report.html'}")
     return lines
 

@@ -8,7 +8,9 @@ the same commands a user types; nothing is called behind the CLI's back):
    (``aerosid run`` ends with the diagnosis of the default models, RUN/diagnosis.json);
 2. ``aerosid design W/std_run --effect E [--versus V] --out W/des_<variant>``, on *that seed's* run,
    for two variants: ``plain`` (``--effect E``: the catalogue size, as in the README example) and
-   ``versus`` (``--effect E --versus V``: separate the look-alikes, what the unresolved message asks for);
+   ``versus`` (``--effect E --versus V``: separate the look-alikes); for control_alpha also ``top``
+   (``--effect`` the first of the standard diagnosis' unresolved look-alikes: what a user who only
+   reads the diagnosis would design for -- alpha_nonlinearity on control_alpha's seed 1);
 3. ``aerosid simulate --case seed-rlv --effect E --input W/des_<variant>/input.parquet --seed 100+S``
    (same hidden effect, another noise seed) and ``aerosid run`` on it: the designed flight alone;
 4. ``aerosid run W/std/telemetry.parquet W/fly_<variant>/telemetry.parquet --out W/pooled_<variant>``:
@@ -110,7 +112,9 @@ def chain(job: tuple) -> list[dict]:
     for variant in variants:
         des, fly, fly_run, pooled = (w / f"des_{variant}", w / f"fly_{variant}", w / f"fly_{variant}_run",
                                      w / f"pooled_{variant}")
-        dargs = ["design", str(w / "std_run"), "--effect", design_effect, "--out", str(des), "--quiet"]
+        top = rows[0]["lookalike_names"].split()[0] if rows[0]["verdict"] == "unresolved" else design_effect
+        dargs = ["design", str(w / "std_run"), "--effect", top if variant == "top" else design_effect,
+                 "--out", str(des), "--quiet"]
         if variant == "versus":
             dargs[4:4] = ["--versus", LOOKALIKE[design_effect]]
         t_des = _cli(dargs, log, des / "design.json")
@@ -241,6 +245,8 @@ def main() -> None:
     ap.add_argument("--ca-seeds", default="1", help="control_alpha seeds (1: its unresolved one)")
     ap.add_argument("--none-seeds", default="0-4", help="no-effect seeds")
     ap.add_argument("--variants", default="plain,versus")
+    ap.add_argument("--ca-variants", default="plain,versus,top",
+                    help="control_alpha's variants; top = --effect the first of the unresolved look-alikes")
     ap.add_argument("--none-variants", default=None, help="design variants flown without an effect (default: --variants)")
     ap.add_argument("--jobs", type=int, default=1)
     ap.add_argument("--work", default="/tmp/aerosid_follow_advice")
@@ -250,7 +256,7 @@ def main() -> None:
     variants = tuple(v for v in args.variants.split(",") if v)
     none_variants = tuple(v for v in (args.none_variants or args.variants).split(",") if v)
     jobs = ([("alpha_nonlinearity", s, variants, args.work) for s in _seeds(args.seeds)]
-            + [("control_alpha", s, variants, args.work) for s in _seeds(args.ca_seeds)]
+            + [("control_alpha", s, tuple(args.ca_variants.split(",")), args.work) for s in _seeds(args.ca_seeds)]
             + [("none", s, none_variants, args.work) for s in _seeds(args.none_seeds)])
     t0 = time.perf_counter()
     rows: list[dict] = []
