@@ -164,9 +164,12 @@ def report(df: pd.DataFrame, wall_s: float, args) -> str:
 
     L = ["# Following the diagnosis' advice end to end (issues 18 and 20)", "",
          f"{date.today()}, {cpu_model()}, {os.cpu_count()} cores shared with other jobs, load {loadavg()}; the CLI steps "
-         f"took {df['seconds'].sum() / 60:.0f} min in all ({args.jobs} chains at a time). "
-         f"`python bench/bench_follow_advice.py --jobs {args.jobs} --seeds {args.seeds} --ca-seeds {args.ca_seeds} "
-         f"--none-seeds {args.none_seeds}`. Per-flight rows: `bench/results/follow_advice_runs.csv`.", ""]
+         f"took {df['seconds'].sum() / 60:.0f} min in all (2 chains at a time). "
+         f"`python bench/bench_follow_advice.py --jobs 2 --seeds {args.seeds} --ca-seeds {args.ca_seeds} "
+         f"--ca-variants {args.ca_variants} --none-seeds {args.none_seeds} --none-variants "
+         f"{args.none_variants or args.variants}`" + (" (tables rebuilt from the step folders with --report-only)"
+                                                      if args.report_only else "")
+         + ". Per-flight rows: `bench/results/follow_advice_runs.csv`.", ""]
     an = df[df["effect"] == "alpha_nonlinearity"]
     variants = [v for v in df["variant"].unique() if v]
     kinds = [("", "standard")] + [(v, f) for v in variants for f in ("designed", "pooled")]
