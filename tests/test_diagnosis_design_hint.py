@@ -11,7 +11,7 @@ import numpy as np
 from aerosid.diagnosis import diagnose
 from aerosid.diagnosis.lookalikes import compare
 from aerosid.diagnosis.synthetic import MEASURED_NOISE, flight_data_from_truth
-from aerosid.vehicle import load_vehicle
+from aerosid.vehicles.vehicle import load_vehicle
 
 
 def _cands():
@@ -77,7 +77,7 @@ def test_run_summary_names_the_design_command_for_an_unresolved_pair(tmp_path):
     design command get a line of their own, with the run folder filled in."""
     import json
 
-    from aerosid.cli_run_summary import verdict_lines
+    from aerosid.cli.run_summary import verdict_lines
 
     pair = {"verdict": "unresolved", "in_model": None, "alternatives": [{"name": "alpha_nonlinearity"},
                                                                         {"name": "control_alpha"}],
