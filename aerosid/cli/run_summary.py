@@ -61,6 +61,12 @@ def verdict_lines(run_dir: Path) -> list[str]:
     if top and top.get("spec_term"):
         lines += [f"to add it, put these lines in a model spec file SPEC and run `aerosid fit {run_dir} --model SPEC`:",
                   *("  " + li for li in paste_lines(top["channel"], top["spec_term"]).splitlines())]
+    open_pair = next((c for c in doc.get("lookalikes") or [] if c.get("verdict") == "unresolved"
+                      and len(c.get("alternatives") or []) > 1), None) if not name else None
+    if open_pair:  # the manoeuvre that would separate them, and the command that designs it
+        lines.append(f"to separate them: {open_pair.get('separating_manoeuvre', 'another manoeuvre')}; "
+                     f"`aerosid design {run_dir} --effect {open_pair['alternatives'][0]['name']} --out DIR` proposes "
+                     "one; fly it and `aerosid run` this flight's and the new flight's telemetry together")
     lines.append(f"details: `aerosid diagnose {run_dir}`, {run_dir / 'report.html'}")
     return lines
 

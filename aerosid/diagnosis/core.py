@@ -10,7 +10,7 @@ Evidence for one candidate (all computed on the samples inside the Mach window)
 -----------------------------------------------------------------------------
 ``partial_f_corrected``, ``p_value``
     t^2 of the added coefficient with its *coloured-residual corrected* sigma
-    (Morelli-Klein, :func:`aerosid.regression.fit_linear`), and the two-sided
+    (Morelli-Klein, :func:`aerosid.identification.regression.fit_linear`), and the two-sided
     Student-t p-value with the effective degrees of freedom.  This is the
     partial F test of one added term that survives coloured residuals.
 ``partial_f_plain``
@@ -392,7 +392,8 @@ class Diagnosis:
         floors = [e for e in self.effects if e.catalogue and math.isfinite(e.detectable_size)]
         if floors:
             strongest += (" This flight could not have detected effects smaller than: "
-                          + ", ".join(f"{e.name} |{e.coefficient}| {e.detectable_size:.3g}" for e in floors) + ".")
+                          + ", ".join(f"{e.name} |{e.coefficient}| {e.detectable_size:.3g}" for e in floors)
+                          + " (`aerosid design RUN_DIR --effect NAME --out DIR` proposes a manoeuvre that would).")
         unident = [e.name for e in self.effects if not e.identifiable]
         cannot = (f" Not separable from the model's own terms on this flight (so not tested): "
                   f"{', '.join(unident)}." if unident else "")
@@ -619,7 +620,7 @@ def diagnose(flight_data: pd.DataFrame, vehicle, models: dict[str, ChannelModel]
     """Diagnose `models` (default: the method.md §11 models) against the flight data.
 
     flight_data: a FlightData frame (schemas/flight_data.py); the samples with
-    |M - M_ref| <= mach_half_width are used, as in :func:`aerosid.identify.identify`.
+    |M - M_ref| <= mach_half_width are used, as in :func:`aerosid.identification.identify.identify`.
     candidates: the effects to test (default :func:`default_candidates`); the ones
     already in a channel's model are skipped.
     angle_sigma_rad: 1-sigma error of the recovered alpha and beta, for the
@@ -776,7 +777,7 @@ def diagnose(flight_data: pd.DataFrame, vehicle, models: dict[str, ChannelModel]
 
 def identity_channels(vehicle, channels) -> tuple[str, ...]:
     """The channels that are identities by construction: C_N and C_Y when alpha and beta
-    are inverted from them (no vanes), as aerosid.identify reports them."""
+    are inverted from them (no vanes), as aerosid.identification.identify reports them."""
     from aerosid.identification.identify import INVERSION_CHANNELS
 
     if getattr(vehicle, "air_data_source", None) == "vanes":
@@ -796,7 +797,7 @@ def _simex_signals(fd: pd.DataFrame, vehicle, groups: np.ndarray, sigma: float) 
         out[lam] = []
         for _ in range(SIMEX_REPLICATES):
             # noise like the angles' own: white for angles inverted from the database, through
-            # the vanes' low-pass for vanes (as aerosid.eiv does)
+            # the vanes' low-pass for vanes (as aerosid.identification.eiv does)
             f = with_angle_noise(fd, rng, groups, sigma * math.sqrt(lam), cutoff)
             out[lam].append(derived_signals(vehicle_signals(f, vehicle), vehicle.length_pitch_m,
                                             vehicle.length_lateral_m))
