@@ -15,7 +15,7 @@ import numpy as np
 import pandas as pd
 from scipy.interpolate import RegularGridInterpolator
 
-from aerosid.aeromodel import AeroModel
+from aerosid.modelling.aeromodel import AeroModel
 
 COLUMNS = ["mach", "alpha_r_rad", "phi_r_rad", "CN_R", "Cm_R_nose", "Cl", "CA"]
 

@@ -1,13 +1,13 @@
 """Regenerate a built-in vehicle's aerodb.csv from its vehicle.toml:
-``python -m aerosid.aerodb_build seed-rlv``."""
+``python -m aerosid.vehicles.aerodb_build seed-rlv``."""
 from __future__ import annotations
 
 import sys
 
-from aerosid.aerodb import tabulate
-from aerosid.aeromodel import AeroModel
+from aerosid.vehicles.aerodb import tabulate
+from aerosid.modelling.aeromodel import AeroModel
 from aerosid.io import write_text_atomic
-from aerosid.vehicle import load_vehicle
+from aerosid.vehicles.vehicle import load_vehicle
 
 
 def build_text(name: str) -> str:

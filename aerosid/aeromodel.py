@@ -14,7 +14,7 @@ slopes:
     Cl        = Cl_0 + Cl_alpha_r alpha_r + Cl_cos4phi cos 4 phi_r + Cl_delta_r delta_r
     CA        = CA_0 + CA_alpha2 alpha_r^2
 
-plus any catalogue effects (aerosid.effects).  The body-axis force
+plus any catalogue effects (aerosid.modelling.effects).  The body-axis force
 coefficients are (C_X, C_Y, C_Z) = (-CA, CY, -CN).  Everything is vectorised.
 """
 from __future__ import annotations
@@ -24,8 +24,8 @@ from dataclasses import dataclass, fields, replace
 
 import numpy as np
 
-from aerosid.effects import Effect
-from aerosid.vehicle import PreflightAero, Vehicle
+from aerosid.modelling.effects import Effect
+from aerosid.vehicles.vehicle import PreflightAero, Vehicle
 
 
 @dataclass(frozen=True)
@@ -106,7 +106,7 @@ class AeroModel:
 
 
 def flight_signals(alpha_r, phi_r, mach, delta_p, delta_y, delta_r, p, q, r, V, qbar, d_m):
-    """The named signals effect terms and model specs are written over (aerosid.effects)."""
+    """The named signals effect terms and model specs are written over (aerosid.modelling.effects)."""
     alpha_r = np.asarray(alpha_r, dtype=float)
     ta = np.tan(alpha_r)
     two_v = 2.0 * np.asarray(V, dtype=float)

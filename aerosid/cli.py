@@ -95,7 +95,7 @@ def simulate(case_name, effects, hidden, seed, out_dir, duration, rate, no_fault
     (true states, alpha, beta, coefficients and fault masks per sample) and
     DIR/truth.json (the true flight coefficients, SI per radian, about the CG).
     """
-    from aerosid.effects import catalogue_table, parse_effect_spec
+    from aerosid.modelling.effects import catalogue_table, parse_effect_spec
 
     from aerosid.simulation.hidden import hidden_table, parse_hidden_spec
 
@@ -113,7 +113,7 @@ def simulate(case_name, effects, hidden, seed, out_dir, duration, rate, no_fault
                                    "not --jsbsim")
         from aerosid.simulation.jsbsim_flight import JSBSimUnavailable, simulate_jsbsim
 
-        from aerosid.cli_progress import stage_progress
+        from aerosid.cli.progress import stage_progress
 
         table = _input_table(input_file, jsbsim=True)
         try:
@@ -152,7 +152,7 @@ def simulate(case_name, effects, hidden, seed, out_dir, duration, rate, no_fault
             case = replace(case, faults=case.faults.without_faults())
     except (KeyError, ValueError) as exc:
         raise click.BadParameter(str(exc.args[0] if exc.args else exc)) from exc
-    from aerosid.cli_progress import stage_progress
+    from aerosid.cli.progress import stage_progress
 
     with stage_progress("simulate") as progress:
         flight = run_simulation(case, parsed, seed=seed, progress=progress, hidden=parsed_hidden)
@@ -256,7 +256,7 @@ def run(telemetry, vehicle, out_dir, flight, windows, model_spec, mach_half_widt
     """
     _hermetic_defaults()
     from aerosid.preprocess import TelemetryError
-    from aerosid.vehicle import VehicleError
+    from aerosid.vehicles.vehicle import VehicleError
 
     params, min_segment_s = _preprocess_options(preprocess_settings, min_segment_s)
     pooled = len(telemetry) > 1
@@ -270,8 +270,8 @@ def run(telemetry, vehicle, out_dir, flight, windows, model_spec, mach_half_widt
             from flows.steps import check_flight_id
 
             check_flight_id(flight)
-        from aerosid.cli_prefect import PrefectServer
-        from aerosid.cli_progress import RunProgress, quiet_console_logs
+        from aerosid.cli.prefect_server import PrefectServer
+        from aerosid.cli.progress import RunProgress, quiet_console_logs
         from tasks.progress import listening
 
         with RunProgress("run") as progress:  # stages, segments, ETA (one line per stage when not a TTY)
@@ -321,13 +321,13 @@ def run(telemetry, vehicle, out_dir, flight, windows, model_spec, mach_half_widt
     if "coefficients" in summary:
         import pandas as pd
 
-        from aerosid.identify import format_table
+        from aerosid.identification.identify import format_table
 
         if pooled:
             click.echo(f"pooled {len(summary['flights'])} manoeuvres into one identification: {summary['status']}")
         click.echo(format_table(pd.read_parquet(summary["coefficients"]["path"]), per_degree=per_degree))
         click.echo(f"wrote {out_dir}/coefficients.parquet, report.html, diagnosis.json, run.json, ledger.jsonl")
-        from aerosid.cli_run_summary import run_outcome_lines
+        from aerosid.cli.run_summary import run_outcome_lines
 
         for line in run_outcome_lines(Path(out_dir), mach_half_width):
             click.echo(line)
@@ -398,10 +398,10 @@ def _preflight(telemetry: Path, vehicle: str | None, model_spec: str | None, pre
     import pyarrow.parquet as pq
 
     from aerosid.io import telemetry_vehicle
-    from aerosid.models import default_models, load_models
+    from aerosid.modelling.models import default_models, load_models
     from aerosid.plausibility.units import check_units
     from aerosid.preprocess import TelemetryError
-    from aerosid.vehicle import load_vehicle
+    from aerosid.vehicles.vehicle import load_vehicle
     from schemas.telemetry import CHANNELS, MEASURED_AIR_DATA_CHANNELS, RAW_COLUMNS, RawTelemetry, sentinel_mask
     from tasks.runner import read_validated
 
@@ -461,7 +461,7 @@ def _preflight(telemetry: Path, vehicle: str | None, model_spec: str | None, pre
         load_models(model_spec, base=default_models(veh), mach_reference=veh.mach_reference)
     if windows:  # windows too short to smooth are refused now, naming the limit (gaps are seen later)
         from aerosid.preprocess import DEFAULT_MIN_SEGMENT_S
-        from aerosid.segments import plan_segments
+        from aerosid.preprocess.segments import plan_segments
 
         min_seg = next(v for v in (min_segment_s, veh.min_segment_s, DEFAULT_MIN_SEGMENT_S) if v is not None)
         plan = plan_segments(frame["t_s"].to_numpy(), [], [tuple(w) for w in windows], float(min_seg))
@@ -492,16 +492,16 @@ def audit(file):
         raise click.ClickException(f"{file}: audit failed:\n  " + "\n  ".join(result.problems))
 
 
-from aerosid.cli_modelling import diagnose, fit, history  # noqa: E402  (the modelling-loop commands)
+from aerosid.cli.modelling import diagnose, fit, history  # noqa: E402  (the modelling-loop commands)
 
 main.add_command(diagnose)
 main.add_command(fit)
 main.add_command(history)
-from aerosid.cli_import import import_group  # noqa: E402  (aerosid import sidpac|csv)
+from aerosid.cli.import_ import import_group  # noqa: E402  (aerosid import sidpac|csv)
 main.add_command(import_group)
-from aerosid.cli_validate import validate  # noqa: E402  (aerosid validate: predict another manoeuvre)
+from aerosid.cli.validate import validate  # noqa: E402  (aerosid validate: predict another manoeuvre)
 main.add_command(validate)
-from aerosid.cli_design import design as _design  # noqa: E402
+from aerosid.cli.design import design as _design  # noqa: E402
 
 main.add_command(_design)
 

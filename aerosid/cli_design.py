@@ -40,8 +40,8 @@ def design(run_dir, effect, size, versus, out_dir, mach_half_width, no_refine, p
     `aerosid simulate ... --input DIR/input.parquet`.
     """
     from aerosid.design.core import DesignError, design as run_design, write_design
-    from aerosid.versions import VersionError
-    from aerosid.vehicle import VehicleError
+    from aerosid.modelling.versions import VersionError
+    from aerosid.vehicles.vehicle import VehicleError
 
     say = (lambda msg: None) if quiet else (lambda msg: click.echo(f"  .. {msg}", err=True))
     try:

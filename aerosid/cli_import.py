@@ -24,8 +24,8 @@ def import_group() -> None:
 
 
 def _import(read, out_dir: Path) -> None:
-    """read() -> the imported flight; written to out_dir, with a stage display (aerosid.cli_progress)."""
-    from aerosid.cli_progress import stage_progress
+    """read() -> the imported flight; written to out_dir, with a stage display (aerosid.cli.progress)."""
+    from aerosid.cli.progress import stage_progress
 
     with stage_progress("import") as progress:
         progress("read, convert and check", 0.0)
@@ -44,7 +44,7 @@ def _echo_written(imported, paths: dict, out_dir: Path) -> None:
 
 def _errors():
     from aerosid.preprocess import TelemetryError
-    from aerosid.vehicle import VehicleError
+    from aerosid.vehicles.vehicle import VehicleError
     from aerosid.vehicles.importers import ImportDataError
 
     return ImportDataError, TelemetryError, VehicleError

@@ -3,7 +3,7 @@
 They read a run folder written by ``aerosid run`` (RUN_DIR/flight_data.parquet,
 RUN_DIR/run.json) and keep the model versions under RUN_DIR/models/.  Register
 them with ``main.add_command(...)`` in aerosid/cli.py.  This module only parses
-and prints; the work is in aerosid.diagnosis and aerosid.versions.
+and prints; the work is in aerosid.diagnosis and aerosid.modelling.versions.
 """
 from __future__ import annotations
 
@@ -29,9 +29,9 @@ The modelling loop:
 
 
 def _errors():
-    from aerosid.models import ModelSpecError
-    from aerosid.vehicle import VehicleError
-    from aerosid.versions import VersionError
+    from aerosid.modelling.models import ModelSpecError
+    from aerosid.vehicles.vehicle import VehicleError
+    from aerosid.modelling.versions import VersionError
 
     return (ModelSpecError, VersionError, VehicleError)
 
@@ -86,11 +86,11 @@ def diagnose(run_dir, model_spec, version_id, n_windows, mach_half_width, quiet)
     recommendation only: add it, `aerosid fit`, and diagnose again.
     """
     _check_run_dir(run_dir)
-    from aerosid.cli_progress import StageProgress
+    from aerosid.cli.progress import StageProgress
     from aerosid.diagnosis import diagnose as run_diagnosis
     from aerosid.io import write_json_atomic
-    from aerosid.vehicle import load_vehicle
-    from aerosid.versions import history, latest_models, read_flight_data, run_vehicle, spec_for_run
+    from aerosid.vehicles.vehicle import load_vehicle
+    from aerosid.modelling.versions import history, latest_models, read_flight_data, run_vehicle, spec_for_run
 
     spec_warnings: list[str] = []
     progress = StageProgress("diagnose").__enter__()
@@ -123,7 +123,7 @@ def diagnose(run_dir, model_spec, version_id, n_windows, mach_half_width, quiet)
     doc = diag.to_json()
     doc["model"] = source
     out = write_json_atomic(doc, run_dir / "diagnosis.json")
-    from aerosid.modelling_loop import run_truth
+    from aerosid.modelling.loop import run_truth
     from aerosid.report import write_report
 
     with progress:
@@ -178,8 +178,8 @@ def fit(run_dir, model_spec, parent, note, mach_half_width, per_degree):
     functions sin cos tan arctan tanh exp log sqrt abs sign.
     """
     _check_run_dir(run_dir)
-    from aerosid.cli_progress import stage_progress
-    from aerosid.versions import fit_version, history, spec_for_run
+    from aerosid.cli.progress import stage_progress
+    from aerosid.modelling.versions import fit_version, history, spec_for_run
 
     try:
         with stage_progress("fit") as progress:
@@ -216,7 +216,7 @@ def fit(run_dir, model_spec, parent, note, mach_half_width, per_degree):
 
 def _diagnose_and_report(run_dir: Path, version: str, mach_half_width) -> None:
     """After a fit: diagnose the new version and write diagnosis.json and report.html for it."""
-    from aerosid.modelling_loop import diagnose_and_report
+    from aerosid.modelling.loop import diagnose_and_report
     from aerosid.report import write_report
 
     try:
@@ -283,7 +283,7 @@ def history(run_dir, csv_path):
     (R^2, PSE, held-out RMS and the rank in --csv).  Read-only.
     """
     _check_run_dir(run_dir)
-    from aerosid.versions import history as read_history
+    from aerosid.modelling.versions import history as read_history
 
     try:
         h = read_history(run_dir)

@@ -16,9 +16,9 @@ def _count(n: int) -> str:
 
 def regression_window_line(run_dir: Path, mach_half_width: float | None) -> str | None:
     """'regressed 7 633 of 60 001 samples, Mach 11.90–12.90 (|M − 12.4| ≤ 0.5)', as identify() selects them."""
-    from aerosid.identify import mach_window_mask
-    from aerosid.vehicle import load_vehicle
-    from aerosid.versions import run_vehicle
+    from aerosid.identification.identify import mach_window_mask
+    from aerosid.vehicles.vehicle import load_vehicle
+    from aerosid.modelling.versions import run_vehicle
 
     path = run_dir / "flight_data.parquet"
     if not path.is_file():
@@ -43,7 +43,7 @@ def first_sentence(text: str) -> str:
 def verdict_lines(run_dir: Path) -> list[str]:
     """The first line of diagnosis.json's message (the recommendation, or that nothing
     significant is missing) and, for a recommendation, the spec lines that add it."""
-    from aerosid.model_specs import paste_lines
+    from aerosid.modelling.model_specs import paste_lines
 
     path = run_dir / "diagnosis.json"
     if not path.is_file():

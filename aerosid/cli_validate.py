@@ -61,12 +61,12 @@ def validate(run_dir, other_telemetry, vehicle, out_dir, version_id, bias, axes,
     from aerosid.identification.identified import ModelSourceError
     from aerosid.identification.validate import validate as run_validation, write_validation
     from aerosid.preprocess import TelemetryError
-    from aerosid.vehicle import VehicleError
+    from aerosid.vehicles.vehicle import VehicleError
 
     if not run_dir.is_dir():
         raise click.ClickException(f"{run_dir}: no such run folder (make one with `aerosid run TELEMETRY --out "
                                    f"{run_dir}`)")
-    from aerosid.cli_progress import stage_progress
+    from aerosid.cli.progress import stage_progress
 
     try:
         with stage_progress("validate") as progress:

@@ -11,14 +11,14 @@ from dataclasses import dataclass
 import pandas as pd
 
 from aerosid.estimation.findings import Finding
-from aerosid.flight_data import build_flight_data_segments, build_pooled_flight_data, load_database
-from aerosid.identify import Identification, identify
-from aerosid.models import ChannelModel
+from aerosid.identification.flight_data import build_flight_data_segments, build_pooled_flight_data, load_database
+from aerosid.identification.identify import Identification, identify
+from aerosid.modelling.models import ChannelModel
 from aerosid.preprocess import (DEFAULT_MIN_SEGMENT_S, PreprocessParams, PreprocessResult, merge_settings,
                                 preprocess)
-from aerosid.segments import plan_segments
-from aerosid.smoothing import SmoothedSegmentResult, smooth_segment_frame
-from aerosid.vehicle import Vehicle
+from aerosid.preprocess.segments import plan_segments
+from aerosid.estimation.smoothing import SmoothedSegmentResult, smooth_segment_frame
+from aerosid.vehicles.vehicle import Vehicle
 
 
 @dataclass(frozen=True)

@@ -26,8 +26,8 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
-from aerosid.derivatives import zero_phase_low_pass
-from aerosid.inversion import total_angles
+from aerosid.identification.derivatives import zero_phase_low_pass
+from aerosid.identification.inversion import total_angles
 
 LAMBDAS = (0.5, 1.0, 1.5, 2.0)
 REPLICATES = 40  # Monte-Carlo noise of the correction: 10 left +-8 % scatter on seed-rlv C_m_alpha, 60 +-5 %

@@ -1,7 +1,7 @@
 """A small, safe expression language for model terms.
 
 Terms are written over the flight signals (``alpha``, ``q_hat``, ``mach``,
-``delta_p`` …, see ``aerosid.effects``) with numbers, ``+ - * / **``, unary
+``delta_p`` …, see ``aerosid.modelling.effects``) with numbers, ``+ - * / **``, unary
 minus, parentheses and a whitelist of element-wise functions.  An expression is
 parsed with Python's ``ast`` in ``eval`` mode and then *interpreted* node by node
 here: nothing is ever compiled or executed, so attribute access, subscripts,

@@ -18,8 +18,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from aerosid.atmosphere import AirData, air_data
-from aerosid.vehicle import Vehicle
+from aerosid.vehicles.atmosphere import AirData, air_data
+from aerosid.vehicles.vehicle import Vehicle
 
 
 @dataclass(frozen=True)
@@ -40,7 +40,7 @@ def flight_coefficients(vehicle: Vehicle, V_m_s, h_m, accel_cg_m_s2, ang_accel_h
                         accel_sigma=None, ang_sigma=None, air: AirData | None = None) -> FlightCoefficients:
     """accel_cg_m_s2: (N,3) X1, Y1, Z1; ang_accel_hat_rad_s2: (N,3) L_hat, M_hat, N_hat.
     Optional (N,3) sigmas of each give the coefficients' sigma.  ``air``: the air data
-    per sample (``aerosid.atmosphere.air_data``, e.g. with measured density); default
+    per sample (``aerosid.vehicles.atmosphere.air_data``, e.g. with measured density); default
     the US-1976 atmosphere at h_m."""
     air = air_data(V_m_s, h_m) if air is None else air
     qs = air.qbar_pa * vehicle.S_m2

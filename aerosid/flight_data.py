@@ -1,7 +1,7 @@
 """From a smoothed segment to the flight data the regression reads (method.md §7–§10):
 air data (the US-1976 atmosphere, or the measured ``rho_kg_m3``, ``qbar_pa``,
 ``p_static_pa``, ``T_total_K`` columns when the telemetry has them: see
-``aerosid.atmosphere.air_data`` and ``flight_air_data_sources``), flight coefficients,
+``aerosid.vehicles.atmosphere.air_data`` and ``flight_air_data_sources``), flight coefficients,
 control mixing, and alpha/beta, either inverted from the force database (the finned
 class) or read from air-data vanes (a vehicle file with ``[air_data] source = "vanes"``)."""
 from __future__ import annotations
@@ -9,16 +9,16 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-from aerosid.aerodb import AeroDatabase
-from aerosid.atmosphere import MEASURED, H_MAX_M, H_MIN_M, AirDataError, air_data, air_data_sources
-from aerosid.flight_coefficients import flight_coefficients
-from aerosid.derivatives import zero_phase_low_pass
+from aerosid.vehicles.aerodb import AeroDatabase
+from aerosid.vehicles.atmosphere import MEASURED, H_MAX_M, H_MIN_M, AirDataError, air_data, air_data_sources
+from aerosid.identification.flight_coefficients import flight_coefficients
+from aerosid.identification.derivatives import zero_phase_low_pass
 from aerosid.estimation.findings import DEPARTURE_MIN_S, DEPARTURE_SIGMA, Finding, dilate, span_findings
 from aerosid.identification.band import (accel_at_cg, band_limited_signals, band_noise_gain, bridge_spikes,
                                          finite_runs, low_pass_runs)
 from aerosid.identification.crb import R_COLUMNS
-from aerosid.inversion import invert_alpha_beta, total_angles
-from aerosid.vehicle import Vehicle
+from aerosid.identification.inversion import invert_alpha_beta, total_angles
+from aerosid.vehicles.vehicle import Vehicle
 
 FIN_COLUMNS = ("d1_rad", "d2_rad", "d3_rad", "d4_rad")
 #: The margin cut around a condemned span: one band period, at most this [s].
@@ -152,7 +152,7 @@ def build_flight_data(smoothed: pd.DataFrame, measured: pd.DataFrame, vehicle: V
             drop_rows = dilate(edge, margin)
     # errors in variables: the 1-sigma of the white noise whose band-limited part is in the
     # angles (vanes: the vehicle file's vane noise; inverted angles: the accelerometers' noise
-    # through the inversion's sensitivity), for the SIMEX correction of aerosid.eiv
+    # through the inversion's sensitivity), for the SIMEX correction of aerosid.identification.eiv
     eiv_a = eiv_b = np.full(len(V), vehicle.vane_noise_rad if vanes else 0.0)
     if not vanes and signals == "band":
         eiv_a, eiv_b = _inversion_noise(fc, delta_p, delta_y, vehicle, db, alpha, beta, bl.accel_noise_m_s2)

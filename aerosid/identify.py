@@ -12,13 +12,13 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 import pandas as pd
 
-from aerosid.aeromodel import AeroModel
-from aerosid.eiv import simex_estimates
+from aerosid.modelling.aeromodel import AeroModel
+from aerosid.identification.eiv import simex_estimates
 from aerosid.identification.crb import identification_bounds
-from aerosid.models import ChannelModel, default_models, signals_from_flight_data, vehicle_signals
+from aerosid.modelling.models import ChannelModel, default_models, signals_from_flight_data, vehicle_signals
 from aerosid.plausibility.estimates import preflight_departure
-from aerosid.regression import LinearFit, fit_linear, with_corrected_estimate
-from aerosid.vehicle import Vehicle
+from aerosid.identification.regression import LinearFit, fit_linear, with_corrected_estimate
+from aerosid.vehicles.vehicle import Vehicle
 
 #: Coefficients that are slopes per radian (the report prints them per degree); the rest are per unit term.
 ANGLE_TERMS = ("alpha", "beta", "alpha_r", "delta_p/2", "delta_y/2", "delta_r", "delta_p", "delta_y")
@@ -81,10 +81,10 @@ class Identification:
 def format_table(table: pd.DataFrame, per_degree: bool = False) -> str:
     """Seed Table 3 style text of a coefficients table: preflight vs estimate vs sigma
     (corrected and plain OLS) vs CRB vs F.  SI per radian for every coefficient (slopes and rate
-    derivatives alike); per_degree: per degree instead (aerosid.coefficient_units), and
+    derivatives alike); per_degree: per degree instead (aerosid.identification.coefficient_units), and
     the header says which.  CRB = Cramer-Rao bound on the std from the gyros' and
     accelerometers' noise (aerosid.identification.crb)."""
-    from aerosid.coefficient_units import per_degree_factor, unit_label, units_header
+    from aerosid.identification.coefficient_units import per_degree_factor, unit_label, units_header
 
     lines = [f"moments about the CG; {units_header(per_degree)}; CRB = Cramér-Rao bound on the std from the "
              "gyros' and accelerometers' noise (aerosid.identification.crb)",
@@ -120,7 +120,7 @@ def format_table(table: pd.DataFrame, per_degree: bool = False) -> str:
 def _eiv_sigma(fd: pd.DataFrame, vehicle: Vehicle):
     """(sigma_alpha, sigma_beta) [rad] of the white noise in the angles (per sample), or None
     when the angles are taken as exact: the flight data's eiv_sigma_* columns
-    (aerosid.flight_data), else the vehicle file's vane noise for vanes."""
+    (aerosid.identification.flight_data), else the vehicle file's vane noise for vanes."""
     if {"eiv_sigma_alpha_rad", "eiv_sigma_beta_rad"} <= set(fd.columns):
         sa, sb = (fd[c].to_numpy(float) for c in ("eiv_sigma_alpha_rad", "eiv_sigma_beta_rad"))
         if np.all(np.isfinite(sa)) and np.all(np.isfinite(sb)) and (sa.max() > 0 or sb.max() > 0):
@@ -139,7 +139,7 @@ IDENTITY_NOTE = ("not identifiable from this telemetry: alpha/beta are inverted 
 
 
 def _eiv_corrected(fd: pd.DataFrame, vehicle: Vehicle, models: dict, fits: dict, sigma) -> dict:
-    """The fits with their estimates corrected for the noise in alpha and beta (aerosid.eiv,
+    """The fits with their estimates corrected for the noise in alpha and beta (aerosid.identification.eiv,
     SIMEX); for inverted angles the force channels they come from are left as they are."""
     skip = INVERSION_CHANNELS if vehicle.air_data_source != "vanes" else ()
     ok = {ch: f for ch, f in fits.items()

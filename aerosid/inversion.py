@@ -25,8 +25,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import minimize_scalar
 
-from aerosid.aerodb import AeroDatabase
-from aerosid.vehicle import PreflightAero
+from aerosid.vehicles.aerodb import AeroDatabase
+from aerosid.vehicles.vehicle import PreflightAero
 
 
 @dataclass(frozen=True)

@@ -93,7 +93,7 @@ def telemetry_vehicle(path: str | Path) -> str | None:
     vehicle's mass and inertia would silently scale every coefficient).  Returns None
     when the file cannot be read at all: the preprocessing stage reports that, with
     the file's name."""
-    from aerosid.vehicle import builtin_vehicles
+    from aerosid.vehicles.vehicle import builtin_vehicles
 
     path = Path(path)
     try:

@@ -21,7 +21,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
-from aerosid.models import (CHANNELS, MAX_SPEC_BYTES, MAX_TERMS, ChannelModel, ModelSpecError, Term, default_models,
+from aerosid.modelling.models import (CHANNELS, MAX_SPEC_BYTES, MAX_TERMS, ChannelModel, ModelSpecError, Term, default_models,
                             parse_terms)
 
 #: The keys a channel table may have.
@@ -182,7 +182,7 @@ def apply_spec(doc: dict, base: dict | None, source: str = "<memory>", mach_refe
 
 def read_spec(path: str | Path, base: dict | None = None, mach_reference: float = 12.4) -> SpecResult:
     """Read a TOML spec file and apply it to `base` (None: the default models)."""
-    from aerosid.vehicle import read_toml_file
+    from aerosid.vehicles.vehicle import read_toml_file
 
     src = str(path)
     if not Path(path).exists():

@@ -11,10 +11,10 @@ from pathlib import Path
 
 from aerosid.diagnosis import diagnose
 from aerosid.io import write_json_atomic
-from aerosid.models import ChannelModel
+from aerosid.modelling.models import ChannelModel
 from aerosid.report import write_report
-from aerosid.vehicle import load_vehicle
-from aerosid.versions import fit_version, history, read_flight_data, run_default_models, run_vehicle
+from aerosid.vehicles.vehicle import load_vehicle
+from aerosid.modelling.versions import fit_version, history, read_flight_data, run_default_models, run_vehicle
 
 DIAGNOSIS_NAME = "diagnosis.json"
 

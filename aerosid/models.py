@@ -1,6 +1,6 @@
 """Model specifications: which terms each channel's linear model holds.
 
-A term is ``NAME = EXPRESSION`` (expression in ``aerosid.expressions`` over the
+A term is ``NAME = EXPRESSION`` (expression in ``aerosid.modelling.expressions`` over the
 signals below) or the bare name of a catalogue effect (``pitch_damping``), which
 brings its own coefficient name and term.  The defaults are method.md §11.
 
@@ -10,7 +10,7 @@ Spec files are TOML, one table per channel::
     terms = ["Cm_0 = 1", "Cm_alpha = alpha", "Cm_delta_p = delta_p/2", "pitch_damping"]
 
 or relative to the parent model, ``add = ["pitch_damping"]`` / ``remove = ["Cm_0"]``
-(aerosid.model_specs).
+(aerosid.modelling.model_specs).
 """
 from __future__ import annotations
 
@@ -20,9 +20,9 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from aerosid.derivatives import smooth_derivative
-from aerosid.effects import CATALOGUE
-from aerosid.expressions import ExpressionError, evaluate, parse, signal_names
+from aerosid.identification.derivatives import smooth_derivative
+from aerosid.modelling.effects import CATALOGUE
+from aerosid.modelling.expressions import ExpressionError, evaluate, parse, signal_names
 
 SIGNALS = ("alpha", "beta", "alpha_r", "phi_r", "mach", "V", "qbar", "delta_p", "delta_y", "delta_r",
            "p", "q", "r", "p_hat", "q_hat", "r_hat", "alpha_dot_hat", "beta_dot_hat", "t",
@@ -183,8 +183,8 @@ def load_models(path: str | Path, base: dict[str, ChannelModel] | None = None,
                 mach_reference: float = 12.4) -> dict[str, ChannelModel]:
     """Read a TOML spec; channels it does not mention keep `base` (default: the defaults).
     A channel table replaces (``terms``) or changes (``add``, ``remove``) base's model
-    (aerosid.model_specs, which also says what changed)."""
-    from aerosid.model_specs import read_spec
+    (aerosid.modelling.model_specs, which also says what changed)."""
+    from aerosid.modelling.model_specs import read_spec
 
     return read_spec(path, base, mach_reference).models
 

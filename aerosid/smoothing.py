@@ -16,7 +16,7 @@ from aerosid.estimation import EBMOptions, EBMResult
 from aerosid.estimation.adaptive import smooth_flight_adaptive
 from aerosid.estimation.findings import smoother_findings
 from aerosid.preprocess import usable_mask
-from aerosid.vehicle import Vehicle
+from aerosid.vehicles.vehicle import Vehicle
 from schemas.smoothed import RATE_DERIVATIVE_COLUMNS, STATE_COLUMNS
 
 IMU_CHANNELS = ("ax_m_s2", "ay_m_s2", "az_m_s2", "p_rad_s", "q_rad_s", "r_rad_s")

@@ -19,7 +19,7 @@ For one term j added to (or kept in) a model, the classical partial F
 With N ~ 8000 strongly autocorrelated samples that number is inflated roughly by
 ``N / N_eff`` (hundreds), so nearly every candidate would enter.  The
 *corrected* partial F is ``theta_j^2 / sigma_j^2`` with sigma from the
-coloured-residual covariance of :func:`aerosid.regression.fit_linear`
+coloured-residual covariance of :func:`aerosid.identification.regression.fit_linear`
 (Morelli-Klein by default), i.e. the Wald F(1, dof_eff) statistic.  Decisions
 use the corrected partial F by default (``criterion="corrected"``); both values
 are recorded in every step.  With ``cov="ols"`` the two coincide.
@@ -42,7 +42,7 @@ from typing import Any, Sequence
 import numpy as np
 import pandas as pd
 
-from aerosid.regression import LinearFit, fit_linear
+from aerosid.identification.regression import LinearFit, fit_linear
 
 __all__ = ["Step", "StepwiseResult", "stepwise", "pse_search"]
 

@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from aerosid.plausibility.envelope import Plausibility, plausibility_for
-from aerosid.rigid_body import InertiaConstants, inertia_constants
+from aerosid.vehicles.rigid_body import InertiaConstants, inertia_constants
 from aerosid.vehicles.keys import MAX_DATABASE_BYTES, MAX_VEHICLE_FILE_BYTES, VehicleKeyError, check_document
 
 DATA_DIR = Path(__file__).parent / "data"
@@ -288,13 +288,13 @@ def load_vehicle(name_or_path: str | Path = "seed-rlv") -> Vehicle:
         raise VehicleError(src, "controls.surfaces", "needs 4 names, one per column d1..d4")
     terms = doc.get("models")
     if terms is not None:
-        from aerosid.models import CHANNELS as MODEL_CHANNELS
+        from aerosid.modelling.models import CHANNELS as MODEL_CHANNELS
 
         bad = [k for k in terms if k not in MODEL_CHANNELS or not isinstance(terms[k], list)]
         if bad:
             raise VehicleError(src, "models", f"channels {bad}: each entry must be a channel "
                                f"({', '.join(MODEL_CHANNELS)}) with a list of terms")
-        from aerosid.models import ModelSpecError, parse_terms
+        from aerosid.modelling.models import ModelSpecError, parse_terms
 
         for ch, items in terms.items():
             try:

@@ -2,7 +2,7 @@
 
 Layout under ``RUN_DIR/models/``::
 
-    v001/spec.toml            the model specification (aerosid.models TOML)
+    v001/spec.toml            the model specification (aerosid.modelling.models TOML)
     v001/metrics.json         per channel: residual RMS, R^2, PSE, F, coefficients with sigma
     v001/coefficients.parquet the coefficients table (as RUN_DIR/coefficients.parquet)
     v001/parent               id of the parent version (empty for the root)
@@ -26,9 +26,9 @@ from pathlib import Path
 
 import pandas as pd
 
-from aerosid.identify import identify
+from aerosid.identification.identify import identify
 from aerosid.io import write_json_atomic, write_parquet_atomic, write_text_atomic
-from aerosid.models import CHANNELS, ChannelModel, ModelSpecError, default_models, load_models, models_to_toml
+from aerosid.modelling.models import CHANNELS, ChannelModel, ModelSpecError, default_models, load_models, models_to_toml
 
 __all__ = ["ModelVersion", "VersionHistory", "fit_version", "history", "load_version", "latest_models",
            "read_flight_data", "run_vehicle", "models_from_spec", "spec_for_run", "MODELS_DIR", "VersionError"]
@@ -215,7 +215,7 @@ def _heldout_backfill(run_dir: Path, v: ModelVersion) -> dict:
     if key not in _HELDOUT_CACHE:
         try:
             from aerosid.diagnosis.heldout import heldout_rms
-            from aerosid.vehicle import load_vehicle
+            from aerosid.vehicles.vehicle import load_vehicle
 
             _HELDOUT_CACHE[key] = heldout_rms(read_flight_data(run_dir), load_vehicle(run_vehicle(run_dir)), v.models,
                                               v.metrics.get("mach_half_width", 0.5))
@@ -277,7 +277,7 @@ def run_vehicle(run_dir: str | Path) -> str:
 
 def run_default_models(run_dir: str | Path) -> dict[str, ChannelModel]:
     """The default models of the run's vehicle (its [models] table, else method.md §11)."""
-    from aerosid.vehicle import load_vehicle
+    from aerosid.vehicles.vehicle import load_vehicle
 
     # a run whose vehicle file cannot be read fails here, naming the file: falling back to
     # another vehicle's models would fit the wrong terms under the name "default models"
@@ -353,7 +353,7 @@ def _metrics(ident, vehicle: str, note: str, parent: str | None, version: str, m
 
 def _write_version(run_dir: Path, fd: pd.DataFrame, vehicle_name: str, models: dict, parent: str | None, note: str,
                    mach_half_width) -> ModelVersion:
-    from aerosid.vehicle import load_vehicle
+    from aerosid.vehicles.vehicle import load_vehicle
 
     veh = load_vehicle(vehicle_name)
     ident = identify(fd, veh, models, mach_half_width)  # fit before claiming an id: a failed fit leaves nothing
@@ -411,10 +411,10 @@ def models_from_spec(spec: str | Path, run_dir: str | Path, parent: str | None =
 
 def spec_for_run(spec: str | Path, run_dir: str | Path, parent: str | None = None):
     """A spec file applied to the run's parent version (`parent`, else the latest, else the
-    defaults): an aerosid.model_specs.SpecResult (the models and what changed, with a
+    defaults): an aerosid.modelling.model_specs.SpecResult (the models and what changed, with a
     warning for every term a ``terms = [...]`` replacement dropped)."""
-    from aerosid.model_specs import read_spec
-    from aerosid.vehicle import load_vehicle
+    from aerosid.modelling.model_specs import read_spec
+    from aerosid.vehicles.vehicle import load_vehicle
 
     h = history(run_dir)
     base = h.get(parent).models if parent else (h.latest.models if h.latest else run_default_models(run_dir))

@@ -37,7 +37,7 @@ def one_rlv(job: tuple) -> dict:
     from aerosid.design.io import as_case_inputs, read_input
     from aerosid.diagnosis import diagnose
     from aerosid.ebm import process_telemetry
-    from aerosid.effects import CATALOGUE
+    from aerosid.modelling.effects import CATALOGUE
     from aerosid.simulation import load_case, simulate
 
     design_dir, effect, scale, seed = job
@@ -77,7 +77,7 @@ def one_c172x(job: tuple) -> dict:
     from aerosid.design.io import read_input
     from aerosid.ebm import process_telemetry
     from aerosid.simulation.jsbsim_flight import simulate_jsbsim
-    from aerosid.vehicle import load_vehicle
+    from aerosid.vehicles.vehicle import load_vehicle
 
     design_dir, seed = job
     t0 = time.perf_counter()

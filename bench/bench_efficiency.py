@@ -95,7 +95,7 @@ def simulate_variant(vehicle_name: str, seed: int, workdir: Path, variant: str):
     import copy
 
     import aerosid.simulation.jsbsim_flight as jf
-    from aerosid.vehicle import load_vehicle
+    from aerosid.vehicles.vehicle import load_vehicle
 
     original = jf.load_jsbsim_config
 
@@ -118,7 +118,7 @@ def simulate_variant(vehicle_name: str, seed: int, workdir: Path, variant: str):
 def gyro_bounds(run, vehicle) -> dict:
     """crb_std from the gyros alone (the accelerometers' lever-arm information left out)."""
     from aerosid.identification.crb import identification_bounds
-    from aerosid.identify import mach_window_mask
+    from aerosid.identification.identify import mach_window_mask
 
     ident = run.identification
     fd = run.flight_data.sort_values(["flight", "t_s"], kind="stable").reset_index(drop=True)
@@ -134,8 +134,8 @@ def estimator_noise_std(run, vehicle, replicates: int = 200, seed: int = 0) -> d
     run's own design matrices.  The equation-error estimator's own loss against the bound."""
     from aerosid.identification.band import low_pass_runs
     from aerosid.identification.crb import R_COLUMNS, rate_coupling_matrix, runs_of
-    from aerosid.identify import mach_window_mask
-    from aerosid.models import vehicle_signals
+    from aerosid.identification.identify import mach_window_mask
+    from aerosid.modelling.models import vehicle_signals
 
     ident = run.identification
     fd = run.flight_data.sort_values(["flight", "t_s"], kind="stable").reset_index(drop=True)

@@ -78,7 +78,7 @@ def default_vehicles() -> list[str]:
 
 def simulate(vehicle: str, seed: int, workdir: Path):
     """(flight, Vehicle) as a user would have them."""
-    from aerosid.vehicle import load_vehicle
+    from aerosid.vehicles.vehicle import load_vehicle
 
     if vehicle == "seed-rlv":
         from aerosid.simulation import load_case, simulate as sim
@@ -125,7 +125,7 @@ def estimate_of(ident, name: str) -> tuple[float, float]:
 def oracle(flight, vehicle) -> dict[str, float]:
     """The vehicle's default models fitted to the noise-free truth (what the sensors see:
     aerodynamic + propulsive coefficients) with the true regressors (aircraft only)."""
-    from aerosid.models import default_models
+    from aerosid.modelling.models import default_models
 
     T = flight.truth
     if vehicle.vehicle_class != "aircraft" or "q_hat" not in T:

@@ -56,7 +56,7 @@ def oracle(flight) -> dict[str, float]:
 def one(seed: int) -> dict:
     from aerosid.ebm import process_telemetry
     from aerosid.simulation.jsbsim_flight import simulate_jsbsim
-    from aerosid.vehicle import load_vehicle
+    from aerosid.vehicles.vehicle import load_vehicle
 
     flight = simulate_jsbsim("c172x", "3211", seed=seed)
     truth = {k: flight.coefficients[TRUTH_NAME.get(k, k)] for k in (*BARS, *OTHER)}

@@ -87,9 +87,9 @@ def analyse(name: str, seed: int, cache: str) -> dict:
 
     from aerosid.diagnosis import diagnose
     from aerosid.diagnosis.synthetic import NO_NOISE, flight_data_from_truth
-    from aerosid.identify import identify, mach_window_mask
-    from aerosid.models import default_models, parse_term, signals_from_flight_data
-    from aerosid.vehicle import load_vehicle
+    from aerosid.identification.identify import identify, mach_window_mask
+    from aerosid.modelling.models import default_models, parse_term, signals_from_flight_data
+    from aerosid.vehicles.vehicle import load_vehicle
 
     d_in = Path(cache) / f"{name}_s{seed}"
     fd = pd.read_parquet(d_in / "flight_data.parquet")

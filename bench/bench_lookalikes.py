@@ -43,7 +43,7 @@ def _flight(name: str, seed: int, cache: str | None):
     `cache` (files {name}_{seed}_fd.parquet / _truth.parquet written by an earlier run of this
     bench with the same code: the estimation chain is deterministic given the seed)."""
     from aerosid.ebm import estimate_flight_data
-    from aerosid.effects import CATALOGUE
+    from aerosid.modelling.effects import CATALOGUE
     from aerosid.simulation import load_case, simulate
 
     if cache:
@@ -67,10 +67,10 @@ def _flight(name: str, seed: int, cache: str | None):
 def one(job: tuple) -> dict:
     from aerosid.diagnosis import diagnose
     from aerosid.diagnosis.floor import excess
-    from aerosid.effects import CATALOGUE
+    from aerosid.modelling.effects import CATALOGUE
     from aerosid.identification.band import low_pass_runs
-    from aerosid.identify import identify, mach_window_mask
-    from aerosid.models import default_models, parse_term
+    from aerosid.identification.identify import identify, mach_window_mask
+    from aerosid.modelling.models import default_models, parse_term
     from aerosid.simulation import load_case
 
     name, seed, cache = job

@@ -43,11 +43,11 @@ def _rms(x) -> float:
 
 def one(job: tuple[str, float, int, float]) -> dict:
     from aerosid.diagnosis import diagnose
-    from aerosid.effects import CATALOGUE
+    from aerosid.modelling.effects import CATALOGUE
     from aerosid.ebm import process_telemetry
-    from aerosid.identify import identify, mach_window_mask
+    from aerosid.identification.identify import identify, mach_window_mask
     from aerosid.diagnosis.synthetic import NO_NOISE, flight_data_from_truth
-    from aerosid.models import default_models, parse_term, signals_from_flight_data
+    from aerosid.modelling.models import default_models, parse_term, signals_from_flight_data
     from aerosid.simulation import load_case, simulate
 
     name, scale, seed, noise = job
@@ -80,7 +80,7 @@ def one(job: tuple[str, float, int, float]) -> dict:
     ch = eff.channel
     true_c = truth[ch].to_numpy(float)
     measured = window[ch].to_numpy(float)
-    from aerosid.aeromodel import flight_signals
+    from aerosid.modelling.aeromodel import flight_signals
     sig = flight_signals(truth["alpha_r_rad"], truth["phi_r_rad"], truth["mach"], truth["delta_p_rad"],
                          truth["delta_y_rad"], truth["delta_r_rad"], truth["p_rad_s"], truth["q_rad_s"],
                          truth["r_rad_s"], truth["V_m_s"], truth["qbar_pa"], vehicle.d_m)
@@ -176,7 +176,7 @@ def main() -> None:
                     help="multiply every sensor's noise sigma (1 = seed Table 2); the results get a suffix")
     ap.add_argument("--out", default=str(Path(__file__).parent / "results"))
     args = ap.parse_args()
-    from aerosid.effects import CATALOGUE
+    from aerosid.modelling.effects import CATALOGUE
 
     seeds = _seeds(args.seeds)
     names = list(CATALOGUE) if args.effects == "all" else args.effects.split(",")

@@ -97,8 +97,8 @@ def reference(data: Path, veh) -> list[tuple]:
     from aerosid.identification.identified import IdentifiedModel
     from aerosid.identification.output_prediction import predict_axis, prediction_inputs
     from aerosid.identification.validate import fit_metric
-    from aerosid.inversion import total_angles
-    from aerosid.models import default_models
+    from aerosid.identification.inversion import total_angles
+    from aerosid.modelling.models import default_models
 
     p = sio.loadmat(data / "sidpac_results_018.mat", squeeze_me=True)["p"]
     vals = {"CN_0": -p[2], "CN_alpha": -p[0], "CN_delta_p": -p[1], "Cm_0": p[6], "Cm_alpha": p[3], "Cm_q": p[4],
@@ -137,9 +137,9 @@ def main() -> None:
 def run_bench(args, work: Path, t0: float) -> str:
     from aerosid.ebm import process_telemetry
     from aerosid.identification.validate import validate
-    from aerosid.identify import format_table
+    from aerosid.identification.identify import format_table
     from aerosid.io import write_json_atomic, write_parquet_atomic
-    from aerosid.vehicle import load_vehicle
+    from aerosid.vehicles.vehicle import load_vehicle
 
     c18, t18 = load(args.data, "lon_020213f1_018")
     (work / "twin-otter.toml").write_text(vehicle_toml(c18))

@@ -43,7 +43,7 @@ def pooled_vehicle(telemetry_files: list[str], vehicle: str | None = None) -> st
     content of their vehicle files) are refused."""
     if vehicle:
         return vehicle
-    from aerosid.vehicle import resolve_vehicle_path
+    from aerosid.vehicles.vehicle import resolve_vehicle_path
 
     # an unreadable file names nothing (None): its preprocessing reports it
     named = {str(t): v for t in telemetry_files if (v := telemetry_vehicle(t)) is not None}

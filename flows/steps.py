@@ -100,7 +100,7 @@ class FlightJob:
         """The preprocessing parameters (the vehicle file's [preprocess] table with this
         job's own on top) and the minimum segment length [s]."""
         from aerosid.preprocess import DEFAULT_MIN_SEGMENT_S, merge_settings
-        from aerosid.vehicle import load_vehicle
+        from aerosid.vehicles.vehicle import load_vehicle
 
         if self.vehicle is None:  # an unreadable telemetry file names none: its preprocessing reports it
             return dict(self.preprocess_params or {}), float(self.min_segment_s or DEFAULT_MIN_SEGMENT_S)

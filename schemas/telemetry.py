@@ -48,7 +48,7 @@ CHANNELS: tuple[str, ...] = RAW_COLUMNS[1:]
 VANE_CHANNELS: tuple[str, ...] = ("alpha_vane_rad", "beta_vane_rad")
 #: Optional measured air data (issue 17): density, dynamic pressure, static pressure and
 #: total temperature.  When present they replace the US-1976 atmosphere in the flight
-#: coefficients (``aerosid.atmosphere.air_data``; the run records the source of each
+#: coefficients (``aerosid.vehicles.atmosphere.air_data``; the run records the source of each
 #: quantity).
 MEASURED_AIR_DATA_CHANNELS: tuple[str, ...] = ("rho_kg_m3", "qbar_pa", "p_static_pa", "T_total_K")
 #: Every optional air-data channel: cleaned like the others when a telemetry file

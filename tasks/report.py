@@ -7,10 +7,10 @@ from pathlib import Path
 
 from prefect import task
 
-from aerosid.models import load_models
-from aerosid.vehicle import load_vehicle
-from aerosid.versions import run_default_models, run_vehicle
-from aerosid.modelling_loop import refresh
+from aerosid.modelling.models import load_models
+from aerosid.vehicles.vehicle import load_vehicle
+from aerosid.modelling.versions import run_default_models, run_vehicle
+from aerosid.modelling.loop import refresh
 from aerosid.provenance import sha256_file
 from tasks import ledger, progress
 from tasks.runner import StageContext, base_record

@@ -13,14 +13,14 @@ from pathlib import Path
 import pandas as pd
 from prefect import task
 
-from aerosid.flight_data import (build_flight_data_segments, build_pooled_flight_data, flight_air_data_sources,
+from aerosid.identification.flight_data import (build_flight_data_segments, build_pooled_flight_data, flight_air_data_sources,
                                  load_database)
-from aerosid.identify import identify
-from aerosid.models import default_models, load_models
+from aerosid.identification.identify import identify
+from aerosid.modelling.models import default_models, load_models
 from aerosid.preprocess import PreprocessParams, preprocess
-from aerosid.segments import plan_segments
-from aerosid.smoothing import smooth_segment_frame
-from aerosid.vehicle import load_vehicle
+from aerosid.preprocess.segments import plan_segments
+from aerosid.estimation.smoothing import smooth_segment_frame
+from aerosid.vehicles.vehicle import load_vehicle
 from schemas.coefficients import Coefficients
 from schemas.flight_data import FlightData
 from schemas.smoothed import SmoothedSegment
@@ -139,7 +139,7 @@ def stored_findings(path: str) -> list:
 @task(name="pooled-flight-data", **IO_RETRIES)
 def pooled_flight_data_task(flights: list[dict], run_dir: str, ctx: StageContext, vehicle: str) -> dict:
     """Flight data of several manoeuvres in one file: ``flights`` holds per manoeuvre
-    ``{"flight", "preprocessed", "smoothed": [paths]}`` (aerosid.flight_data.build_pooled_flight_data)."""
+    ``{"flight", "preprocessed", "smoothed": [paths]}`` (aerosid.identification.flight_data.build_pooled_flight_data)."""
     out = Path(run_dir) / "flight_data.parquet"
     inputs = [p for f in flights for p in (f["preprocessed"], *f["smoothed"])]
 

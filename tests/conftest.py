@@ -43,6 +43,6 @@ def prefect_harness(tmp_path_factory):
 def reference_run(reference_flight):
     """The whole method in memory on the reference flight (seed 0)."""
     from aerosid.ebm import process_telemetry
-    from aerosid.vehicle import load_vehicle
+    from aerosid.vehicles.vehicle import load_vehicle
 
     return process_telemetry(reference_flight.telemetry, load_vehicle("seed-rlv"), flight="reference")

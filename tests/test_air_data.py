@@ -8,11 +8,11 @@ import pandas as pd
 import pytest
 from ambiance import Atmosphere
 
-from aerosid.atmosphere import (CP_AIR_J_KG_K, GAMMA_AIR, US1976, AirDataError, air_data, air_data_sources,
+from aerosid.vehicles.atmosphere import (CP_AIR_J_KG_K, GAMMA_AIR, US1976, AirDataError, air_data, air_data_sources,
                                 density_kg_m3)
-from aerosid.flight_data import build_flight_data_segments, flight_air_data_sources, load_database
+from aerosid.identification.flight_data import build_flight_data_segments, flight_air_data_sources, load_database
 from aerosid.preprocess import preprocess
-from aerosid.vehicle import load_vehicle
+from aerosid.vehicles.vehicle import load_vehicle
 from schemas.telemetry import MEASURED_AIR_DATA_CHANNELS, UNITS, PreprocessedTelemetry, RawTelemetry, validate
 
 H = np.array([0.0, 2196.0, 11000.0, 30000.0, 60000.0])

@@ -9,11 +9,11 @@ from aerosid.identification.band import low_pass_runs
 import pandas as pd
 import pytest
 
-from aerosid.flight_coefficients import flight_coefficients
-from aerosid.flight_data import build_flight_data, load_database
-from aerosid.models import default_models, signals_from_flight_data, vehicle_signals
+from aerosid.identification.flight_coefficients import flight_coefficients
+from aerosid.identification.flight_data import build_flight_data, load_database
+from aerosid.modelling.models import default_models, signals_from_flight_data, vehicle_signals
 from aerosid.preprocess import preprocess
-from aerosid.vehicle import VehicleError, load_vehicle
+from aerosid.vehicles.vehicle import VehicleError, load_vehicle
 
 AIRCRAFT = """
 name = "test-aircraft"

@@ -312,8 +312,8 @@ def test_24_constant_signal_is_not_identifiable_rather_than_a_number(flight):
     """A regressor with no excitation (a fin held still): the coefficient is reported
     'not identifiable', its estimate NaN, never a number; the others are still fitted."""
     from aerosid.ebm import process_telemetry
-    from aerosid.identify import format_table, identify
-    from aerosid.vehicle import load_vehicle
+    from aerosid.identification.identify import format_table, identify
+    from aerosid.vehicles.vehicle import load_vehicle
 
     veh = load_vehicle("seed-rlv")
     run = process_telemetry(flight[1], veh, flight="f1")
@@ -333,10 +333,10 @@ def test_24_constant_signal_is_not_identifiable_rather_than_a_number(flight):
 
 # --------------------------------------------------------------------------- 25 Mach outside the database
 def test_25_mach_outside_the_database_is_refused_naming_the_samples(flight):
-    from aerosid.aerodb import AeroDatabase
-    from aerosid.flight_data import build_flight_data
-    from aerosid.smoothing import smooth_segment_frame
-    from aerosid.vehicle import load_vehicle
+    from aerosid.vehicles.aerodb import AeroDatabase
+    from aerosid.identification.flight_data import build_flight_data
+    from aerosid.estimation.smoothing import smooth_segment_frame
+    from aerosid.vehicles.vehicle import load_vehicle
 
     veh = load_vehicle("seed-rlv")
     db = AeroDatabase.load(veh.database_path)

@@ -17,9 +17,9 @@ from click.testing import CliRunner
 
 from aerosid.cli import main
 from aerosid.diagnosis.synthetic import MEASURED_NOISE, flight_data_from_truth
-from aerosid.identify import format_table, identify
-from aerosid.models import ModelSpecError, load_models
-from aerosid.vehicle import load_vehicle
+from aerosid.identification.identify import format_table, identify
+from aerosid.modelling.models import ModelSpecError, load_models
+from aerosid.vehicles.vehicle import load_vehicle
 from tests.test_bad_input import flight, run_fails, run_fails_fast, vehicle_file, write  # noqa: F401 (fixture)
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -161,7 +161,7 @@ def test_u10_a_term_never_finite_names_the_term_and_the_reason(run_dir, tmp_path
 
 
 def test_u10_a_term_over_a_signal_without_a_finite_value_names_term_and_signal(synthetic_fd):
-    from aerosid.models import ChannelModel, parse_term, vehicle_signals
+    from aerosid.modelling.models import ChannelModel, parse_term, vehicle_signals
 
     veh = load_vehicle("seed-rlv")
     signals = vehicle_signals(synthetic_fd, veh)
@@ -251,12 +251,12 @@ def test_u13_no_segment_names_the_reason(flight, tmp_path):
 
 # --------------------------------------------------------------------------- U14 no traceback from any command
 def test_u14_an_unexpected_error_in_any_command_is_one_line(run_dir, monkeypatch):
-    import aerosid.versions
+    import aerosid.modelling.versions
 
     def broken(*args, **kwargs):
         raise KeyError("something nobody expected")
 
-    monkeypatch.setattr(aerosid.versions, "history", broken)
+    monkeypatch.setattr(aerosid.modelling.versions, "history", broken)
     text = clean_failure(cli("history", str(run_dir)), "Error: KeyError: 'something nobody expected'",
                          "AEROSID_TRACEBACK=1")
     assert len(text.strip().splitlines()) == 1
@@ -346,7 +346,7 @@ def test_u15b_a_running_prefect_server_is_reused_only_if_it_answers_with_this_ve
 
     import prefect
 
-    from aerosid.cli_prefect import running_server
+    from aerosid.cli.prefect_server import running_server
 
     version = {"v": prefect.__version__}
 

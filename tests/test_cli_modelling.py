@@ -18,15 +18,15 @@ import pandas as pd
 import pytest
 from click.testing import CliRunner
 
-from aerosid.cli_modelling import fit as fit_cmd
+from aerosid.cli.modelling import fit as fit_cmd
 from aerosid.diagnosis import default_candidates
 from aerosid.diagnosis.synthetic import MEASURED_NOISE, flight_data_from_truth
-from aerosid.effects import CATALOGUE
-from aerosid.identify import format_table
-from aerosid.model_specs import apply_spec, paste_lines, read_spec
-from aerosid.models import (ModelSpecError, default_models, load_models, models_to_toml, parse_term,
+from aerosid.modelling.effects import CATALOGUE
+from aerosid.identification.identify import format_table
+from aerosid.modelling.model_specs import apply_spec, paste_lines, read_spec
+from aerosid.modelling.models import (ModelSpecError, default_models, load_models, models_to_toml, parse_term,
                             signals_from_flight_data)
-from aerosid.versions import fit_version, history, models_from_spec
+from aerosid.modelling.versions import fit_version, history, models_from_spec
 
 MACH = ["--mach-half-width", "1.0"]  # the 20 s flight spans Mach 12.75..13.1
 
@@ -189,7 +189,7 @@ def test_every_candidate_fits_as_a_new_version(run_dir, tmp_path):
 
 def test_the_diagnosis_message_ends_with_the_lines_to_paste(flight_data):
     from aerosid.diagnosis import diagnose
-    from aerosid.vehicle import load_vehicle
+    from aerosid.vehicles.vehicle import load_vehicle
 
     d = diagnose(flight_data, load_vehicle("seed-rlv"), mach_half_width=1.0)
     # the look-alikes are compared first (aerosid.diagnosis.lookalikes); the message still ends
@@ -202,7 +202,7 @@ def test_the_diagnosis_message_ends_with_the_lines_to_paste(flight_data):
 
 # --------------------------------------------------------------------------- units
 def test_per_degree_converts_by_pi_over_180_per_power_of_angle(run_dir, tmp_path):
-    from aerosid.coefficient_units import angle_power, per_degree_factor
+    from aerosid.identification.coefficient_units import angle_power, per_degree_factor
 
     assert per_degree_factor("alpha") == math.pi / 180
     assert per_degree_factor("q_hat") == math.pi / 180  # damping like slopes
@@ -236,7 +236,7 @@ def test_per_degree_converts_by_pi_over_180_per_power_of_angle(run_dir, tmp_path
 
 # --------------------------------------------------------------------------- what `aerosid run` says
 def test_run_ends_with_the_samples_and_mach_window_and_the_verdict(run_dir, flight_data):
-    from aerosid.cli_run_summary import run_outcome_lines
+    from aerosid.cli.run_summary import run_outcome_lines
 
     mach = flight_data["mach"].to_numpy()
     inside = np.abs(mach - 12.4) <= 0.5
@@ -262,7 +262,7 @@ def test_run_ends_with_the_samples_and_mach_window_and_the_verdict(run_dir, flig
 
 # --------------------------------------------------------------------------- progress
 def test_progress_without_a_terminal_writes_one_line_per_stage():
-    from aerosid.cli_progress import RunProgress, StageProgress
+    from aerosid.cli.progress import RunProgress, StageProgress
 
     stream = io.StringIO()
     with StageProgress("simulate", stream=stream) as progress:
@@ -335,7 +335,7 @@ def test_the_readme_specs_apply_to_the_version_after_control_alpha():
 
 
 def test_diagnose_with_a_replacing_spec_names_the_dropped_terms(run_dir, tmp_path):
-    from aerosid.cli_modelling import diagnose as diagnose_cmd
+    from aerosid.cli.modelling import diagnose as diagnose_cmd
 
     spec = _spec(tmp_path, '[Cl]\nterms = ["Cl_0 = 1", "Cl_delta_r = delta_r"]\n')
     result = CliRunner().invoke(diagnose_cmd, [str(run_dir), "--model", str(spec), "--quiet", *MACH])

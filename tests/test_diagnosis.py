@@ -23,12 +23,12 @@ from aerosid.diagnosis import (MIN_WINDOW_CONSISTENCY, P_MAX, Candidate, default
                                smooth_derivative)
 from aerosid.diagnosis.core import _whiteness
 from aerosid.diagnosis.synthetic import MEASURED_NOISE, NO_NOISE, flight_data_from_truth
-from aerosid.aeromodel import flight_signals
-from aerosid.effects import CATALOGUE, Effect
-from aerosid.identify import identify
-from aerosid.models import ChannelModel, default_models, parse_term, signals_from_flight_data
+from aerosid.modelling.aeromodel import flight_signals
+from aerosid.modelling.effects import CATALOGUE, Effect
+from aerosid.identification.identify import identify
+from aerosid.modelling.models import ChannelModel, default_models, parse_term, signals_from_flight_data
 from aerosid.simulation import load_case, simulate
-from aerosid.vehicle import load_vehicle
+from aerosid.vehicles.vehicle import load_vehicle
 
 #: The logic tests run at a quarter of the real pipeline's errors on seed-rlv (the SNR of a quieter
 #: flight or a longer window), so that every catalogue effect sits clearly above the floor; what the

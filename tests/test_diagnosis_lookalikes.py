@@ -19,9 +19,9 @@ from aerosid.diagnosis.floor import channel_floor, excess
 from aerosid.diagnosis.heldout import heldout_rms
 from aerosid.diagnosis.lookalikes import DELTA_MIN, compare, separating_manoeuvre
 from aerosid.diagnosis.synthetic import MEASURED_NOISE, flight_data_from_truth
-from aerosid.effects import CATALOGUE
-from aerosid.models import default_models, parse_term
-from aerosid.vehicle import load_vehicle
+from aerosid.modelling.effects import CATALOGUE
+from aerosid.modelling.models import default_models, parse_term
+from aerosid.vehicles.vehicle import load_vehicle
 
 NOISE = MEASURED_NOISE.scaled(0.25)
 WRONG = {"control_alpha": "alpha_nonlinearity", "alpha_nonlinearity": "control_alpha"}
@@ -87,7 +87,7 @@ def test_compare_separates_lookalikes_when_the_noise_allows_and_picks_the_true_t
     assert a.estimate == pytest.approx(0.5, abs=0.02)  # the true coefficient
     assert abs(a.t_joint) > 3 and abs(b.t_joint) < 3
     # the shift each forces on the base coefficients, in units of their sigma in the base fit
-    from aerosid.regression import fit_linear
+    from aerosid.identification.regression import fit_linear
 
     fb = fit_linear(y, base, names=["c0", "c1"], channel="Cm")
     fa = fit_linear(y, np.column_stack([base, x1]), names=["c0", "c1", "a"], channel="Cm")
@@ -197,7 +197,7 @@ def test_heldout_error_prefers_the_true_term_over_its_lookalike(data, vehicle):
 
 
 def test_history_ranks_versions_by_heldout_error(tmp_path, data, vehicle):
-    from aerosid.versions import fit_version, history
+    from aerosid.modelling.versions import fit_version, history
 
     run = tmp_path / "run"
     run.mkdir()

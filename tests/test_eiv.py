@@ -1,4 +1,4 @@
-"""SIMEX correction for vane noise (aerosid.eiv): a known slope attenuated by noise in its
+"""SIMEX correction for vane noise (aerosid.identification.eiv): a known slope attenuated by noise in its
 regressor is recovered; without noise the correction changes nothing."""
 from __future__ import annotations
 
@@ -6,7 +6,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from aerosid.eiv import filtered_noise, simex_estimates
+from aerosid.identification.eiv import filtered_noise, simex_estimates
 
 
 def _frame(alpha: np.ndarray, t: np.ndarray) -> pd.DataFrame:

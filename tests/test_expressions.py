@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from aerosid.expressions import ExpressionError, evaluate
+from aerosid.modelling.expressions import ExpressionError, evaluate
 
 SIG = {"alpha": np.array([0.1, -0.2]), "mach": np.array([12.0, 13.0]), "q_hat": np.array([1e-5, 2e-5])}
 

@@ -12,7 +12,7 @@ from click.testing import CliRunner
 
 from aerosid.ebm import process_telemetry
 from aerosid.simulation import load_case, simulate
-from aerosid.vehicle import load_vehicle
+from aerosid.vehicles.vehicle import load_vehicle
 from tasks import ledger
 
 pytestmark = pytest.mark.prefect

@@ -2,10 +2,10 @@
 import numpy as np
 import pytest
 
-from aerosid.aerodb import AeroDatabase
-from aerosid.aeromodel import AeroModel
-from aerosid.inversion import invert_alpha_beta
-from aerosid.vehicle import load_vehicle
+from aerosid.vehicles.aerodb import AeroDatabase
+from aerosid.modelling.aeromodel import AeroModel
+from aerosid.identification.inversion import invert_alpha_beta
+from aerosid.vehicles.vehicle import load_vehicle
 
 VEH = load_vehicle("seed-rlv")
 DB = AeroDatabase.load(VEH.database_path)

@@ -15,10 +15,10 @@ from click.testing import CliRunner  # noqa: E402
 
 from aerosid.diagnosis import diagnose  # noqa: E402
 from aerosid.ebm import process_telemetry  # noqa: E402
-from aerosid.identify import identify  # noqa: E402
-from aerosid.models import ChannelModel, default_models, parse_term  # noqa: E402
+from aerosid.identification.identify import identify  # noqa: E402
+from aerosid.modelling.models import ChannelModel, default_models, parse_term  # noqa: E402
 from aerosid.simulation.jsbsim_flight import simulate_jsbsim  # noqa: E402
-from aerosid.vehicle import load_vehicle  # noqa: E402
+from aerosid.vehicles.vehicle import load_vehicle  # noqa: E402
 
 #: issue bars: |error| of Cm_alpha and Cm_delta_p <= 5 %, of the damping Cm_q + Cm_alpha_dot <= 10 %
 BARS = {"Cm_alpha": 0.05, "Cm_delta_p": 0.05}

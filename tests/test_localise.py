@@ -16,11 +16,11 @@ from click.testing import CliRunner
 
 from aerosid.diagnosis import default_candidates, diagnose
 from aerosid.diagnosis.synthetic import MEASURED_NOISE, flight_data_from_truth
-from aerosid.effects import CATALOGUE
-from aerosid.models import parse_term
+from aerosid.modelling.effects import CATALOGUE
+from aerosid.modelling.models import parse_term
 from aerosid.simulation import flight_model, load_case, simulate
 from aerosid.simulation.hidden import HIDDEN, parse_hidden_spec
-from aerosid.vehicle import load_vehicle
+from aerosid.vehicles.vehicle import load_vehicle
 
 NOISE = MEASURED_NOISE.scaled(0.25)
 
@@ -187,8 +187,8 @@ def test_identity_channel_is_not_localised(reference_flight, vehicle):
     fd = flight_data_from_truth(reference_flight.truth, NOISE, seed=1)
     from aerosid.diagnosis.candidates import derived_signals
     from aerosid.diagnosis.localise import localise
-    from aerosid.identify import mach_window_mask
-    from aerosid.models import default_models, vehicle_signals
+    from aerosid.identification.identify import mach_window_mask
+    from aerosid.modelling.models import default_models, vehicle_signals
 
     fd = fd.loc[mach_window_mask(fd["mach"].to_numpy(), 12.4, 0.5)].reset_index(drop=True)
     sig = derived_signals(vehicle_signals(fd, vehicle), vehicle.length_pitch_m, vehicle.length_lateral_m)

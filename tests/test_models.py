@@ -1,7 +1,7 @@
 import numpy as np
 import pytest
 
-from aerosid.models import ModelSpecError, default_models, load_models, models_to_toml
+from aerosid.modelling.models import ModelSpecError, default_models, load_models, models_to_toml
 
 
 def test_default_models_are_the_seed_models():

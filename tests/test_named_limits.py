@@ -10,8 +10,8 @@ from click.testing import CliRunner
 
 from aerosid.cli import main
 from aerosid.preprocess import PreprocessParams, TelemetryError, preprocess, write_raw_parquet
-from aerosid.segments import plan_segments
-from tests.test_preprocess import make_flight
+from aerosid.preprocess.segments import plan_segments
+from tests.preprocess.test_preprocess import make_flight
 
 T = np.round(np.arange(0, 401) * 0.02, 10)  # 8 s at 50 Hz, like the Twin Otter manoeuvre 018
 
@@ -42,7 +42,7 @@ def test_pieces_cut_short_by_long_gaps_name_the_gap_limit_too():
 
 def test_the_whole_method_refuses_a_short_window_with_the_named_limit():
     from aerosid.ebm import process_telemetry
-    from aerosid.vehicle import load_vehicle
+    from aerosid.vehicles.vehicle import load_vehicle
 
     raw = make_flight(seed=71, duration_s=10.0, faults=False).raw
     with pytest.raises(ValueError, match=r"shorter than min_segment_s = 5 s.*--min-segment-s"):
@@ -58,8 +58,8 @@ def test_a_clock_jump_names_max_time_gap_s_and_how_to_raise_it():
 
 
 def test_the_mach_window_refusal_names_mach_half_width_and_the_option():
-    from aerosid.identify import identify
-    from aerosid.vehicle import load_vehicle
+    from aerosid.identification.identify import identify
+    from aerosid.vehicles.vehicle import load_vehicle
 
     fd = pd.DataFrame({"flight": "f", "t_s": np.arange(200) * 0.01, "mach": np.full(200, 0.9)})
     veh = load_vehicle("c172x")

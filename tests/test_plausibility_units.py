@@ -11,12 +11,12 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from aerosid.effects import parse_effect_spec
+from aerosid.modelling.effects import parse_effect_spec
 from aerosid.plausibility import units as U
 from aerosid.plausibility.units import check_units, unit_findings
 from aerosid.preprocess import TelemetryError
 from aerosid.simulation import load_case, simulate
-from aerosid.vehicle import load_vehicle
+from aerosid.vehicles.vehicle import load_vehicle
 from tests import twin_otter
 
 DEG = math.pi / 180

@@ -14,14 +14,14 @@ from click.testing import CliRunner
 from aerosid.ebm import process_manoeuvres, process_telemetry
 from aerosid.io import write_parquet_atomic
 from aerosid.simulation import load_case, simulate
-from aerosid.vehicle import load_vehicle
+from aerosid.vehicles.vehicle import load_vehicle
 from tasks import ledger
 
 COLS = ["channel", "coefficient", "estimate", "std_error", "std_error_ols", "ci_low", "ci_high"]
 
 
 def us1976_density(h: np.ndarray) -> np.ndarray:
-    from aerosid.atmosphere import density_kg_m3
+    from aerosid.vehicles.atmosphere import density_kg_m3
 
     ok = np.isfinite(h) & (h > -5000) & (h < 81000)
     return np.where(ok, density_kg_m3(np.where(ok, h, 0.0)), np.nan)

@@ -22,7 +22,7 @@ from aerosid.preprocess import (
 )
 from aerosid.preprocess import detect, sensors
 from schemas.telemetry import CHANNELS, validate, PreprocessedTelemetry
-from tests.test_preprocess import NOISE, make_flight
+from tests.preprocess.test_preprocess import NOISE, make_flight
 
 F = QualityFlag
 DEG = math.pi / 180.0
@@ -257,7 +257,7 @@ def test_settings_are_parsed_checked_and_merged():
 
 
 def test_vehicle_preprocess_table_is_loaded_and_errors_name_the_key(tmp_path):
-    from aerosid.vehicle import VehicleError, load_vehicle, resolve_vehicle_path
+    from aerosid.vehicles.vehicle import VehicleError, load_vehicle, resolve_vehicle_path
 
     text = resolve_vehicle_path("c172x").read_text()
     good = tmp_path / "good.toml"

@@ -1,5 +1,5 @@
 """Property tests of the telemetry *reader* and the preprocessing on random damage to the
-file and to its columns (tests/test_preprocess.py damages the values of a valid frame).
+file and to its columns (tests/preprocess/test_preprocess.py damages the values of a valid frame).
 
 Whatever the damage, the answer is a result or a TelemetryError naming the file (and,
 when it is about a column, a contract column) -- never another exception.
@@ -16,7 +16,7 @@ from hypothesis import strategies as st
 from aerosid.preprocess import TelemetryError, preprocess
 from schemas.telemetry import RAW_COLUMNS, RawTelemetry
 from tasks.runner import read_validated
-from tests.test_preprocess import make_flight
+from tests.preprocess.test_preprocess import make_flight
 
 _RAW = make_flight(seed=5, duration_s=3.0, faults=False).raw
 _BUF = io.BytesIO()

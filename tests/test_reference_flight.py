@@ -69,8 +69,8 @@ def test_pitch_plane_coefficients_within_the_accuracy_bars_and_intervals(referen
 
 
 def test_moment_transfer_nose_to_cg_matches_the_seed():
-    from aerosid.aeromodel import AeroModel
-    from aerosid.vehicle import load_vehicle
+    from aerosid.modelling.aeromodel import AeroModel
+    from aerosid.vehicles.vehicle import load_vehicle
 
     ref = AeroModel.preflight(load_vehicle("seed-rlv")).linear_truth()
     assert np.rad2deg(1) ** -1 * ref["Cm_alpha"] == pytest.approx(-0.0578 + 0.0305 * 1.675, abs=1e-9)
@@ -87,9 +87,9 @@ def test_flight_derived_cm_error_below_0_6_hz_sits_at_the_gyro_noise_bound(refer
     through the same low-pass (the regression's band is shared by both sides)."""
     import scipy.signal
 
-    from aerosid.derivatives import zero_phase_low_pass
-    from aerosid.identify import mach_window_mask
-    from aerosid.rigid_body import inertia_constants
+    from aerosid.identification.derivatives import zero_phase_low_pass
+    from aerosid.identification.identify import mach_window_mask
+    from aerosid.vehicles.rigid_body import inertia_constants
     from aerosid.simulation import load_case
 
     case = load_case("seed-rlv")

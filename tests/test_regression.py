@@ -1,4 +1,4 @@
-"""Tests of aerosid.regression (method.md §11-§12): recovery, honest uncertainty, diagnostics."""
+"""Tests of aerosid.identification.regression (method.md §11-§12): recovery, honest uncertainty, diagnostics."""
 from __future__ import annotations
 
 import dataclasses
@@ -11,7 +11,7 @@ import scipy.signal
 import scipy.stats
 import statsmodels.api as sm
 
-from aerosid.regression import LinearFit, fit_linear, residual_autocovariance
+from aerosid.identification.regression import LinearFit, fit_linear, residual_autocovariance
 
 FS = 100.0  # Hz
 N = 8000  # 80 s at 100 Hz

@@ -30,10 +30,10 @@ _CACHE: dict = {}
 def _make_run(root: Path):
     from aerosid.diagnosis import diagnose
     from aerosid.io import write_json_atomic
-    from aerosid.models import default_models, parse_term
+    from aerosid.modelling.models import default_models, parse_term
     from aerosid.simulation import load_case, simulate
-    from aerosid.vehicle import load_vehicle
-    from aerosid.versions import fit_version, latest_models, read_flight_data
+    from aerosid.vehicles.vehicle import load_vehicle
+    from aerosid.modelling.versions import fit_version, latest_models, read_flight_data
     from flows.pipeline import process_flight
 
     simulate(load_case("seed-rlv", duration_s=30.0), seed=0).write(root / "flight")

@@ -32,7 +32,7 @@ def _cm_alpha_per_degree(run_dir, version: str) -> str:
 
 def test_the_chosen_version_is_shown_everywhere_and_a_stale_diagnosis_says_so(report_run):
     from aerosid.report import build_report
-    from aerosid.versions import VersionError
+    from aerosid.modelling.versions import VersionError
 
     run_dir, _, _ = report_run
     a1, a2 = _cm_alpha_per_degree(run_dir, "v001"), _cm_alpha_per_degree(run_dir, "v002")
@@ -55,10 +55,10 @@ def test_the_chosen_version_is_shown_everywhere_and_a_stale_diagnosis_says_so(re
 
 
 def test_versions_are_a_tree_siblings_are_not_joined(report_run, tmp_path):
-    from aerosid.models import default_models, parse_term
+    from aerosid.modelling.models import default_models, parse_term
     from aerosid.report import build_report
     from aerosid.report.sections_versions import tree_edges, tree_order
-    from aerosid.versions import fit_version, history
+    from aerosid.modelling.versions import fit_version, history
 
     run_dir, _, _ = report_run
     work = tmp_path / "run"

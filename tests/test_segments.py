@@ -1,7 +1,7 @@
 import numpy as np
 import pytest
 
-from aerosid.segments import split_segments
+from aerosid.preprocess.segments import split_segments
 
 T = np.round(np.arange(0, 9001) * 0.01, 10)
 

@@ -1,4 +1,4 @@
-"""Tests of aerosid.structure: Efroymson stepwise regression and PSE search (method.md §11)."""
+"""Tests of aerosid.identification.structure: Efroymson stepwise regression and PSE search (method.md §11)."""
 from __future__ import annotations
 
 import dataclasses
@@ -7,8 +7,8 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from aerosid.structure import StepwiseResult, pse_search, stepwise
-from tests.test_regression import FS, N, TRUE, ar1, manoeuvre
+from aerosid.identification.structure import StepwiseResult, pse_search, stepwise
+from tests.identification.test_regression import FS, N, TRUE, ar1, manoeuvre
 
 
 def pitch_candidates(seed: int):

@@ -1,9 +1,9 @@
 import numpy as np
 import pytest
 
-from aerosid.aerodb import AeroDatabase
-from aerosid.aerodb_build import build_text
-from aerosid.vehicle import VehicleError, load_vehicle
+from aerosid.vehicles.aerodb import AeroDatabase
+from aerosid.vehicles.aerodb_build import build_text
+from aerosid.vehicles.vehicle import VehicleError, load_vehicle
 
 
 def test_builtin_database_file_matches_its_generator():

@@ -15,7 +15,7 @@ from click.testing import CliRunner
 from aerosid.cli import main
 from aerosid.io import NoVehicleError, telemetry_vehicle
 from aerosid.simulation import load_case, simulate
-from aerosid.vehicle import DATA_DIR, builtin_vehicles
+from aerosid.vehicles.vehicle import DATA_DIR, builtin_vehicles
 
 
 @pytest.fixture(scope="module")

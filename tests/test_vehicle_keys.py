@@ -9,8 +9,8 @@ from pathlib import Path
 
 import pytest
 
-from aerosid import vehicle as vehicle_module
-from aerosid.vehicle import VehicleError, builtin_vehicles, load_vehicle
+from aerosid.vehicles import vehicle as vehicle_module
+from aerosid.vehicles.vehicle import VehicleError, builtin_vehicles, load_vehicle
 from aerosid.vehicles.keys import TABLES
 
 SEED = Path(vehicle_module.DATA_DIR) / "seed-rlv" / "vehicle.toml"

@@ -1,4 +1,4 @@
-"""Model versions (aerosid.versions) and the modelling-loop commands (aerosid.cli_modelling)."""
+"""Model versions (aerosid.modelling.versions) and the modelling-loop commands (aerosid.cli.modelling)."""
 from __future__ import annotations
 
 import hashlib
@@ -8,13 +8,13 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from aerosid.cli_modelling import diagnose as diagnose_cmd
-from aerosid.cli_modelling import fit as fit_cmd
-from aerosid.cli_modelling import history as history_cmd
+from aerosid.cli.modelling import diagnose as diagnose_cmd
+from aerosid.cli.modelling import fit as fit_cmd
+from aerosid.cli.modelling import history as history_cmd
 from aerosid.diagnosis.synthetic import MEASURED_NOISE, flight_data_from_truth
-from aerosid.effects import CATALOGUE
-from aerosid.models import ModelSpecError, default_models, parse_term
-from aerosid.versions import (VersionError, _claim, fit_version, history, latest_models, models_from_spec,
+from aerosid.modelling.effects import CATALOGUE
+from aerosid.modelling.models import ModelSpecError, default_models, parse_term
+from aerosid.modelling.versions import (VersionError, _claim, fit_version, history, latest_models, models_from_spec,
                               run_vehicle)
 
 SPEC_CONTROL_ALPHA = """\

@@ -102,7 +102,7 @@ class Design:
 def resolve_term(text: str, models: dict, vehicle):
     """(channel, Term) for a candidate name, a model coefficient or 'NAME = EXPR' ('Cm: NAME = EXPR')."""
     from aerosid.diagnosis.candidates import default_candidates
-    from aerosid.models import ModelSpecError, Term, parse_term
+    from aerosid.modelling.models import ModelSpecError, Term, parse_term
 
     text = text.strip()
     for c in default_candidates(vehicle.mach_reference, vehicle.vehicle_class):
@@ -131,7 +131,7 @@ def resolve_term(text: str, models: dict, vehicle):
 def _signals_from_truth(truth: pd.DataFrame, vehicle) -> dict:
     from aerosid.diagnosis.candidates import derived_signals
     from aerosid.diagnosis.synthetic import NO_NOISE, flight_data_from_truth
-    from aerosid.models import vehicle_signals
+    from aerosid.modelling.models import vehicle_signals
 
     fd = flight_data_from_truth(truth, NO_NOISE)
     return derived_signals(vehicle_signals(fd, vehicle), vehicle.length_pitch_m, vehicle.length_lateral_m)
@@ -185,11 +185,11 @@ def design(run_dir: str | Path, effect: str, size: float | None = None, versus: 
            mach_half_width: float = 0.5, kinds: tuple[str, ...] = ("3211", "doublet", "multisine"),
            refine: bool = True, progress=None, flyer_factory=None, power: str = "trim") -> Design:
     from aerosid.diagnosis.candidates import derived_signals
-    from aerosid.identify import mach_window_mask
-    from aerosid.models import vehicle_signals
-    from aerosid.regression import fit_linear
-    from aerosid.vehicle import load_vehicle
-    from aerosid.versions import latest_models, read_flight_data, run_vehicle
+    from aerosid.identification.identify import mach_window_mask
+    from aerosid.modelling.models import vehicle_signals
+    from aerosid.identification.regression import fit_linear
+    from aerosid.vehicles.vehicle import load_vehicle
+    from aerosid.modelling.versions import latest_models, read_flight_data, run_vehicle
 
     say = progress or (lambda msg: None)
     if power not in POWER_SETTINGS:
@@ -226,7 +226,7 @@ def design(run_dir: str | Path, effect: str, size: float | None = None, versus: 
     before_pred = predict_covariance(X.to_numpy(float), model.names, resid)
     estimates = dict(zip(model.names, np.asarray(fit.estimate, float)))
     sizes = []
-    from aerosid.effects import CATALOGUE
+    from aerosid.modelling.effects import CATALOGUE
 
     for i, t in enumerate(targets):
         if i == 0 and size is not None:
@@ -420,7 +420,7 @@ def default_flyer(vehicle, limits: Limits, coefs: dict, effect: str | None, size
                           "of the JSBSim aircraft (c172x)")
     if vehicle.name == "seed-rlv":
         from aerosid.design.flyers import RLVFlyer
-        from aerosid.identify import mach_window_mask
+        from aerosid.identification.identify import mach_window_mask
 
         flyer = RLVFlyer(coefs, effect, size)
         say("flying the baseline and the impulse response (built-in simulator, identified pitch model)")
@@ -450,9 +450,9 @@ def _pipeline_residual(telemetry: pd.DataFrame, vehicle, model, ch: str, mach_ha
 
     from aerosid.diagnosis.candidates import derived_signals
     from aerosid.ebm import process_telemetry
-    from aerosid.identify import mach_window_mask
-    from aerosid.models import vehicle_signals
-    from aerosid.regression import fit_linear
+    from aerosid.identification.identify import mach_window_mask
+    from aerosid.modelling.models import vehicle_signals
+    from aerosid.identification.regression import fit_linear
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")

@@ -20,7 +20,7 @@ import numpy as np
 import pandas as pd
 import scipy.signal
 
-from aerosid.effects import CATALOGUE
+from aerosid.modelling.effects import CATALOGUE
 
 #: truth columns that respond to the pitch command (linearised about the baseline)
 _RESPONSE = ("alpha_rad", "q_rad_s", "delta_p_rad", "d1_rad", "d2_rad", "d3_rad", "d4_rad", "az_cg_m_s2", "mach",

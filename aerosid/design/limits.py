@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from aerosid.vehicle import resolve_vehicle_path
+from aerosid.vehicles.vehicle import resolve_vehicle_path
 
 
 @dataclass(frozen=True)

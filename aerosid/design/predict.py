@@ -1,7 +1,7 @@
 """Predicted standard errors of a manoeuvre not yet flown (issue 20, item 2).
 
 The pipeline reports, for a coefficient of a channel model ``y = X theta + v``, the
-Morelli-Klein coloured-residual covariance (``aerosid.regression``)::
+Morelli-Klein coloured-residual covariance (``aerosid.identification.regression``)::
 
     Cov = (X'X)^-1 [X' T X] (X'X)^-1 * N_eff / (N_eff - p)
 
@@ -23,7 +23,8 @@ import numpy as np
 import scipy.signal
 import scipy.stats
 
-from aerosid.regression import _group_slices, _parzen, _pooled_autocovariance, auto_max_lag
+from aerosid.identification.residual_covariance import _group_slices, _parzen, _pooled_autocovariance
+from aerosid.identification.regression import auto_max_lag
 
 #: the diagnosis's significance level (aerosid.diagnosis.core.P_MAX)
 P_MAX = 0.001

@@ -1,15 +1,15 @@
 """Candidate physical effects the diagnosis tests for (method.md §13).
 
-Every entry of the simulator's catalogue (:data:`aerosid.effects.CATALOGUE`) is a
+Every entry of the simulator's catalogue (:data:`aerosid.modelling.effects.CATALOGUE`) is a
 candidate under the *same name*; a few extra candidates cover effects the
 simulator cannot hide (rate damping in roll and yaw, alpha-dot, Mach dependence
 of the trim moment and of the fin effectiveness, non-linear force terms).  Each
 candidate is one extra regressor ``coefficient * term`` in one channel, with a
 one-line physical meaning.
 
-Terms are written in the model-spec expression language (``aerosid.expressions``)
+Terms are written in the model-spec expression language (``aerosid.modelling.expressions``)
 so that a finding can be pasted into a spec file (``alpha_dot_hat`` is alpha-dot
-d/(2V) from a smoothing derivative of the recovered alpha, see aerosid.derivatives).
+d/(2V) from a smoothing derivative of the recovered alpha, see aerosid.identification.derivatives).
 """
 from __future__ import annotations
 
@@ -17,10 +17,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from aerosid.effects import CATALOGUE
-from aerosid.expressions import evaluate
+from aerosid.modelling.effects import CATALOGUE
+from aerosid.modelling.expressions import evaluate
 
-from aerosid.derivatives import DERIVATIVE_HALF_WINDOW_S, smooth_derivative  # noqa: F401  (re-exported)
+from aerosid.identification.derivatives import DERIVATIVE_HALF_WINDOW_S, smooth_derivative  # noqa: F401  (re-exported)
 
 
 @dataclass(frozen=True)
@@ -30,7 +30,7 @@ class Candidate:
     name: str  # catalogue name for catalogue effects
     channel: str
     coefficient: str
-    term: str  # expression over the signals (see aerosid.effects)
+    term: str  # expression over the signals (see aerosid.modelling.effects)
     meaning: str  # one line of physics
     catalogue: bool = False  # True: the simulator can hide it (aerosid simulate --effect NAME)
     addable: bool = True  # False: the term uses a derived signal the model specs do not offer
@@ -42,7 +42,7 @@ class Candidate:
         if not self.addable:
             return None
         if self.catalogue or _EXTRA_NAMES.get(self.name) == (self.channel, self.coefficient):
-            return self.name  # a model spec takes every default candidate by name (aerosid.models.parse_term)
+            return self.name  # a model spec takes every default candidate by name (aerosid.modelling.models.parse_term)
         return f"{self.coefficient} = {self.term}"
 
     def regressor(self, signals: dict[str, np.ndarray]) -> np.ndarray:
@@ -103,7 +103,7 @@ def default_candidates(mach_reference: float = 12.4, vehicle_class: str = "finne
 
 def derived_signals(signals: dict[str, np.ndarray], d_m: float, lateral_m: float | None = None
                     ) -> dict[str, np.ndarray]:
-    """The model signals (aerosid.models.signals_from_flight_data, which holds alpha_dot_hat
+    """The model signals (aerosid.modelling.models.signals_from_flight_data, which holds alpha_dot_hat
     and beta_dot_hat with the regression's own derivative window) plus ``alpha_dot`` and
     ``beta_dot`` [rad/s] (d_m: pitch reference length [m]; lateral_m: that of beta_dot_hat,
     default d_m)."""

@@ -10,7 +10,7 @@ Evidence for one candidate (all computed on the samples inside the Mach window)
 -----------------------------------------------------------------------------
 ``partial_f_corrected``, ``p_value``
     t^2 of the added coefficient with its *coloured-residual corrected* sigma
-    (Morelli-Klein, :func:`aerosid.regression.fit_linear`), and the two-sided
+    (Morelli-Klein, :func:`aerosid.identification.regression.fit_linear`), and the two-sided
     Student-t p-value with the effective degrees of freedom.  This is the
     partial F test of one added term that survives coloured residuals.
 ``partial_f_plain``
@@ -59,12 +59,12 @@ from statsmodels.stats.diagnostic import acorr_ljungbox
 from aerosid.diagnosis.candidates import Candidate, default_candidates, derived_signals
 from aerosid.diagnosis.lookalikes import heldout_sse as _heldout_sse, scaled_lstsq as _scaled_lstsq
 from aerosid.diagnosis.lookalikes import windows_index as _windows_index
-from aerosid.expressions import evaluate
-from aerosid.identify import angle_cutoff_hz, mach_window_mask
-from aerosid.eiv import with_angle_noise
-from aerosid.model_specs import paste_lines
-from aerosid.models import ChannelModel, default_models, vehicle_signals
-from aerosid.regression import LinearFit, fit_linear, residual_autocovariance
+from aerosid.modelling.expressions import evaluate
+from aerosid.identification.identify import angle_cutoff_hz, mach_window_mask
+from aerosid.identification.eiv import with_angle_noise
+from aerosid.modelling.model_specs import paste_lines
+from aerosid.modelling.models import ChannelModel, default_models, vehicle_signals
+from aerosid.identification.regression import LinearFit, fit_linear, residual_autocovariance
 
 __all__ = [
     "diagnose", "Diagnosis", "EffectEvidence", "ChannelReport", "WindowStat", "RegimeBin", "Whiteness",
@@ -619,7 +619,7 @@ def diagnose(flight_data: pd.DataFrame, vehicle, models: dict[str, ChannelModel]
     """Diagnose `models` (default: the method.md §11 models) against the flight data.
 
     flight_data: a FlightData frame (schemas/flight_data.py); the samples with
-    |M - M_ref| <= mach_half_width are used, as in :func:`aerosid.identify.identify`.
+    |M - M_ref| <= mach_half_width are used, as in :func:`aerosid.identification.identify.identify`.
     candidates: the effects to test (default :func:`default_candidates`); the ones
     already in a channel's model are skipped.
     angle_sigma_rad: 1-sigma error of the recovered alpha and beta, for the
@@ -776,8 +776,8 @@ def diagnose(flight_data: pd.DataFrame, vehicle, models: dict[str, ChannelModel]
 
 def identity_channels(vehicle, channels) -> tuple[str, ...]:
     """The channels that are identities by construction: C_N and C_Y when alpha and beta
-    are inverted from them (no vanes), as aerosid.identify reports them."""
-    from aerosid.identify import INVERSION_CHANNELS
+    are inverted from them (no vanes), as aerosid.identification.identify reports them."""
+    from aerosid.identification.identify import INVERSION_CHANNELS
 
     if getattr(vehicle, "air_data_source", None) == "vanes":
         return ()
@@ -796,7 +796,7 @@ def _simex_signals(fd: pd.DataFrame, vehicle, groups: np.ndarray, sigma: float) 
         out[lam] = []
         for _ in range(SIMEX_REPLICATES):
             # noise like the angles' own: white for angles inverted from the database, through
-            # the vanes' low-pass for vanes (as aerosid.eiv does)
+            # the vanes' low-pass for vanes (as aerosid.identification.eiv does)
             f = with_angle_noise(fd, rng, groups, sigma * math.sqrt(lam), cutoff)
             out[lam].append(derived_signals(vehicle_signals(f, vehicle), vehicle.length_pitch_m,
                                             vehicle.length_lateral_m))

@@ -12,7 +12,7 @@ model completes, where the residual itself barely moves (docs/modelling-loop.md 
 How the floor is computed
 -------------------------
 ``flight_data.parquet`` carries per-sample ``sigma_<channel>`` columns: the EKF + MBF
-smoother's state sigma propagated to the coefficient (``aerosid.flight_coefficients``).
+smoother's state sigma propagated to the coefficient (``aerosid.identification.flight_coefficients``).
 The floor is their RMS over the samples the diagnosis uses.
 
 Is that sigma honest?  On the band path (the default) the regression's target *and* its
@@ -128,8 +128,8 @@ def angle_part(model, estimate: np.ndarray, fd, vehicle, sig_a: np.ndarray, sig_
     """Per-sample error the angles' sigma puts into the model output: sqrt((dm/dalpha sig_a)^2 +
     (dm/dbeta sig_b)^2), the derivatives by finite differences of the fitted model."""
     from aerosid.diagnosis.candidates import derived_signals
-    from aerosid.inversion import total_angles
-    from aerosid.models import vehicle_signals
+    from aerosid.identification.inversion import total_angles
+    from aerosid.modelling.models import vehicle_signals
 
     def out(da: float, db: float) -> np.ndarray:
         f = fd.copy()
@@ -176,7 +176,7 @@ def angle_floor_parts(fd, vehicle, models: dict, reports: dict) -> dict:
     sig = angle_sigmas(fd)
     if sig is None:
         return {}
-    from aerosid.identify import INVERSION_CHANNELS
+    from aerosid.identification.identify import INVERSION_CHANNELS
 
     skip = INVERSION_CHANNELS if vehicle.air_data_source != "vanes" else ()
     return {ch: angle_part(models[ch], rep.fit.estimate, fd, vehicle, *sig)

@@ -16,8 +16,8 @@ import numpy as np
 import pandas as pd
 
 from aerosid.diagnosis.lookalikes import heldout_sse, windows_index
-from aerosid.identify import mach_window_mask
-from aerosid.models import vehicle_signals
+from aerosid.identification.identify import mach_window_mask
+from aerosid.modelling.models import vehicle_signals
 
 __all__ = ["heldout_rms", "HELDOUT_WINDOWS"]
 

@@ -43,8 +43,8 @@ import pandas as pd
 import scipy.stats
 
 from aerosid.diagnosis.finding import Finding, localisation_hint, localisation_text
-from aerosid.expressions import evaluate, signal_names
-from aerosid.regression import fit_linear
+from aerosid.modelling.expressions import evaluate, signal_names
+from aerosid.identification.regression import fit_linear
 
 __all__ = ["Finding", "localise", "localisation_text", "localisation_hint", "LAG_SCAN_S", "IDENTITY_RATIO",
            "MAX_PER_CHANNEL"]
@@ -204,7 +204,7 @@ def _perturbed(signals: dict, sigma: float) -> dict | None:
     recomputed), a fixed draw: the errors-in-variables guard of the shapes."""
     if not sigma > 0:
         return None
-    from aerosid.inversion import total_angles
+    from aerosid.identification.inversion import total_angles
 
     rng = np.random.default_rng(20240613)
     out = dict(signals)

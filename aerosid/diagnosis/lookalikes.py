@@ -44,7 +44,7 @@ from typing import Sequence
 import numpy as np
 import scipy.stats
 
-from aerosid.regression import fit_linear
+from aerosid.identification.regression import fit_linear
 
 __all__ = ["Alternative", "LookalikeComparison", "compare", "model_lookalikes", "separating_manoeuvre",
            "heldout_sse", "scaled_lstsq", "windows_index", "resolve", "lookalike_message", "DELTA_MIN", "LOOKALIKE_WINDOWS", "MAX_ALTERNATIVES"]

@@ -22,7 +22,7 @@ import numpy as np
 import pandas as pd
 import scipy.signal
 
-from aerosid.inversion import total_angles
+from aerosid.identification.inversion import total_angles
 
 
 @dataclass(frozen=True)

@@ -2,7 +2,7 @@
 EKF, Bierman's Modified Bryson-Frazier smoother, NIS and automatic tuning.
 
 Imports only numpy, scipy and numba.  Units: SI, radians.  The L, M, N chain
-states are moments divided by Ixx, Iyy, Izz [rad/s^2] (aerosid.rigid_body).
+states are moments divided by Ixx, Iyy, Izz [rad/s^2] (aerosid.vehicles.rigid_body).
 """
 from .ekf import EKFUpdate, MBFResult, ekf_predict, ekf_update, gate_channels, mbf_smooth, run_reference
 from .init import (NoiseDispersion, ParabolaFit, SpectrumNoise, initial_state, measurement_noise_from_dispersion,

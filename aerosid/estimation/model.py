@@ -10,7 +10,7 @@ State vector (SI, radians), index in brackets::
     M1 M2 M3                    [15..17] M_hat = M/Iyy chain
     N1 N2 N3                    [18..20] N_hat = N/Izz chain
 
-Convention (as in :mod:`aerosid.rigid_body`): L, M, N chain states are the
+Convention (as in :mod:`aerosid.vehicles.rigid_body`): L, M, N chain states are the
 aerodynamic moments divided by Ixx, Iyy, Izz [rad/s^2].
 
 Each chain is a triple integrator driven by white noise on its third state
@@ -39,7 +39,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from aerosid.rigid_body import inertia_constants
+from aerosid.vehicles.rigid_body import inertia_constants
 
 STATE_NAMES = ("p", "q", "r", "X1", "X2", "X3", "Y1", "Y2", "Y3", "Z1", "Z2", "Z3",
                "L1", "L2", "L3", "M1", "M2", "M3", "N1", "N2", "N3")

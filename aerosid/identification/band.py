@@ -44,7 +44,7 @@ import numpy as np
 import scipy.signal
 
 from aerosid.estimation.findings import true_runs
-from aerosid.rigid_body import inertia_constants
+from aerosid.vehicles.rigid_body import inertia_constants
 
 #: Significance of a signal bin in noise-floor multiples (method.md §3's test; a noise
 #: bin exceeds it with probability exp(-15) = 3e-7).

@@ -54,7 +54,7 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
-from aerosid.rigid_body import inertia_constants
+from aerosid.vehicles.rigid_body import inertia_constants
 
 #: Per-sample measurement-noise 1-sigma the run estimated (the EKF's R), flight-data columns,
 #: in the order of the measured outputs (ax, ay, az, p, q, r).
@@ -243,10 +243,10 @@ def coefficient_bounds(fd: pd.DataFrame, vehicle, designs: dict, report: dict | 
 
 def identification_bounds(fd: pd.DataFrame, vehicle, models: dict, fits: dict, identities=(),
                           outputs: tuple = OUTPUTS) -> CramerRaoBounds:
-    """The bounds of the fits of aerosid.identify.identify: fd the flight data they used (inside
+    """The bounds of the fits of aerosid.identification.identify.identify: fd the flight data they used (inside
     the Mach window, sorted by flight and time), models/fits per channel, identities the
     channels reported without numbers."""
-    from aerosid.models import vehicle_signals
+    from aerosid.modelling.models import vehicle_signals
 
     signals = vehicle_signals(fd, vehicle)
     designs = {ch: (model.design(signals)[0].to_numpy(float), model.names, np.asarray(fits[ch].identifiable))

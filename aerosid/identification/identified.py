@@ -17,8 +17,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from aerosid.expressions import compile_expression, names_in
-from aerosid.models import CHANNELS, SIGNALS, ChannelModel, Term
+from aerosid.modelling.expressions import compile_expression, names_in
+from aerosid.modelling.models import CHANNELS, SIGNALS, ChannelModel, Term
 
 _SIGNALS = frozenset(SIGNALS)
 
@@ -139,7 +139,7 @@ def read_run_json(run_dir: str | Path) -> dict:
 def load_identified_model(run_dir: str | Path, version: str | None = None) -> IdentifiedModel:
     """The run's identified model: `version` (vNNN), else the latest model version, else
     RUN_DIR/coefficients.parquet."""
-    from aerosid.versions import VersionError, history, run_vehicle
+    from aerosid.modelling.versions import VersionError, history, run_vehicle
 
     run_dir = Path(run_dir)
     if not run_dir.is_dir():

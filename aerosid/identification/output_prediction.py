@@ -23,7 +23,7 @@ other; gravity g(h) along the measured attitude, less the centrifugal relief
     w' = q u - p v + a_z + g cos(phi) cos(theta)
     alpha' = (u w' - w u')/(u^2 + w^2)        beta' = (V v' - v V')/(V^2 cos b),  V' = (u u' + v v' + w w')/V
     a_z = -CN qbar S/m,  a_y = CY qbar S/m
-    p', q', r' = Euler's equations (aerosid.rigid_body) with L = Cl qbar S b, M = Cm qbar S c, N = Cn qbar S b
+    p', q', r' = Euler's equations (aerosid.vehicles.rigid_body) with L = Cl qbar S b, M = Cm qbar S c, N = Cn qbar S b
 
 Integration: classical RK4 on the sample grid (sub-steps of at most ``MAX_STEP_S``),
 inputs linear between samples.  Terms that read alpha_dot_hat (beta_dot_hat) in
@@ -51,9 +51,9 @@ import pandas as pd
 from scipy.optimize import least_squares
 
 from aerosid.identification.identified import IdentifiedModel
-from aerosid.inversion import total_angles
-from aerosid.rigid_body import body_rate_derivatives, lever_arm_acceleration
-from aerosid.vehicle import Vehicle
+from aerosid.identification.inversion import total_angles
+from aerosid.vehicles.rigid_body import body_rate_derivatives, lever_arm_acceleration
+from aerosid.vehicles.vehicle import Vehicle
 
 AXES = ("lon", "lat")
 BIAS_MODES = ("none", "offsets", "intercepts")
@@ -88,7 +88,7 @@ def theil_inequality(y, yhat) -> float:
 def gravity_less_relief(h_m, V_m_s, alpha, beta, phi, theta) -> np.ndarray:
     """g(h) [m/s^2] less the centrifugal relief (V cos gamma)^2/(R_E + h), gamma from the
     attitude and the aerodynamic angles (no wind)."""
-    from aerosid.atmosphere import gravity_m_s2
+    from aerosid.vehicles.atmosphere import gravity_m_s2
 
     sg = (np.cos(alpha) * np.cos(beta) * np.sin(theta)
           - (np.sin(beta) * np.sin(phi) + np.sin(alpha) * np.cos(beta) * np.cos(phi)) * np.cos(theta))
@@ -97,10 +97,10 @@ def gravity_less_relief(h_m, V_m_s, alpha, beta, phi, theta) -> np.ndarray:
 
 
 def prediction_inputs(fd: pd.DataFrame, vehicle: Vehicle, phi_rad, theta_rad, span) -> pd.DataFrame:
-    """The inputs frame of a manoeuvre from its flight data (aerosid.flight_data columns,
+    """The inputs frame of a manoeuvre from its flight data (aerosid.identification.flight_data columns,
     sorted by time within each segment), the attitude [rad] on the same rows and a span
     id per row (contiguous samples simulated together; negative: not simulated)."""
-    from aerosid.models import vehicle_signals
+    from aerosid.modelling.models import vehicle_signals
 
     sig = vehicle_signals(fd, vehicle)
     qS = fd["qbar_pa"].to_numpy(float) * vehicle.S_m2

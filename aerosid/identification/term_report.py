@@ -11,7 +11,7 @@ import math
 
 import pandas as pd
 
-from aerosid.coefficient_units import per_degree_factor, unit_label, units_header
+from aerosid.identification.coefficient_units import per_degree_factor, unit_label, units_header
 
 #: Significance level of a term (the diagnosis's rule: corrected p < 0.001).
 P_MAX = 1e-3
@@ -67,7 +67,7 @@ def significance_warnings(table: pd.DataFrame, p_max: float = P_MAX) -> list[str
 
 
 def _is_constant(expression: str) -> bool:
-    from aerosid.expressions import parse
+    from aerosid.modelling.expressions import parse
 
     try:
         parse(expression, frozenset())

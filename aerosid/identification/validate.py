@@ -30,9 +30,9 @@ from aerosid.identification.identified import IdentifiedModel, load_identified_m
 from aerosid.identification.output_prediction import (AXIS_CHANNELS, AXIS_OUTPUTS, BIAS_MODES, OUTPUT_UNITS,
                                                       predict_axis, prediction_inputs,
                                                       theil_inequality)
-from aerosid.identify import mach_window_mask
-from aerosid.models import vehicle_signals
-from aerosid.vehicle import Vehicle
+from aerosid.identification.identify import mach_window_mask
+from aerosid.modelling.models import vehicle_signals
+from aerosid.vehicles.vehicle import Vehicle
 
 MIN_SPAN_S = 1.0  # contiguous in-window stretches shorter than this are not predicted
 ATTITUDE_COLUMNS = ("phi_rad", "theta_rad")
@@ -291,7 +291,7 @@ def validate(run_dir: str | Path, telemetry: str | Path, *, vehicle: str | None 
     progress: an optional callback progress(stage, fraction) (the CLI's display)."""
     from aerosid.ebm import estimate_flight_data
     from aerosid.preprocess.io import read_raw_parquet
-    from aerosid.vehicle import load_vehicle
+    from aerosid.vehicles.vehicle import load_vehicle
 
     if bias not in BIAS_MODES:
         raise ValueError(f"unknown bias treatment {bias!r}; choose one of {', '.join(BIAS_MODES)}")

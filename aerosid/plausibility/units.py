@@ -86,14 +86,14 @@ SCALE_HEIGHT_M = 5500.0
 
 
 def _qbar_pa(V: np.ndarray, h: np.ndarray) -> np.ndarray:
-    from aerosid.atmosphere import H_MAX_M, H_MIN_M, density_kg_m3
+    from aerosid.vehicles.atmosphere import H_MAX_M, H_MIN_M, density_kg_m3
 
     rho = density_kg_m3(np.clip(h, H_MIN_M, H_MAX_M)) * np.exp(-np.clip(h - H_MAX_M, 0.0, None) / SCALE_HEIGHT_M)
     return 0.5 * rho * V**2
 
 
 def _mach(V: np.ndarray, h: np.ndarray) -> np.ndarray:
-    from aerosid.atmosphere import H_MAX_M, H_MIN_M, speed_of_sound_m_s
+    from aerosid.vehicles.atmosphere import H_MAX_M, H_MIN_M, speed_of_sound_m_s
 
     return V / speed_of_sound_m_s(np.clip(h, H_MIN_M, H_MAX_M))
 

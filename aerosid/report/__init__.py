@@ -98,7 +98,7 @@ def build_report(run_dir: str | Path, *, diagnosis=None, truth=None, version: st
     version: the model version whose coefficients, comparison and residual plots
     are shown ("v003"); default the latest (RUN_DIR/coefficients.parquet when the
     run has no versions yet).  An unknown version raises
-    :class:`aerosid.versions.VersionError` naming the versions there are.
+    :class:`aerosid.modelling.versions.VersionError` naming the versions there are.
     Reads the run folder only; never writes.
     """
     import matplotlib  # noqa: F401  (fail early and clearly if the plotting library is missing)

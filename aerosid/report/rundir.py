@@ -177,7 +177,7 @@ def _per_flight(run: _Run, section: Callable[[_Run], str]) -> str:
 
 
 # --------------------------------------------------------------------------- the model shown
-#: coefficients.parquet's note on a channel that is an identity by construction (aerosid.identify)
+#: coefficients.parquet's note on a channel that is an identity by construction (aerosid.identification.identify)
 IDENTITY_PREFIX = "not identifiable from this telemetry"
 
 
@@ -192,7 +192,7 @@ class Shown:
     table: pd.DataFrame | None = field(repr=False)
     table_name: str
     mach_half_width: float | None
-    history: object | None = field(repr=False)  # aerosid.versions.VersionHistory
+    history: object | None = field(repr=False)  # aerosid.modelling.versions.VersionHistory
     problem: str | None = None  # the version history could not be read
 
     @property
@@ -221,7 +221,7 @@ class Shown:
 def shown_model(run: _Run, version: str | None = None) -> Shown:
     """The version to show: `version`, else the latest; without versions the run's
     coefficients.parquet.  An unknown `version` raises VersionError (it names the ones there are)."""
-    from aerosid.versions import history
+    from aerosid.modelling.versions import history
 
     job_half = (run.run.get("job") or {}).get("mach_half_width", 0.5)
     try:

@@ -14,7 +14,7 @@ IDENTITY_TEXT = ("alpha and beta are inverted from this channel through the pref
 
 
 def _s_coefficients(run: _Run, shown: Shown, truth: dict) -> str:
-    from aerosid.identify import ANGLE_TERMS
+    from aerosid.identification.identify import ANGLE_TERMS
 
     table = shown.table
     if table is None or table.empty:
@@ -106,10 +106,10 @@ def model_series(run: _Run, shown: Shown) -> dict:
     table = shown.table
     if fd is None or table is None or table.empty or fd.empty:
         return {}
-    from aerosid.expressions import evaluate
-    from aerosid.identify import mach_window_mask
-    from aerosid.models import signals_from_flight_data
-    from aerosid.vehicle import load_vehicle
+    from aerosid.modelling.expressions import evaluate
+    from aerosid.identification.identify import mach_window_mask
+    from aerosid.modelling.models import signals_from_flight_data
+    from aerosid.vehicles.vehicle import load_vehicle
 
     veh = load_vehicle(run.vehicle)
     fd = fd.sort_values(["flight", "t_s"], kind="stable").reset_index(drop=True)
@@ -200,7 +200,7 @@ def _s_comparison(run: _Run, shown: Shown, series: dict, doc: dict | None, diag)
 
 
 def _axis(expression: str) -> tuple[float, str]:
-    from aerosid.identify import ANGLE_TERMS
+    from aerosid.identification.identify import ANGLE_TERMS
 
     e = expression.replace(" ", "")
     return (DEG, f"{e} [deg]") if e in ANGLE_TERMS else (1.0, e)

@@ -15,9 +15,9 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from aerosid.aeromodel import AeroModel, flight_signals
-from aerosid.effects import Effect
-from aerosid.rigid_body import body_rate_derivatives, lever_arm_acceleration
+from aerosid.modelling.aeromodel import AeroModel, flight_signals
+from aerosid.modelling.effects import Effect
+from aerosid.vehicles.rigid_body import body_rate_derivatives, lever_arm_acceleration
 from aerosid.simulation.case import SimulationCase, load_case
 from aerosid.simulation.dynamics import Plant, aero_angles, euler_from_quat, integrate, quat_from_euler, quat_to_dcm, schedule
 from aerosid.simulation.sensors import IMU_COLUMNS, apply_faults, noisy_channels

@@ -5,7 +5,7 @@ import tomllib
 from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
 
-from aerosid.vehicle import DATA_DIR, Vehicle, load_vehicle
+from aerosid.vehicles.vehicle import DATA_DIR, Vehicle, load_vehicle
 
 
 @dataclass(frozen=True)

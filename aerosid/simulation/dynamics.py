@@ -15,10 +15,10 @@ from typing import Callable
 
 import numpy as np
 
-from aerosid.aeromodel import AeroModel
-from aerosid.atmosphere import FastAtmosphere
-from aerosid.rigid_body import body_rate_derivatives
-from aerosid.vehicle import Vehicle
+from aerosid.modelling.aeromodel import AeroModel
+from aerosid.vehicles.atmosphere import FastAtmosphere
+from aerosid.vehicles.rigid_body import body_rate_derivatives
+from aerosid.vehicles.vehicle import Vehicle
 
 R_EARTH_M = 6_371_000.0
 

@@ -21,7 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from aerosid.aeromodel import AeroModel, flight_signals
+from aerosid.modelling.aeromodel import AeroModel, flight_signals
 
 #: Flight time over which the drift reaches its stated change [s] (the 90 s reference flight).
 DRIFT_REFERENCE_S = 90.0
@@ -94,7 +94,7 @@ HIDDEN: dict[str, HiddenEffect] = {
 
 def parse_hidden_spec(spec: str) -> tuple[HiddenEffect, float]:
     """``NAME`` or ``NAME=SCALE`` -> (hidden effect, scale)."""
-    from aerosid.effects import parse_scaled_spec
+    from aerosid.modelling.effects import parse_scaled_spec
 
     return parse_scaled_spec(spec, HIDDEN, "hidden (uncatalogued) effect")
 

@@ -31,13 +31,13 @@ from aerosid.simulation import SimulatedFlight
 from aerosid.simulation.jsbsim_design import (DT_S, FT, INCH, LBF, PSF, SLUG, SLUG_FT2, FlightDesign,
                                               UnsupportedAircraft, flight_design, symmetric_loading)
 from aerosid.simulation.jsbsim_linear import abs_beta_slope, mach_slopes, model_coefficients
-from aerosid.simulation.jsbsim_flight import (COMMON_PROPERTIES, _fly, _import_jsbsim, coefficient_columns,
-                                              flight_statistics, _schedule, _takeup_steps, _truth_check,
-                                              make_telemetry, state_columns)
+from aerosid.simulation.jsbsim_flight import COMMON_PROPERTIES, _fly, _import_jsbsim, _schedule, _takeup_steps
+from aerosid.simulation.jsbsim_columns import coefficient_columns, make_telemetry, state_columns
+from aerosid.simulation.jsbsim_truth import flight_statistics, _truth_check
 from aerosid.simulation.jsbsim_tables import DEG, AeroTables
 from aerosid.simulation.jsbsim_trim import initialise, open_fdm, start_engines
 from aerosid.simulation.jsbsim_vehicle import vehicle_toml
-from aerosid.vehicle import DATA_DIR
+from aerosid.vehicles.vehicle import DATA_DIR
 
 __all__ = ["simulate_aircraft", "XML_TOLERANCE", "RESERVED"]
 

@@ -31,12 +31,12 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from aerosid.rigid_body import lever_arm_acceleration
+from aerosid.vehicles.rigid_body import lever_arm_acceleration
 from aerosid.simulation import SimulatedFlight
 from aerosid.simulation.case import FaultSpec
 from aerosid.simulation.jsbsim_tables import AeroTables, body_coefficients
 from aerosid.simulation.sensors import IMU_COLUMNS, RAW_COLUMNS, apply_faults
-from aerosid.vehicle import DATA_DIR
+from aerosid.vehicles.vehicle import DATA_DIR
 
 __all__ = ["JSBSimUnavailable", "simulate_jsbsim", "SUPPORTED_AIRCRAFT", "GENERATED_AIRCRAFT", "MANOEUVRES", "AeroTables",
            "TELEMETRY_COLUMNS"]

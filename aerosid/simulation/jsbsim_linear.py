@@ -97,7 +97,7 @@ def model_coefficients(tables: AeroTables, values: dict, alpha, beta, cg_in, cl_
 def linear_truth(tables: AeroTables, base: dict, controls: Controls, slopes: dict | None = None) -> tuple[dict, dict, dict]:
     """Central differences of the model at the trim point: (about the CG, about the
     AERORP, the value and derivative table) in jsbsim_flight's names."""
-    from aerosid.simulation.jsbsim_flight import _LINEAR_VARS, _coefficient_table
+    from aerosid.simulation.jsbsim_truth import _LINEAR_VARS, _coefficient_table
 
     cg = (base["inertia/cg-x-in"], base["inertia/cg-y-in"], base["inertia/cg-z-in"])
     point = {"alpha": base["aero/alpha-rad"], "beta": base["aero/beta-rad"], "delta_p": base[controls.pitch],

@@ -3,7 +3,7 @@
 A flight-test file that holds both the accelerations as measured and the same
 accelerations moved to the CG (SIDPAC's data-compatibility output does) fixes the
 sensor's position r relative to the CG: their difference is the lever-arm term
-omega_dot x r + omega x (omega x r) (aerosid.rigid_body.lever_arm_acceleration),
+omega_dot x r + omega x (omega x r) (aerosid.vehicles.rigid_body.lever_arm_acceleration),
 linear in r, plus a constant per axis when the CG values also had a bias removed.
 A least-squares fit of the difference on those terms returns r, the biases and the
 residual; a residual at the recording resolution means the file's own correction
@@ -15,7 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from aerosid.rigid_body import lever_arm_acceleration
+from aerosid.vehicles.rigid_body import lever_arm_acceleration
 
 #: The fit is trusted when its residual RMS is below this [m/s^2] (1e-3 g; SIDPAC's
 #: Twin Otter files give ~1.6e-5 m/s^2) and every offset component's sigma below

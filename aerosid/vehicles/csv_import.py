@@ -114,7 +114,7 @@ def load_csv_map(path: str | Path) -> CsvMap:
 
 def _vehicle_text(spec, map_path: Path) -> tuple[str, str]:
     """The vehicle file's text: a copy of the file `spec` names, or the inline table written out."""
-    from aerosid.vehicle import VehicleError, resolve_vehicle_path
+    from aerosid.vehicles.vehicle import VehicleError, resolve_vehicle_path
 
     if spec is None:
         raise ImportDataError(map_path, "no vehicle: give `vehicle = \"FILE_OR_BUILTIN\"` (before the tables) or a "

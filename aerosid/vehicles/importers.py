@@ -83,7 +83,7 @@ class ImportedFlight:
     def write(self, out_dir: str | Path) -> dict[str, Path]:
         """Write DIR/vehicle.toml and DIR/telemetry.parquet (atomic, checked); returns their paths."""
         from aerosid.io import write_parquet_atomic, write_text_atomic
-        from aerosid.vehicle import VehicleError, load_vehicle
+        from aerosid.vehicles.vehicle import VehicleError, load_vehicle
         from schemas.telemetry import RawTelemetry, validate
 
         out = Path(out_dir)

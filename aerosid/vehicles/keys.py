@@ -4,7 +4,7 @@ be finite and inside its range, every vector and matrix of the right shape.
 
 To add a key, add one line to :data:`TABLES` (a table may be given a whole new entry,
 e.g. ``TABLES["preprocess"] = {...}``); :func:`check_document` and the error messages
-follow.  ``load_vehicle`` (aerosid/vehicle.py) runs the check before it reads any value,
+follow.  ``load_vehicle`` (aerosid/vehicles/vehicle.py) runs the check before it reads any value,
 so its own checks (required keys, Gamma > 0, ...) see only well-formed numbers.
 
 The ranges are wide, physical sanity bounds (a 1e300 m accelerometer offset, a NaN CG,
@@ -31,7 +31,7 @@ class Key:
     kind: "number", "int", "bool", "string", "choice", "vector" (``length`` numbers, or
     any length >= 1 when None), "matrix" (``shape`` rows x columns), "range" (two
     numbers lo < hi), "strings" (a list of ``length`` strings), "terms" (a list of model
-    terms, checked by aerosid.models), "path" (a file name, checked by load_vehicle).
+    terms, checked by aerosid.modelling.models), "path" (a file name, checked by load_vehicle).
     """
 
     kind: str
@@ -122,7 +122,7 @@ TABLES: dict[str, dict[str, Key] | None] = {
             "Cn_delta_y_nose", "Cl_0", "Cl_alpha_r", "Cl_cos4phi", "Cl_delta_r", "CA_0", "CA_alpha2")},
         "mach_breakpoints": vec(None, 0.0, 50.0, positive=True), "slope_factor": vec(None, 0.0, 100.0, positive=True),
     },
-    # Smoother defaults: aerosid.estimation.EBMOptions fields (tests/test_vehicle_keys.py keeps
+    # Smoother defaults: aerosid.estimation.EBMOptions fields (tests/vehicles/test_vehicle_keys.py keeps
     # the two lists equal), plus band_hz (the regression's low-pass edge, read by load_vehicle).
     "estimation": {
         "f_max_hz": pos(1e4), "gate_probability": Key("number", 0.0, 1.0, positive=True),

@@ -252,7 +252,7 @@ def import_sidpac(path: str | Path) -> ImportedFlight:
 
 
 def _vehicle(f: _SidpacFile, tel: pd.DataFrame, offset, fit) -> AircraftVehicle:
-    from aerosid.atmosphere import speed_of_sound_m_s
+    from aerosid.vehicles.atmosphere import speed_of_sound_m_s
 
     aircraft = _text(f.fds, "aircraft") or f.path.stem
     manoeuvre = _text(f.fds, "maneuver") or f.path.stem

@@ -5,7 +5,7 @@ import scipy.signal
 import scipy.stats
 
 from aerosid.design.predict import ResidualModel, predict_covariance
-from aerosid.regression import fit_linear
+from aerosid.identification.regression import fit_linear
 
 N = 3000
 FS = 100.0

@@ -15,7 +15,7 @@ import scipy.signal
 import scipy.stats
 
 from aerosid.diagnosis.localise import _Channel, _lag_findings
-from aerosid.models import ChannelModel, Term
+from aerosid.modelling.models import ChannelModel, Term
 
 FS_HZ = 100.0
 N = 4000  # 40 s

@@ -6,7 +6,7 @@ from scipy.integrate import solve_ivp
 from aerosid.estimation import (PlantModel, continuous_dynamics, continuous_jacobian, discrete_process_noise,
                                 measure, measure_many, measurement_jacobian, propagate)
 from aerosid.estimation.model import IX_ANG, chain_transition, rate_rhs
-from aerosid.rigid_body import body_rate_derivatives, inertia_constants, lever_arm_acceleration
+from aerosid.vehicles.rigid_body import body_rate_derivatives, inertia_constants, lever_arm_acceleration
 
 MODEL = PlantModel((150.0, 2500.0, 2550.0, 40.0), (1.1, -0.2, 0.3), 0.01)
 
@@ -53,7 +53,7 @@ def test_transition_is_the_jacobian_of_the_discrete_map(seed):
 
 
 def test_measurement_model_matches_rigid_body_module():
-    """h(x) = CG acceleration + lever-arm terms from aerosid.rigid_body (L, M, N per inertia)."""
+    """h(x) = CG acceleration + lever-arm terms from aerosid.vehicles.rigid_body (L, M, N per inertia)."""
     x = _state(4)
     c = inertia_constants(*MODEL.inertia_kg_m2)
     p, q, r = x[0:3]

@@ -7,9 +7,9 @@ import pytest
 
 from aerosid.identification.identified import IdentifiedModel
 from aerosid.identification.output_prediction import prediction_inputs
-from aerosid.models import default_models
+from aerosid.modelling.models import default_models
 from aerosid.simulation import load_case, simulate
-from aerosid.vehicle import load_vehicle
+from aerosid.vehicles.vehicle import load_vehicle
 
 
 @pytest.fixture(scope="session")

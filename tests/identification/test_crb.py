@@ -174,9 +174,9 @@ def test_coefficient_table_carries_the_bound():
     """crb_std reaches coefficients.parquet (schema with unit metadata) and the CLI table."""
     import pandera.errors
 
-    from aerosid.identify import Identification, format_table
-    from aerosid.models import ChannelModel, Term
-    from aerosid.regression import fit_linear
+    from aerosid.identification.identify import Identification, format_table
+    from aerosid.modelling.models import ChannelModel, Term
+    from aerosid.identification.regression import fit_linear
     from schemas.coefficients import Coefficients
 
     rng = np.random.default_rng(0)

@@ -6,7 +6,7 @@ import pytest
 
 from aerosid.ebm import process_telemetry
 from aerosid.estimation.findings import Finding, dilate, true_runs
-from aerosid.vehicle import load_vehicle
+from aerosid.vehicles.vehicle import load_vehicle
 
 
 def _run(telemetry):

@@ -37,7 +37,7 @@ def small_run(tmp_path_factory):
     """RUN_DIR as `aerosid run` lays it out (flight_data.parquet, coefficients.parquet,
     run.json), from the in-memory method on a 20 s seed-rlv flight; plus other manoeuvres."""
     from aerosid.ebm import process_telemetry
-    from aerosid.vehicle import load_vehicle
+    from aerosid.vehicles.vehicle import load_vehicle
 
     tmp = tmp_path_factory.mktemp("validate")
     own = _telemetry(tmp, "f0", 0)
@@ -55,7 +55,7 @@ def small_run(tmp_path_factory):
 def test_run_coefficients_are_the_model_and_a_version_takes_over(small_run, tmp_path):
     import shutil
 
-    from aerosid.versions import fit_version, models_from_spec
+    from aerosid.modelling.versions import fit_version, models_from_spec
 
     run = tmp_path / "run"
     shutil.copytree(small_run["run"], run)

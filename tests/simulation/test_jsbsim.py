@@ -12,15 +12,15 @@ import pytest
 
 pytest.importorskip("jsbsim")
 
-from aerosid.rigid_body import body_rate_derivatives, inertia_constants, lever_arm_acceleration  # noqa: E402
+from aerosid.vehicles.rigid_body import body_rate_derivatives, inertia_constants, lever_arm_acceleration  # noqa: E402
 from aerosid.simulation.jsbsim_flight import (  # noqa: E402
     TELEMETRY_COLUMNS,
     JSBSimUnavailable,
-    linear_prediction,
     load_jsbsim_config,
     simulate_jsbsim,
 )
-from aerosid.vehicle import DATA_DIR  # noqa: E402
+from aerosid.simulation.jsbsim_truth import linear_prediction  # noqa: E402
+from aerosid.vehicles.vehicle import DATA_DIR  # noqa: E402
 
 DEG = math.pi / 180.0
 

@@ -12,7 +12,7 @@ import pytest
 pytest.importorskip("jsbsim")
 
 from aerosid.io import read_parquet_metadata, telemetry_vehicle  # noqa: E402
-from aerosid.rigid_body import body_rate_derivatives, inertia_constants  # noqa: E402
+from aerosid.vehicles.rigid_body import body_rate_derivatives, inertia_constants  # noqa: E402
 from aerosid.simulation.jsbsim_aircraft import XML_TOLERANCE, simulate_aircraft  # noqa: E402
 from aerosid.simulation.jsbsim_design import UnsupportedAircraft, flight_design  # noqa: E402
 from aerosid.simulation.jsbsim_flight import (  # noqa: E402
@@ -24,7 +24,7 @@ from aerosid.simulation.jsbsim_flight import (  # noqa: E402
 )
 from aerosid.simulation.jsbsim_tables import AeroTables  # noqa: E402
 from aerosid.simulation.jsbsim_trim import open_fdm, start_engines, trim  # noqa: E402
-from aerosid.vehicle import load_vehicle  # noqa: E402
+from aerosid.vehicles.vehicle import load_vehicle  # noqa: E402
 
 AIRCRAFT = "pa28"   # a light single: ~36 s of flight, ~1 s to simulate
 

@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from aerosid.rigid_body import (angular_momentum, body_rate_derivatives, inertia_constants,
+from aerosid.vehicles.rigid_body import (angular_momentum, body_rate_derivatives, inertia_constants,
                                 lever_arm_acceleration, rotational_energy)
 
 INERTIA = inertia_constants(220.0, 2400.0, 2450.0, 12.0)

@@ -7,8 +7,8 @@ import pandas as pd
 import pytest
 from scipy import stats
 
-from aerosid.atmosphere import FastAtmosphere, density_kg_m3, speed_of_sound_m_s
-from aerosid.effects import CATALOGUE, parse_effect_spec
+from aerosid.vehicles.atmosphere import FastAtmosphere, density_kg_m3, speed_of_sound_m_s
+from aerosid.modelling.effects import CATALOGUE, parse_effect_spec
 from aerosid.simulation import load_case, simulate
 from aerosid.simulation.dynamics import R_EARTH_M, quat_to_dcm
 from aerosid.simulation.sensors import IMU_COLUMNS, RAW_COLUMNS
@@ -17,7 +17,7 @@ from aerosid.simulation.sensors import IMU_COLUMNS, RAW_COLUMNS
 def test_accelerometer_model_matches_finite_differences_of_the_trajectory(reference_flight):
     """Second differences of the sensor's position, minus effective gravity, rotated
     to body axes, equal the simulated accelerometer (lever arm included)."""
-    from aerosid.rigid_body import lever_arm_acceleration  # noqa: F401  (what is being checked)
+    from aerosid.vehicles.rigid_body import lever_arm_acceleration  # noqa: F401  (what is being checked)
 
     case = load_case("seed-rlv", duration_s=6.0, sample_rate_hz=1000.0)
     case = case.__class__(**{**case.__dict__, "faults": case.faults.without_faults()})

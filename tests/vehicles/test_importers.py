@@ -16,8 +16,8 @@ import scipy.io as sio
 from click.testing import CliRunner
 
 from aerosid.io import telemetry_vehicle
-from aerosid.rigid_body import lever_arm_acceleration
-from aerosid.vehicle import load_vehicle
+from aerosid.vehicles.rigid_body import lever_arm_acceleration
+from aerosid.vehicles.vehicle import load_vehicle
 from aerosid.vehicles.accel import recover_accel_offset
 from aerosid.vehicles.csv_import import import_csv, load_csv_map
 from aerosid.vehicles.importers import ImportDataError
@@ -154,7 +154,7 @@ def test_noise_sigma_of_white_noise_on_a_smooth_signal():
 
 
 def test_written_telemetry_names_its_vehicle_and_passes_the_run_preflight(written18, to18):
-    from aerosid.cli import _preflight
+    from aerosid.cli.run import _preflight
 
     tel = written18["telemetry"]
     assert telemetry_vehicle(tel) == str(written18["vehicle"].resolve())
