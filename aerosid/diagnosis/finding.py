@@ -6,7 +6,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from aerosid.diagnosis.core import _f  # JSON-safe float
+from aerosid.diagnosis.rule import _f  # JSON-safe float
 
 __all__ = ["Finding", "localisation_text", "localisation_hint"]
 

@@ -159,7 +159,7 @@ class _Channel:
 
 
 def _rule(r: dict) -> list[str]:
-    from aerosid.diagnosis.core import MIN_VARIANCE_SHARE, MIN_WINDOW_CONSISTENCY, P_MAX
+    from aerosid.diagnosis.rule import MIN_VARIANCE_SHARE, MIN_WINDOW_CONSISTENCY, P_MAX
 
     reasons = []
     if not r["p_value"] < P_MAX:
@@ -274,7 +274,7 @@ def _trend_findings(c: _Channel, mach_ref: float, t: np.ndarray) -> list[Finding
         if not tried:
             continue
         var, expr, r = max(tried, key=lambda s: abs(s[2]["t_value"]))
-        from aerosid.diagnosis.core import CONFUSION_R
+        from aerosid.diagnosis.rule import CONFUSION_R
 
         alike = tuple(f"trend:{term.coefficient}:{v}" for v, _, o in tried
                       if v != var and _corr(r["perp"], o["perp"]) >= CONFUSION_R)
@@ -451,7 +451,7 @@ def localise(signals: dict, y_by_channel: dict, models: dict, t: np.ndarray, gro
     y_by_channel: measured coefficient per channel; win: time-window index per sample;
     angle_sigma_rad: 1-sigma error of the recovered angles (for the errors-in-variables
     guard of the shapes: a shape the angle errors make by themselves is not significant)."""
-    from aerosid.diagnosis.core import CONFUSION_R
+    from aerosid.diagnosis.rule import CONFUSION_R
 
     perturbed = _perturbed(signals, float(angle_sigma_rad))
     result: dict[str, tuple[Finding, ...]] = {}
