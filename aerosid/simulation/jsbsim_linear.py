@@ -97,7 +97,7 @@ def model_coefficients(tables: AeroTables, values: dict, alpha, beta, cg_in, cl_
 def linear_truth(tables: AeroTables, base: dict, controls: Controls, slopes: dict | None = None) -> tuple[dict, dict, dict]:
     """Central differences of the model at the trim point: (about the CG, about the
     AERORP, the value and derivative table) in jsbsim_flight's names."""
-    from aerosid.simulation.jsbsim_truth import _LINEAR_VARS, _coefficient_table
+    from aerosid.simulation.jsbsim_truth import _coefficient_table, central_differences
 
     cg = (base["inertia/cg-x-in"], base["inertia/cg-y-in"], base["inertia/cg-z-in"])
     point = {"alpha": base["aero/alpha-rad"], "beta": base["aero/beta-rad"], "delta_p": base[controls.pitch],
@@ -109,16 +109,7 @@ def linear_truth(tables: AeroTables, base: dict, controls: Controls, slopes: dic
                                cl_squared_from_lift=True)
         return {k: float(v) for k, v in c.items()}
 
-    value = evaluate(point)
-    h = 1e-4
-    deriv = {}
-    for var in _LINEAR_VARS:
-        hi, lo = dict(point), dict(point)
-        hi[var] += h
-        lo[var] -= h
-        ch, cl = evaluate(hi), evaluate(lo)
-        deriv[var] = {k: (ch[k] - cl[k]) / (2 * h) for k in value}
-    lin = {"value": value, "d": deriv}
+    lin = central_differences(evaluate, point)
     return _coefficient_table(lin, point, "cg"), _coefficient_table(lin, point, "rp"), lin
 
 

@@ -14,6 +14,26 @@ from aerosid.simulation.sensors import IMU_COLUMNS
 _LINEAR_VARS = ["alpha", "beta", "delta_p", "delta_r", "delta_y", "p_hat", "q_hat", "r_hat", "alpha_dot_hat"]
 
 
+#: The central-difference step of the linear truth (every variable of _LINEAR_VARS).
+STEP = 1e-4
+
+
+def central_differences(evaluate, point: dict, h: float = STEP) -> dict[str, dict]:
+    """{"value": C, "d": {variable: {coefficient: dC/dvariable}}} by central differences of
+    ``evaluate`` (variables -> {coefficient: value}) at ``point``.  The point's variables may
+    be arrays over a flight's samples (aerosid.simulation.jsbsim_truth_avg): every entry is
+    then the mean over the samples; for scalars it is the plain central difference."""
+    value = {k: float(np.mean(v)) for k, v in evaluate(point).items()}
+    deriv = {}
+    for var in _LINEAR_VARS:
+        hi, lo = dict(point), dict(point)
+        hi[var] = point[var] + h
+        lo[var] = point[var] - h
+        ch, cl = evaluate(hi), evaluate(lo)
+        deriv[var] = {k: float(np.mean((np.asarray(ch[k]) - np.asarray(cl[k])) / (2 * h))) for k in value}
+    return {"value": value, "d": deriv}
+
+
 def _linearise(tables: AeroTables, point: dict, arm_ft, cbar_ft, span_ft) -> dict[str, dict[str, float]]:
     """Derivatives of CA, CY, CN and the moment coefficients (about the CG and the
     AERORP) at the trim point by central differences of c172x's own tables."""
@@ -23,17 +43,7 @@ def _linearise(tables: AeroTables, point: dict, arm_ft, cbar_ft, span_ft) -> dic
                                 x["p_hat"], x["q_hat"], x["r_hat"], x["alpha_dot_hat"])
         return {k: float(v) for k, v in body_coefficients(c, x["alpha"], x["beta"], arm_ft, cbar_ft, span_ft).items()}
 
-    base = evaluate(point)
-    steps = {"alpha": 1e-4, "beta": 1e-4, "delta_p": 1e-4, "delta_r": 1e-4, "delta_y": 1e-4,
-             "p_hat": 1e-4, "q_hat": 1e-4, "r_hat": 1e-4, "alpha_dot_hat": 1e-4}
-    deriv = {}
-    for v in _LINEAR_VARS:
-        hi, lo = dict(point), dict(point)
-        hi[v] += steps[v]
-        lo[v] -= steps[v]
-        ch, cl = evaluate(hi), evaluate(lo)
-        deriv[v] = {k: (ch[k] - cl[k]) / (2 * steps[v]) for k in base}
-    return {"value": base, "d": deriv}
+    return central_differences(evaluate, point)
 
 
 _LINEAR_MODEL = {  # the regressors of each coefficient's linear model

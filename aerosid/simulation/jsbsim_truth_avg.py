@@ -32,11 +32,11 @@ from typing import Callable
 import numpy as np
 
 from aerosid.simulation.jsbsim_tables import AeroTables, body_coefficients
+from aerosid.simulation.jsbsim_truth import STEP  # the central-difference step of the at-trim truth
 
 __all__ = ["STEP", "flight_average", "generated_state", "c172x_state", "generated_flight_average",
            "c172x_flight_average"]
 
-STEP = 1e-4   # the central-difference step of the at-trim truth
 NOTE = ("flight-averaged linear truth = mean over the flight's samples of the central difference (h = 1e-4) of "
         "the aircraft's own aerodynamic model at each sample's state (every input of the model as recorded; "
         "moments about the sample's CG); intercepts = mean(C) - sum mean(dC/dx) mean(x) "
@@ -49,7 +49,7 @@ def flight_average(evaluate: Evaluate, x: dict[str, np.ndarray], h: float = STEP
     """The flight-averaged truth table.  evaluate(x) -> {coefficient: array over the
     samples} (CA, CY, CN, Cl, Cm, Cn about the CG and Cl_rp, Cm_rp, Cn_rp), vectorised over
     the samples; x: the model's variables (jsbsim_flight._LINEAR_VARS) per sample."""
-    from aerosid.simulation.jsbsim_truth import _LINEAR_VARS, _coefficient_table
+    from aerosid.simulation.jsbsim_truth import _LINEAR_VARS, _coefficient_table, central_differences
 
     missing = [v for v in _LINEAR_VARS if v not in x]
     if missing:
@@ -58,16 +58,9 @@ def flight_average(evaluate: Evaluate, x: dict[str, np.ndarray], h: float = STEP
     n = len(x["alpha"])
     if n == 0:
         raise ValueError("flight_average: the flight has no samples")
-    value = {k: float(np.mean(v)) for k, v in evaluate(x).items()}
-    deriv = {}
-    for var in _LINEAR_VARS:
-        hi, lo = dict(x), dict(x)
-        hi[var] = x[var] + h
-        lo[var] = x[var] - h
-        ch, cl = evaluate(hi), evaluate(lo)
-        deriv[var] = {k: float(np.mean((np.asarray(ch[k]) - np.asarray(cl[k])) / (2 * h))) for k in value}
+    lin = central_differences(evaluate, x, h)
     point = {k: float(np.mean(x[k])) for k in _LINEAR_VARS}
-    return _coefficient_table({"value": value, "d": deriv}, point, "cg")
+    return _coefficient_table(lin, point, "cg")
 
 
 def generated_state(tables: AeroTables, rec: dict, controls, slopes: dict | None = None,
