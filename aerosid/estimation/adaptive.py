@@ -22,7 +22,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from aerosid.estimation.findings import GATED_RUN_MIN_S, MERGE_GAP_S, dilate, true_runs
+from aerosid.estimation.findings import GATED_RUN_MIN_S, MERGE_GAP_S, dilate, sample_interval, true_runs
 from aerosid.estimation.local_q import follow_locally
 from aerosid.estimation.pipeline import EBMOptions, EBMResult, smooth_flight
 
@@ -77,7 +77,7 @@ def gated_channels(result: EBMResult, min_run_s: float = GATED_RUN_MIN_S) -> lis
     noise would let into the smoothed signals (a 1.5 s, +25 m/s^2 a_z step on seed-rlv,
     absorbed that way, took C_m_alpha to -90 % without a word): it stays a finding."""
     t = result.t_s
-    dt = float(np.median(np.diff(t))) if t.size > 1 else 1.0
+    dt = sample_interval(t)
     need = max(1, int(np.ceil(min_run_s / dt)))
     merge = int(round(MERGE_GAP_S / dt))
     return [j for j in range(result.gate_flags.shape[1]) if _systematic(result.gate_flags[:, j], need, merge)]
@@ -97,7 +97,7 @@ def smooth_flight_adaptive(t_s, z, valid, inertia_kg_m2, sensor_offset_m, z_fill
         bad = gated_channels(result)
         flagged = np.zeros(result.t_s.size, bool)
         flagged[np.asarray(result.divergence_samples, dtype=int)] = True
-        dt = float(np.median(np.diff(result.t_s))) if result.t_s.size > 1 else 1.0
+        dt = sample_interval(result.t_s)
         excursion = _systematic(flagged, 1, int(round(MERGE_GAP_S / dt)))
         if not bad and not excursion:
             break

@@ -71,6 +71,12 @@ class Finding:
         return asdict(self)
 
 
+def sample_interval(t_s: np.ndarray) -> float:
+    """The segment's sample interval [s]: the median step of t_s (1 for fewer than two samples)."""
+    t = np.asarray(t_s, float)
+    return float(np.median(np.diff(t))) if t.size > 1 else 1.0
+
+
 def true_runs(mask: np.ndarray) -> list[tuple[int, int]]:
     """[start, stop) index pairs of the runs of True."""
     m = np.asarray(mask, bool)
@@ -115,7 +121,7 @@ def smoother_findings(t_s: np.ndarray, gated: dict[str, np.ndarray], excursion: 
     """Findings of a smoothed segment: gated runs per channel, windowed-NIS excursions,
     the mean NIS against its band.  Returns them and the mask of samples to cut."""
     t = np.asarray(t_s, float)
-    dt = float(np.median(np.diff(t))) if t.size > 1 else 1.0
+    dt = sample_interval(t)
     found, cut = [], np.zeros(t.size, bool)
     for ch, g in gated.items():
         f, hit = span_findings("gated", segment, ch, t, merge_close(g, int(round(MERGE_GAP_S / dt))),

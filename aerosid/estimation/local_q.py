@@ -35,7 +35,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.stats import chi2
 
-from aerosid.estimation.findings import MERGE_GAP_S, dilate, merge_close, true_runs
+from aerosid.estimation.findings import MERGE_GAP_S, dilate, merge_close, sample_interval, true_runs
 
 #: Factor on the involved chains' intensity over a manoeuvre's span, per round.
 ESCALATION = 30.0
@@ -80,7 +80,7 @@ class LocalEvent:
 def event_mask(result) -> np.ndarray:
     """Samples gated on any channel or flagged by the windowed NIS, runs closer than MERGE_GAP_S merged."""
     t = result.t_s
-    dt = float(np.median(np.diff(t))) if t.size > 1 else 1.0
+    dt = sample_interval(t)
     m = np.asarray(result.gate_flags, bool).any(axis=1)
     m[np.asarray(result.divergence_samples, dtype=int)] = True
     return merge_close(m, int(round(MERGE_GAP_S / dt)))
@@ -116,7 +116,7 @@ def controls_moving(controls: np.ndarray | None, a: int, b: int, lead: int) -> b
 def classify(result, controls: np.ndarray | None = None) -> list[LocalEvent]:
     """The events of a smoothed segment and whether each is a manoeuvre (module doc)."""
     t = result.t_s
-    dt = float(np.median(np.diff(t))) if t.size > 1 else 1.0
+    dt = sample_interval(t)
     I = result.innovation_sq
     if I is None:
         return []
@@ -135,7 +135,7 @@ def classify(result, controls: np.ndarray | None = None) -> list[LocalEvent]:
 def raise_locally(q_local: np.ndarray, t_s: np.ndarray, events: list[LocalEvent]) -> np.ndarray:
     """q_local with the manoeuvres' chains multiplied by ESCALATION over their span +- MARGIN_S."""
     out = np.array(q_local, dtype=float, copy=True)
-    dt = float(np.median(np.diff(t_s))) if t_s.size > 1 else 1.0
+    dt = sample_interval(t_s)
     margin = int(round(MARGIN_S / dt))
     for ev in events:
         if not ev.manoeuvre:
