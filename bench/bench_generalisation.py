@@ -205,15 +205,8 @@ def one(job: tuple[str, int]) -> dict:
             row[f"{name}_cover"] = bool(abs(est - truth) <= 1.96 * se)
         if name in orc and math.isfinite(truth) and truth != 0:
             row[f"{name}_oracle_pct"] = 100.0 * (orc[name] / truth - 1.0)
-    silent = []
-    if not row["diverged"] and not found:  # a run with findings said so ("ok with findings")
-        for name in BARRED:
-            z, e, cov = row.get(f"{name}_z"), row.get(f"{name}_err_pct"), row.get(f"{name}_cover")
-            if z is None:
-                continue
-            if abs(z) > SILENT_SIGMA or (abs(e) > SILENT_PCT and not cov):
-                silent.append(f"{name} {e:+.0f} % ({z:+.1f} sigma)")
-    row["silent_failure"] = "; ".join(silent)
+    # a run with findings said so ("ok with findings"): averaged.silent leaves it out
+    row["silent_failure"] = averaged.silent(row, BARRED, SILENT_SIGMA, SILENT_PCT)
     averaged.add_columns(row, flight, COEFFICIENTS, COEFFICIENTS, truth_of, BARRED, SILENT_SIGMA, SILENT_PCT)
     return row
 
