@@ -335,6 +335,8 @@ def _metrics(ident, vehicle: str, note: str, parent: str | None, version: str, m
         return x if math.isfinite(x) else None
 
     chans = {}
+    crb = getattr(ident, "crb_std", {}) or {}
+    identities = tuple(getattr(ident, "identities", ()))
     for ch, fit in ident.fits.items():
         chans[ch] = {
             "terms": [_term_label(t) for t in ident.models[ch].terms],
@@ -342,7 +344,12 @@ def _metrics(ident, vehicle: str, note: str, parent: str | None, version: str, m
             "r2": f(fit.r2), "pse": f(fit.pse), "f_stat": f(fit.f_stat),
             "f_stat_corrected": f(fit.f_stat_corrected), "n_eff": f(fit.n_eff), "n_obs": int(fit.n_obs),
             "coefficients": {n: {"estimate": f(fit.estimate[i]), "std_error": f(fit.std_error[i]),
-                                 "std_error_ols": f(fit.std_error_ols[i])} for i, n in enumerate(fit.names)},
+                                 "std_error_ols": f(fit.std_error_ols[i]),
+                                 # the Cramer-Rao bound on the std (aerosid.identification.crb), as in
+                                 # coefficients.parquet: how far the reported sigma is from the best possible
+                                 "crb_std": f(crb.get(n, float("nan")))} for i, n in enumerate(fit.names)},
+            # alpha/beta inverted from this channel: its fit returns the preflight database by construction
+            "identity": ch in identities,
             "warnings": list(fit.warnings),
         }
     return {"version": version, "parent": parent, "note": note,

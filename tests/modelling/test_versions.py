@@ -79,6 +79,15 @@ def test_versions_grow_with_parent_links_and_the_error_falls(run_dir):
     cm = metrics["channels"]["Cm"]
     assert {"rms_residual", "r2", "pse", "f_stat", "f_stat_corrected", "coefficients"} <= set(cm)
     assert cm["coefficients"]["Cm_alpha_delta_p"]["std_error"] > 0
+    # the Cramer-Rao bound travels with each coefficient, as in coefficients.parquet
+    coefs = json.loads((run_dir / "models" / "v002" / "metrics.json").read_text())["channels"]["Cm"]["coefficients"]
+    table = __import__("pandas").read_parquet(run_dir / "models" / "v002" / "coefficients.parquet")
+    for name, c in coefs.items():
+        want = float(table.loc[table["coefficient"] == name, "crb_std"].iloc[0])
+        assert (c["crb_std"] is None) == (not np.isfinite(want))
+        if c["crb_std"] is not None:
+            assert c["crb_std"] == pytest.approx(want)
+    assert cm["identity"] is False
     assert abs(cm["coefficients"]["Cm_alpha_delta_p"]["estimate"] / CATALOGUE["control_alpha"].value - 1) < 0.1
     assert "v002" in h.summary() and "control_alpha" in h.summary()
     assert latest_models(run_dir)["Cm"].names[-1] == "Cm_junk"
