@@ -245,7 +245,42 @@ def signals_from_flight_data(fd: pd.DataFrame, d_m: float, lateral_m: float | No
     }
 
 
+#: alpha_dot_hat of a vane aircraft from the flight-path kinematics above a corner and the
+#: vanes below it (aerosid.modelling.flight_path).  Off: measured worse than the vane derivative
+#: (docs/estimation.md, "alpha-dot from the flight-path kinematics"): exact alpha-dot is nearly
+#: q + a_n/V, which makes C_m_alpha and C_m_alpha_dot confounded (VIF 84 -> 222 on pa28).
+KINEMATIC_ALPHA_DOT = False
+#: ... and alpha itself from the same complementary filter (needs KINEMATIC_ALPHA_DOT).  Off too.
+KINEMATIC_ALPHA = False
+
+
 def vehicle_signals(fd: pd.DataFrame, vehicle) -> dict[str, np.ndarray]:
-    """signals_from_flight_data with the vehicle's pitch and lateral reference lengths."""
-    return signals_from_flight_data(fd, vehicle.length_pitch_m, vehicle.length_lateral_m,
-                                    vehicle.derivative_half_window_s)
+    """signals_from_flight_data with the vehicle's pitch and lateral reference lengths.
+
+    With vanes (``[air_data] source = "vanes"``) and KINEMATIC_ALPHA_DOT set, alpha_dot_hat comes
+    from the flight-path kinematics (rates, the specific forces -C_A, -C_N times qbar S/m) above
+    f_c = band / 5 and from the vane angle below (aerosid.modelling.flight_path); with
+    KINEMATIC_ALPHA alpha too (alpha_r, phi_r recomputed).  Both are off by default: on 10 cached
+    JSBSim flights each (identify, SIMEX on) C_m_alpha mean / RMS error went pa28 -4.0 / 5.7 ->
+    -6.0 / 9.7 %, F4N -4.9 / 5.2 -> -13.1 / 16.7 %, OV10 +3.0 / 3.2 -> -2.3 / 2.6 %
+    (bench/results/kinematic_adot.md).  SIMEX (aerosid.identification.eiv) needs no change
+    either way: its design() calls this function on the perturbed frame."""
+    sig = signals_from_flight_data(fd, vehicle.length_pitch_m, vehicle.length_lateral_m,
+                                   vehicle.derivative_half_window_s)
+    if KINEMATIC_ALPHA_DOT and getattr(vehicle, "air_data_source", None) == "vanes" and len(fd):
+        from aerosid.modelling.flight_path import KINEMATIC_COLUMNS, flight_data_alpha
+        from aerosid.identification.inversion import total_angles
+
+        if set(KINEMATIC_COLUMNS) <= set(fd.columns):
+            band = fd["band_hz"].to_numpy(float) if "band_hz" in fd.columns else np.array([np.nan])
+            # the band edge of band-limited flight data, else the Savitzky-Golay window's corner
+            edge = (float(np.min(band)) if np.all(np.isfinite(band))
+                    else 1.0 / (2.0 * vehicle.derivative_half_window_s))
+            groups = ((fd["flight"].astype(str) + "/" + fd["segment"].astype(str)).to_numpy()
+                      if {"flight", "segment"} <= set(fd.columns) else None)
+            kin = flight_data_alpha(fd, sig, vehicle, edge, groups)
+            if KINEMATIC_ALPHA:
+                sig["alpha"] = kin.alpha
+                sig["alpha_r"], sig["phi_r"] = total_angles(kin.alpha, sig["beta"])
+            sig["alpha_dot_hat"] = kin.alpha_dot * vehicle.length_pitch_m / (2 * sig["V"])
+    return sig
