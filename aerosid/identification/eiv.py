@@ -35,15 +35,18 @@ SEED = 20261122
 
 
 def filtered_noise(rng: np.random.Generator, groups: np.ndarray, t_s: np.ndarray, sigma,
-                   cutoff_hz: float | None) -> np.ndarray:
+                   cutoff_hz) -> np.ndarray:
     """White noise of 1-sigma `sigma` (a number or one per sample) through the low-pass the
-    angles went through, per flight segment."""
+    angles went through, per flight segment.  cutoff_hz: one corner [Hz] (None: white), or one
+    per sample (each segment takes its median: pooled flights keep their own band)."""
     out = np.empty(len(t_s))
     sig = np.broadcast_to(np.asarray(sigma, float), (len(t_s),))
+    per_sample = cutoff_hz is not None and np.ndim(cutoff_hz) > 0
     for g in pd.unique(groups):
         idx = np.flatnonzero(groups == g)
         fs = 1.0 / float(np.median(np.diff(t_s[idx]))) if idx.size > 1 else 1.0
-        out[idx] = zero_phase_low_pass(sig[idx] * rng.standard_normal(idx.size), fs, cutoff_hz)
+        cut = float(np.median(np.asarray(cutoff_hz, float)[idx])) if per_sample else cutoff_hz
+        out[idx] = zero_phase_low_pass(sig[idx] * rng.standard_normal(idx.size), fs, cut)
     return out
 
 
@@ -69,15 +72,38 @@ def with_angle_noise(fd: pd.DataFrame, rng: np.random.Generator, groups: np.ndar
     return f
 
 
-def simex_estimates(fd: pd.DataFrame, y_by_channel: dict[str, np.ndarray], design, sigma_rad: float,
-                    cutoff_hz: float | None) -> dict[str, "SimexResult"]:
+def with_rate_noise(fd: pd.DataFrame, rng: np.random.Generator, groups: np.ndarray, sigma: tuple,
+                    cutoff_hz) -> pd.DataFrame:
+    """A copy of the flight data with extra noise on p, q, r: sigma = (sigma_p, sigma_q,
+    sigma_r) [rad/s], white-noise 1-sigma (numbers or arrays per sample) before the low-pass;
+    cutoff_hz: the band the rates went through (a number, or one per sample), None: white."""
+    f = fd.copy()
+    t = f["t_s"].to_numpy(float)
+    for col, sig in zip(RATE_COLUMNS, sigma):
+        f[col] = f[col].to_numpy(float) + filtered_noise(rng, groups, t, sig, cutoff_hz)
+    return f
+
+
+#: The body-rate columns the gyro part of the correction adds noise to.
+RATE_COLUMNS = ("p_rad_s", "q_rad_s", "r_rad_s")
+
+
+def simex_estimates(fd: pd.DataFrame, y_by_channel: dict[str, np.ndarray], design, sigma_rad,
+                    cutoff_hz: float | None, rate_sigma: tuple | None = None,
+                    rate_cutoff_hz=None) -> dict[str, "SimexResult"]:
     """Corrected coefficient vectors per channel, with their sigma's ingredients.
 
     fd: the flight data of the fit (sorted as fitted). y_by_channel: the responses.
     design: fd -> {channel: (n, k) regressor matrix} (the models on that frame's signals).
-    sigma_rad: the vanes' raw noise 1-sigma [rad]; cutoff_hz: the vane low-pass corner.
+    sigma_rad: the vanes' raw noise 1-sigma [rad] (or (sigma_alpha, sigma_beta)), None: the
+    angles are exact; cutoff_hz: the vane low-pass corner.  rate_sigma: (sigma_p, sigma_q,
+    sigma_r) [rad/s] of the gyros' white noise, None: the rates are exact (the angle-only
+    correction, bit-identical to it); rate_cutoff_hz: the band the rates went through (a
+    number, or one per sample).  Both noises are added in the same draws (one lambda scales
+    every variance), the rates' from their own generator so the angles' draws do not change.
     """
     rng = np.random.default_rng(SEED)
+    rng_rates = np.random.default_rng(SEED + 1)
     groups = (fd["flight"].astype(str) + "/" + fd["segment"].astype(str)).to_numpy()
 
     def fit_all(frame: pd.DataFrame) -> dict[str, np.ndarray]:
@@ -89,9 +115,14 @@ def simex_estimates(fd: pd.DataFrame, y_by_channel: dict[str, np.ndarray], desig
     for lam in LAMBDAS:
         acc = {ch: np.zeros_like(b) for ch, b in naive.items()}
         for _ in range(REPLICATES):
-            scaled = (tuple(np.asarray(x) * np.sqrt(lam) for x in sigma_rad) if isinstance(sigma_rad, tuple)
-                      else sigma_rad * np.sqrt(lam))
-            f = with_angle_noise(fd, rng, groups, scaled, cutoff_hz)
+            f = fd
+            if sigma_rad is not None:
+                scaled = (tuple(np.asarray(x) * np.sqrt(lam) for x in sigma_rad) if isinstance(sigma_rad, tuple)
+                          else sigma_rad * np.sqrt(lam))
+                f = with_angle_noise(f, rng, groups, scaled, cutoff_hz)
+            if rate_sigma is not None:
+                f = with_rate_noise(f, rng_rates, groups, tuple(np.asarray(x, float) * np.sqrt(lam)
+                                                               for x in rate_sigma), rate_cutoff_hz)
             for ch, est in fit_all(f).items():
                 acc[ch] += est / REPLICATES
         for ch in curves:
