@@ -100,10 +100,12 @@ def simex_estimates(fd: pd.DataFrame, y_by_channel: dict[str, np.ndarray], desig
     sigma_r) [rad/s] of the gyros' white noise, None: the rates are exact (the angle-only
     correction, bit-identical to it); rate_cutoff_hz: the band the rates went through (a
     number, or one per sample).  Both noises are added in the same draws (one lambda scales
-    every variance), the rates' from their own generator so the angles' draws do not change.
+    every variance), the rates' from their own generator so the angles' draws do not change;
+    the rates' draws are common random numbers (replicate b adds the same noise, scaled by
+    sqrt(lambda), at every lambda), so the curve's Monte-Carlo error does not pass for a
+    curvature the quadratic extrapolant would amplify.
     """
     rng = np.random.default_rng(SEED)
-    rng_rates = np.random.default_rng(SEED + 1)
     groups = (fd["flight"].astype(str) + "/" + fd["segment"].astype(str)).to_numpy()
 
     def fit_all(frame: pd.DataFrame) -> dict[str, np.ndarray]:
@@ -114,15 +116,16 @@ def simex_estimates(fd: pd.DataFrame, y_by_channel: dict[str, np.ndarray], desig
     curves = {ch: [b] for ch, b in naive.items()}
     for lam in LAMBDAS:
         acc = {ch: np.zeros_like(b) for ch, b in naive.items()}
-        for _ in range(REPLICATES):
+        for b in range(REPLICATES):
             f = fd
             if sigma_rad is not None:
                 scaled = (tuple(np.asarray(x) * np.sqrt(lam) for x in sigma_rad) if isinstance(sigma_rad, tuple)
                           else sigma_rad * np.sqrt(lam))
                 f = with_angle_noise(f, rng, groups, scaled, cutoff_hz)
             if rate_sigma is not None:
-                f = with_rate_noise(f, rng_rates, groups, tuple(np.asarray(x, float) * np.sqrt(lam)
-                                                               for x in rate_sigma), rate_cutoff_hz)
+                # common random numbers: replicate b draws the same gyro noise at every lambda
+                f = with_rate_noise(f, np.random.default_rng([SEED + 1, b]), groups,
+                                    tuple(np.asarray(x, float) * np.sqrt(lam) for x in rate_sigma), rate_cutoff_hz)
             for ch, est in fit_all(f).items():
                 acc[ch] += est / REPLICATES
         for ch in curves:

@@ -46,3 +46,17 @@ def test_zero_gyro_noise_and_the_switch_off_are_bit_identical_to_the_angle_only_
     est_off = before.table().set_index("coefficient")["estimate"]
     assert abs(est_on["Cm_q"] / est_off["Cm_q"] - 1) > 1e-3
     assert "gyro noise in the band-limited rates" in " ".join(on.table()["warnings"])
+
+
+def test_the_gyro_noise_is_the_filters_R_else_the_band_estimate_and_zero_for_the_smoothers_rates():
+    import pandas as pd
+
+    from aerosid.identification.flight_data import gyro_eiv_sigma
+
+    sm = pd.DataFrame({"R_sigma_p_rad_s": [0.003] * 4, "R_sigma_q_rad_s": [0.002, 0.002, np.nan, 0.0]})
+    out = gyro_eiv_sigma(sm, (0.01, 0.02, 0.03))
+    assert list(out) == list(RATE_EIV_COLUMNS)
+    assert np.array_equal(out["eiv_sigma_p_rad_s"], [0.003] * 4)  # the filter's R
+    assert np.array_equal(out["eiv_sigma_q_rad_s"], [0.002, 0.002, 0.02, 0.02])  # R unusable: the band's
+    assert np.array_equal(out["eiv_sigma_r_rad_s"], [0.03] * 4)  # no R column: the band's
+    assert all(np.array_equal(v, np.zeros(4)) for v in gyro_eiv_sigma(sm, None).values())  # smoother's rates
