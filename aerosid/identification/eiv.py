@@ -72,20 +72,27 @@ def with_angle_noise(fd: pd.DataFrame, rng: np.random.Generator, groups: np.ndar
     return f
 
 
-def with_rate_noise(fd: pd.DataFrame, rng: np.random.Generator, groups: np.ndarray, sigma: tuple,
-                    cutoff_hz) -> pd.DataFrame:
-    """A copy of the flight data with extra noise on p, q, r: sigma = (sigma_p, sigma_q,
-    sigma_r) [rad/s], white-noise 1-sigma (numbers or arrays per sample) before the low-pass;
-    cutoff_hz: the band the rates went through (a number, or one per sample), None: white."""
-    f = fd.copy()
-    t = f["t_s"].to_numpy(float)
-    for col, sig in zip(RATE_COLUMNS, sigma):
-        f[col] = f[col].to_numpy(float) + filtered_noise(rng, groups, t, sig, cutoff_hz)
+def rate_noise(rng: np.random.Generator, groups: np.ndarray, t_s: np.ndarray, sigma: tuple,
+               cutoff_hz) -> np.ndarray:
+    """(N, 3) noise for p, q, r: sigma = (sigma_p, sigma_q, sigma_r) [rad/s], the gyros'
+    white-noise 1-sigma (numbers or arrays per sample) before the low-pass; cutoff_hz: the band
+    the rates went through (a number, or one per sample), None: white."""
+    return np.column_stack([filtered_noise(rng, groups, t_s, sig, cutoff_hz) for sig in sigma])
+
+
+def with_rate_noise(fd: pd.DataFrame, noise: np.ndarray, copy: bool = True) -> pd.DataFrame:
+    """The flight data with `noise` (N, 3) added to p, q, r (a copy unless copy=False)."""
+    f = fd.copy() if copy else fd
+    for j, col in enumerate(RATE_COLUMNS):
+        f[col] = f[col].to_numpy(float) + noise[:, j]
     return f
 
 
 #: The body-rate columns the gyro part of the correction adds noise to.
 RATE_COLUMNS = ("p_rad_s", "q_rad_s", "r_rad_s")
+#: The gyro draws (REPLICATES x N x 3) are kept for the next lambda below this size [bytes],
+#: else drawn again from the same seeds (the same numbers either way).
+RATE_CACHE_BYTES = 256e6
 
 
 def simex_estimates(fd: pd.DataFrame, y_by_channel: dict[str, np.ndarray], design, sigma_rad,
@@ -114,6 +121,19 @@ def simex_estimates(fd: pd.DataFrame, y_by_channel: dict[str, np.ndarray], desig
 
     naive = fit_all(fd)
     curves = {ch: [b] for ch, b in naive.items()}
+    t = fd["t_s"].to_numpy(float)
+    cache: dict[int, np.ndarray] = {}
+    keep = REPLICATES * len(fd) * 3 * 8 <= RATE_CACHE_BYTES
+
+    def gyro_draw(b: int) -> np.ndarray:
+        """Replicate b's gyro noise at lambda = 1 (common random numbers: seeded by b)."""
+        if b in cache:
+            return cache[b]
+        noise = rate_noise(np.random.default_rng([SEED + 1, b]), groups, t, rate_sigma, rate_cutoff_hz)
+        if keep:
+            cache[b] = noise
+        return noise
+
     for lam in LAMBDAS:
         acc = {ch: np.zeros_like(b) for ch, b in naive.items()}
         for b in range(REPLICATES):
@@ -122,10 +142,8 @@ def simex_estimates(fd: pd.DataFrame, y_by_channel: dict[str, np.ndarray], desig
                 scaled = (tuple(np.asarray(x) * np.sqrt(lam) for x in sigma_rad) if isinstance(sigma_rad, tuple)
                           else sigma_rad * np.sqrt(lam))
                 f = with_angle_noise(f, rng, groups, scaled, cutoff_hz)
-            if rate_sigma is not None:
-                # common random numbers: replicate b draws the same gyro noise at every lambda
-                f = with_rate_noise(f, np.random.default_rng([SEED + 1, b]), groups,
-                                    tuple(np.asarray(x, float) * np.sqrt(lam) for x in rate_sigma), rate_cutoff_hz)
+            if rate_sigma is not None:  # the same draw at every lambda, scaled (the low-pass is linear)
+                f = with_rate_noise(f, np.sqrt(lam) * gyro_draw(b), copy=f is fd)
             for ch, est in fit_all(f).items():
                 acc[ch] += est / REPLICATES
         for ch in curves:
