@@ -1,4 +1,4 @@
-"""Errors in the regressors: SIMEX correction for air-data vane noise.
+"""Errors in the regressors: SIMEX correction for the noise in the angles and the body rates.
 
 With alpha and beta read from vanes, the regressors carry the vanes' noise (after the
 vane low-pass) and so do the signals derived from them (alpha-dot, beta-dot, alpha_r,
@@ -18,6 +18,35 @@ the quadratic and the linear extrapolant (SimexResult.std_error): without them t
 intervals of the de-attenuated slopes covered 62 % on seed-rlv (band-limited flight data,
 angles inverted from the accelerometers). The draws are seeded, so the result
 is reproducible.
+
+The gyros. The band-limited rates p, q, r (aerosid.identification.band) are the measured gyros
+through the common low-pass, so they carry the gyros' white noise through that low-pass, and so
+do q_hat, p_hat, r_hat. Replacing only the rates by the band-limited truth moved C_m_alpha by
+F4N +6.3 %, OV10 +1.4 %, pa28 +1.1 % (bench/results/attribution_notes.md, finding 3). The same
+draws therefore also add noise of variance lambda sigma_g^2 to p, q, r through the same low-pass
+(the flight data's band_hz), where sigma_g is the flight data's eiv_sigma_p/q/r_rad_s: the
+measurement noise the run's filter used for the gyros (R, from the noise dispersion above the
+signal band, aerosid.estimation.init). On the simulators it was within 4.5 % of the noise
+actually added, against 9 % for the band module's first-difference estimate. Only the
+regressors get the noise; the response is left alone. Its noise (the derivative of the
+band-limited gyro noise) has no correlation with the rates' noise at zero lag, and it costs
+<= 0.4 % (finding 4). The rates' draws are common random numbers across lambda: replicate b adds
+the same noise, scaled by sqrt(lambda), at every lambda. With independent draws, the Monte-Carlo
+error of 40 replicates passed for a curvature. The quadratic amplified it, and on OV10 it moved
+C_m_alpha by -3.8 % where the gyro noise makes -1.4 %. The rates' draws come from their own
+generator. Without gyro noise (identify(gyro_eiv=False), or flight data without or with zero
+eiv_sigma_p/q/r), the result is bit-identical to the angle-only correction (tested). Extra cost
+about 5 % of identify (each replicate's gyro noise is filtered once and scaled per lambda).
+
+Measured on 10 cached JSBSim flights each (bench/results/gyro_simex.md; mean error % of the
+truth). The gyro part moves C_m_alpha toward the answer with the true rates: the
+rates-true-minus-flight difference against the SIMEX move is F4N -4.2 against -1.5 (with the
+true angles -6.2 against -5.1), OV10 -1.5 against -2.1, pa28 -0.6 against -0.6. The F4N
+shortfall with the vane angles comes from the joint extrapolation. The vane noise's saturating
+alpha_dot_hat (finding 2) damps the gyro effect at the flight's noise level. Against the truth,
+C_m_alpha goes OV10 +3.0 -> +0.9, F4N -4.9 -> -6.5 (its oracle is itself -6.3 %), and pa28
+-4.0 -> -4.6. On F4N and pa28 the alpha-dot under-correction had been partly cancelling the
+gyro error.
 """
 from __future__ import annotations
 
