@@ -61,6 +61,8 @@ from aerosid.identification.inversion import total_angles
 LAMBDAS = (0.5, 1.0, 1.5, 2.0)
 REPLICATES = 40  # Monte-Carlo noise of the correction: 10 left +-8 % scatter on seed-rlv C_m_alpha, 60 +-5 %
 SEED = 20261122
+#: The body-rate columns the gyro part of the correction adds noise to.
+RATE_COLUMNS = ("p_rad_s", "q_rad_s", "r_rad_s")
 
 
 def filtered_noise(rng: np.random.Generator, groups: np.ndarray, t_s: np.ndarray, sigma,
@@ -117,8 +119,6 @@ def with_rate_noise(fd: pd.DataFrame, noise: np.ndarray, copy: bool = True) -> p
     return f
 
 
-#: The body-rate columns the gyro part of the correction adds noise to.
-RATE_COLUMNS = ("p_rad_s", "q_rad_s", "r_rad_s")
 #: The gyro draws (REPLICATES x N x 3) are kept for the next lambda below this size [bytes],
 #: else drawn again from the same seeds (the same numbers either way).
 RATE_CACHE_BYTES = 256e6
