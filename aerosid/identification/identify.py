@@ -209,15 +209,24 @@ def mach_window_mask(mach: np.ndarray, reference: float, half_width: float | Non
     return np.abs(mach - reference) <= half_width
 
 
+#: The rates' part of SIMEX is off by default.  Right in isolation (it moves C_m_alpha toward the
+#: true-rates answer on F4N, OV10 and pa28, bench/results/gyro_simex.md), but joined to the
+#: angles' SIMEX, which under-corrects the vane noise in alpha_dot_hat, it made the estimates
+#: worse on three of the four aircraft measured, including T37, which it had not been developed
+#: on (generalisation bench, 10 seeds, C_m_alpha mean error off -> on: OV10 +3.0 -> +0.9 %,
+#: T37 -1.4 -> -5.2 %, F4N -4.6 -> -6.1 %, pa28 -4.0 -> -4.6 %; docs/estimation.md).
+GYRO_EIV_DEFAULT = False
+
+
 def identify(flight_data: pd.DataFrame, vehicle: Vehicle, models: dict[str, ChannelModel] | None = None,
              mach_half_width: float | None = 0.5, cov: str = "morelli_klein",
-             gyro_eiv: bool = True) -> Identification:
+             gyro_eiv: bool = GYRO_EIV_DEFAULT) -> Identification:
     """Fit every channel's model on the samples with |M - M_ref| <= mach_half_width.
     Pooled flights (several values of ``flight``: manoeuvres of one aircraft) are fitted
     together; the coloured-residual correction treats each flight as its own record
     (``fit_linear(groups=...)``).  The estimates are corrected for the noise in the angles
     and (gyro_eiv, the flight data's eiv_sigma_p/q/r columns) in the rates by SIMEX
-    (aerosid.identification.eiv); gyro_eiv=False: the angles only, as before the rates' part."""
+    (aerosid.identification.eiv); gyro_eiv=False (the default, GYRO_EIV_DEFAULT): the angles only."""
     models = models or default_models(vehicle)
     fd = flight_data.sort_values(["flight", "t_s"], kind="stable").reset_index(drop=True)
     mask = mach_window_mask(fd["mach"].to_numpy(), vehicle.mach_reference, mach_half_width)

@@ -41,7 +41,8 @@ def test_zero_gyro_noise_and_the_switch_off_are_bit_identical_to_the_angle_only_
     assert _same(identify(zero, veh, models), before)
     assert _same(identify(noisy, veh, models, gyro_eiv=False), before)
     assert "gyro noise" not in " ".join(before.table()["warnings"])
-    on = identify(noisy, veh, models)  # the comparison above can fail: the gyro noise moves the rate terms
+    assert _same(identify(noisy, veh, models), before)  # off by default (identify.GYRO_EIV_DEFAULT)
+    on = identify(noisy, veh, models, gyro_eiv=True)  # the comparison above can fail: the gyro noise moves the rate terms
     est_on = on.table().set_index("coefficient")["estimate"]
     est_off = before.table().set_index("coefficient")["estimate"]
     assert abs(est_on["Cm_q"] / est_off["Cm_q"] - 1) > 1e-3
