@@ -92,3 +92,19 @@ def test_run_summary_names_the_design_command_for_an_unresolved_pair(tmp_path):
     doc.update(recommended="alpha_nonlinearity", lookalikes=[dict(pair, verdict="separated")])
     (tmp_path / "diagnosis.json").write_text(json.dumps(doc))
     assert "aerosid design" not in "\n".join(verdict_lines(tmp_path))
+
+
+def test_a_pooled_diagnosis_speaks_of_the_pooled_flights(reference_flight):
+    """`aerosid run A B` diagnoses the pooled data: its message must not say "this flight"."""
+    import pandas as pd
+
+    vehicle = load_vehicle("seed-rlv")
+    one = flight_data_from_truth(reference_flight.truth, MEASURED_NOISE.scaled(0.25), seed=0)
+    two = flight_data_from_truth(reference_flight.truth, MEASURED_NOISE.scaled(0.25), seed=1)
+    one["flight"], two["flight"] = "m1", "m2"
+    single = diagnose(one, vehicle, localisation=False)
+    pooled = diagnose(pd.concat([one, two], ignore_index=True), vehicle, localisation=False)
+    assert single.n_flights == 1 and "This flight could not" in single.message
+    assert pooled.n_flights == 2 and pooled.to_json()["n_flights"] == 2
+    assert "this flight" not in pooled.message.lower()
+    assert "These 2 pooled flights could not" in pooled.message

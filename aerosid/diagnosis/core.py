@@ -205,6 +205,8 @@ def diagnose(flight_data: pd.DataFrame, vehicle, models: dict[str, ChannelModel]
         cn_alpha = abs(float(vehicle.preflight.CN_alpha))
         angle_sigma_rad = float(np.nanmedian(sig_cn)) / cn_alpha if cn_alpha > 0 else 0.0
     simex = _simex_signals(fd, vehicle, groups, float(angle_sigma_rad)) if angle_sigma_rad > 0 else []
+    n_flights = max(int(fd["flight"].astype(str).nunique()) if "flight" in fd.columns else 1, 1)
+    on_flights = "on this flight" if n_flights == 1 else f"on these {n_flights} pooled flights"
 
     reports: dict[str, ChannelReport] = {}
     simex_cache: dict = {}
@@ -299,7 +301,7 @@ def diagnose(flight_data: pd.DataFrame, vehicle, models: dict[str, ChannelModel]
             if c.alias_of and c.alias_of in confused.get(c.name, ()):
                 rec.setdefault("reasons", ())
                 rec["reasons"] = tuple(rec["reasons"]) + (
-                    f"cannot be told from {c.alias_of} on this flight (regressors correlate by >= {CONFUSION_R:g} "
+                    f"cannot be told from {c.alias_of} {on_flights} (regressors correlate by >= {CONFUSION_R:g} "
                     f"once the model's terms are removed): reported together as {c.alias_of}, whose estimate is "
                     "then the combined derivative",)
             evidence.append(_evidence(rec, tuple(confused.get(c.name, ()))))
@@ -321,7 +323,7 @@ def diagnose(flight_data: pd.DataFrame, vehicle, models: dict[str, ChannelModel]
         loc = localise(signals, {ch: fd[ch].to_numpy(float) for ch in models}, models, t, groups, win,
                        vehicle.mach_reference, float(angle_sigma_rad))
     return Diagnosis(tuple(ranked), reports, models, n, window, int(win.max()) + 1,
-                     identities, looks, recommended, floor, loc)
+                     identities, looks, recommended, floor, loc, n_flights)
 
 
 def identity_channels(vehicle, channels) -> tuple[str, ...]:

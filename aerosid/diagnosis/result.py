@@ -195,6 +195,19 @@ class ChannelReport:
                              "model": self.model, "residual": self.residual})
 
 
+def pooled_wording(text: str, n_flights: int) -> str:
+    """A diagnosis text about one flight, reworded for `n_flights` pooled flights (unchanged
+    for one): what was or was not separable is a property of the data as pooled."""
+    if n_flights <= 1:
+        return text
+    these = f"these {n_flights} pooled flights"
+    for one, many in (("on this flight", f"on {these}"), ("by this flight", f"by {these}"),
+                      ("This flight could not", f"These {n_flights} pooled flights could not"),
+                      ("this flight could not", f"{these} could not")):
+        text = text.replace(one, many)
+    return text
+
+
 @dataclass(frozen=True)
 class Diagnosis:
     """Result of :func:`diagnose`."""
@@ -221,6 +234,9 @@ class Diagnosis:
                                                     for c in self.lookalikes)
     #: channel -> localisation findings (aerosid.diagnosis.localise), best first
     localisation: dict = field(default_factory=dict)
+    #: flights pooled in the diagnosed data (`aerosid run A B`): the message speaks of "these N
+    #: pooled flights" instead of "this flight"
+    n_flights: int = 1
 
     @property
     def significant(self) -> tuple[EffectEvidence, ...]:
@@ -260,7 +276,7 @@ class Diagnosis:
     def message(self) -> str:
         from aerosid.diagnosis.lookalikes import lookalike_message
 
-        return lookalike_message(self, self._base_message())
+        return pooled_wording(lookalike_message(self, self._base_message()), self.n_flights)
 
     def _base_message(self) -> str:
         sig = self.significant
@@ -325,6 +341,7 @@ class Diagnosis:
             "schema": "aerosid.diagnosis/1",
             "nothing_significant": self.nothing_significant,
             "message": self.message,
+            "n_flights": self.n_flights,
             "rule": {"text": RULE_TEXT, "p_max": P_MAX, "min_window_consistency": MIN_WINDOW_CONSISTENCY,
                      "min_variance_share": MIN_VARIANCE_SHARE, "flag_ratio": FLAG_RATIO,
                      "n_windows": self.n_windows},
