@@ -1,43 +1,39 @@
 """The error against its floor (issue 18 item 3).
 
 A channel's residual RMS (model - flight-derived coefficient) cannot fall below the
-*floor*: the estimation error of the flight-derived coefficient itself, which no model
-term can remove.  The headline number is the *excess* over the floor,
+*floor*: what a complete model would still leave, because the flight-derived
+coefficient and the regressors both carry estimation errors no model term can remove.
+The headline number is the *excess* over the floor,
 
     excess_rms = sqrt(max(residual_rms^2 - floor_rms^2, 0)),
 
 the part of the residual the model could still explain; it falls toward zero as the
 model completes, where the residual itself barely moves (docs/modelling-loop.md §5).
 
-How the floor is computed
--------------------------
-``flight_data.parquet`` carries per-sample ``sigma_<channel>`` columns: the EKF + MBF
-smoother's state sigma propagated to the coefficient (``aerosid.identification.flight_coefficients``).
-The floor is their RMS over the samples the diagnosis uses.
+How the floor is computed: floor_rms = sqrt(coefficient_floor_rms^2 + angle_floor_rms^2)
+-----------------------------------------------------------------------------------------
+``coefficient_floor_rms``, the error of the flight-derived coefficient.  On the band path
+(the default: flight data with ``band_hz`` and the sensors' white-noise sigma, the filter's
+R, per sample) it is that noise through what the band path does to it: the gyros' through
+the common low-pass and its central-difference derivative (:func:`band_derivative_noise_gain`)
+and the Euler equations read backwards, the accelerometers' through the low-pass and the
+lever arm; times the coefficient's scale factor (I/(q-bar S l), m/(q-bar S)).  On seed-rlv
+(10 no-effect flights, Mach window) it is 0.85-1.05 x RMS(measured - LP(true)) for Cm, Cl and
+Cn, where the smoother's sigma (the ``sigma_<channel>`` columns, used before, and still the
+fallback for flight data without those columns) was 1.2-1.6 x for Cm: the smoother's
+chains are not the band path's filter.
 
-Is that sigma honest?  On the band path (the default) the regression's target *and* its
-regressors go through the same low-pass at ``band_hz``, so the error that no model term
-can remove is ``measured - LP(true)`` (the low-pass's attenuation of the true
-coefficient is matched by the low-passed regressors, the model fits it).  Against that,
-RMS(sigma) / RMS(measured - LP(true)) on seed-rlv (Mach window, 5 flights) is
-Cm 1.18, Cl 1.05, Cn 0.67 (bench/results/modelling_loop_floor.md).  Against the old
-bench column RMS(measured - true) the ratio is only 0.57 for Cm: that column counts the
-band-limit's attenuation of the signal as error although the band-limited model
-reproduces it (the default model's Cm residual is 0.6-0.8 x that "floor").  A floor
-from the residual's high-frequency power was tried and rejected: the error spectrum
-falls faster above the band than a 2nd-order low-pass of differentiated white noise
-(the preprocessing filters too), so the extrapolation gave 2 % of the floor.
+``angle_floor_rms``, the recovered angles' error through the fitted model.  Measured, not
+linearised: the channel's model is refitted with one more draw of the angles' own noise
+(``eiv_sigma_*`` through the band, as the SIMEX correction draws it; ANGLE_REPLICATES draws)
+and the rise of the residual's mean square is the angles' share of it.  A refit includes
+what the least-squares fit absorbs into attenuated coefficients; the linearised
+sqrt((dm/dalpha sigma_alpha)^2 + ...) (used before, for reference only) did not, and put
+the floor above complete models' residuals (Cl 1.3-2.4e-4 against 0.8-1.0e-4 on seed-rlv:
+near alpha_r = 0 the roll angle's derivative is huge but bounded sin(4 phi_r) terms are not).
 
-The regressors carry an error too: the recovered alpha and beta (``eiv_sigma_*`` columns,
-white-noise sigma, through the band's low-pass).  Its effect on the model output,
-sqrt((dm/dalpha sigma_alpha)^2 + (dm/dbeta sigma_beta)^2), is reported as
-``angle_floor_rms`` but is *not* part of the floor the excess is measured against:
-added in quadrature it put the floor above the residual of complete models (Cm
-7.0e-4 vs 5.8-6.6e-4, Cl 1.3-2.4e-4 vs 0.8-1.0e-4: the least-squares fit absorbs part of
-the angle error into attenuated coefficients), which made the excess 0 while a
-detectable effect was still missing.  So the excess stays above zero when the model is
-complete (Cm: sqrt(6.6^2 - 5.6^2) e-4 ~ 3.5e-4 on seed-rlv); what the bench checks is how
-far it falls when the missing effect is added.
+A floor from the residual's high-frequency power was tried and rejected: the error spectrum
+falls faster above the band than a 2nd-order low-pass of differentiated white noise.
 """
 from __future__ import annotations
 
@@ -46,20 +42,27 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["ChannelFloor", "channel_floor", "floors", "excess", "floor_table", "angle_sigmas", "angle_part", "angle_floor_parts"]
+__all__ = ["ChannelFloor", "channel_floor", "floors", "excess", "floor_table", "band_sigmas", "angle_floor_rms",
+           "ANGLE_REPLICATES"]
+
+#: Draws of the angles' noise whose refits measure the angles' part of the floor.
+ANGLE_REPLICATES = 8
+#: Seed of those draws (the diagnosis is deterministic).
+ANGLE_SEED = 20261126
+FORCE_CHANNELS = ("CA", "CY", "CN")
+MOMENT_CHANNELS = ("Cl", "Cm", "Cn")
 
 
 @dataclass(frozen=True)
 class ChannelFloor:
-    """One channel's residual against its floor."""
+    """One channel's residual against its floor (module doc)."""
 
     channel: str
     residual_rms: float
-    floor_rms: float  # RMS of the sigma column: the flight-derived coefficient's own error
+    floor_rms: float  # sqrt(coefficient_floor_rms^2 + angle_floor_rms^2)
     method: str
-    coefficient_floor_rms: float = float("nan")  # RMS of the sigma column
-    #: the recovered angles' sigma through the fitted model (reported, not in the excess: see module doc)
-    angle_floor_rms: float = 0.0
+    coefficient_floor_rms: float = float("nan")  # the flight-derived coefficient's own error
+    angle_floor_rms: float = 0.0  # the recovered angles' error through the fitted model
 
     @property
     def excess_rms(self) -> float:
@@ -84,100 +87,134 @@ def excess(residual_rms: float, floor_rms: float) -> float:
     return math.sqrt(max(residual_rms ** 2 - floor_rms ** 2, 0.0))
 
 
-def channel_floor(channel: str, residual: np.ndarray, sigma: np.ndarray | None,
-                  angle_part: np.ndarray | None = None) -> ChannelFloor:
-    """One channel's residual RMS against its floor, the RMS of its per-sample sigma; the RMS of
-    the per-sample error the recovered angles put into the model (when given) is reported
-    beside it (module doc)."""
-    r = np.asarray(residual, float)
-    res_rms = float(np.sqrt(np.mean(r * r))) if r.size else float("nan")
-    ang = float(np.sqrt(np.mean(np.square(angle_part)))) if angle_part is not None and np.size(angle_part) else 0.0
+def _rms(x) -> float:
+    x = np.asarray(x, float)
+    x = x[np.isfinite(x)]
+    return float(np.sqrt(np.mean(x * x))) if x.size else float("nan")
+
+
+def channel_floor(channel: str, residual: np.ndarray, sigma: np.ndarray | None, angle_rms: float = 0.0,
+                  method: str = "smoother sigma") -> ChannelFloor:
+    """One channel's residual RMS against its floor: the RMS of the coefficient's per-sample
+    sigma combined in quadrature with the angles' part angle_rms (module doc)."""
+    res_rms = _rms(residual) if np.size(residual) else float("nan")
+    ang = float(angle_rms) if math.isfinite(angle_rms) else 0.0
     if sigma is None:
-        return ChannelFloor(channel, res_rms, float("nan"), "none (no sigma column in the flight data)",
-                            float("nan"), ang)
-    s = np.asarray(sigma, float)
-    s = s[np.isfinite(s)]
-    if s.size == 0:
-        return ChannelFloor(channel, res_rms, float("nan"), "none (sigma column not finite)", float("nan"), ang)
-    coef = float(np.sqrt(np.mean(s * s)))
-    return ChannelFloor(channel, res_rms, coef, "smoother sigma", coef, ang)
+        return ChannelFloor(channel, res_rms, float("nan"), "none (no sigma of the coefficient)", float("nan"), ang)
+    coef = _rms(sigma)
+    if not math.isfinite(coef):
+        return ChannelFloor(channel, res_rms, float("nan"), "none (sigma not finite)", float("nan"), ang)
+    return ChannelFloor(channel, res_rms, math.hypot(coef, ang), method, coef, ang)
 
 
-def angle_sigmas(flight_data) -> tuple[np.ndarray, np.ndarray] | None:
-    """Per-sample 1-sigma of the recovered alpha and beta as the regression sees them: the
-    flight data's white-noise ``eiv_sigma_*`` through the band path's low-pass
-    (``band_noise_gain``); None without those columns."""
-    fd = flight_data
-    if not {"eiv_sigma_alpha_rad", "eiv_sigma_beta_rad"} <= set(fd.columns):
+def band_sigmas(fd, vehicle) -> dict[str, np.ndarray] | None:
+    """Per-sample 1-sigma of the band path's flight-derived coefficients (module doc): the
+    gyros' white noise (``eiv_sigma_p/q/r_rad_s``) through the band's low-pass and derivative
+    and the Euler equations read backwards, the accelerometers' (``R_sigma_ax/ay/az_m_s2``)
+    through the low-pass and the lever arm, times the coefficients' scale factors.  None when
+    the flight data do not say so much (smoother path: zero gyro sigma; older files)."""
+    from aerosid.identification.band import aero_angular_acceleration, band_derivative_noise_gain, band_noise_gain
+
+    gyro = ("eiv_sigma_p_rad_s", "eiv_sigma_q_rad_s", "eiv_sigma_r_rad_s")
+    acc = ("R_sigma_ax_m_s2", "R_sigma_ay_m_s2", "R_sigma_az_m_s2")
+    if not ({"band_hz", "t_s", "qbar_pa", *gyro} <= set(fd.columns)):
         return None
-    gain = 1.0
-    if "band_hz" in fd.columns:
-        from aerosid.identification.band import band_noise_gain
+    sg = np.column_stack([fd[c].to_numpy(float) for c in gyro])
+    band = float(np.nanmedian(fd["band_hz"].to_numpy(float))) if len(fd) else float("nan")
+    t = fd["t_s"].to_numpy(float)
+    dts = np.diff(t)
+    dts = dts[dts > 0]
+    if not (dts.size and math.isfinite(band) and band > 0 and np.all(np.isfinite(sg)) and sg.max() > 0):
+        return None
+    fs = 1.0 / float(np.median(dts))
+    s_wdot = sg * band_derivative_noise_gain(fs, band)  # (N, 3) [rad/s^2]
+    inertia = (vehicle.Ixx_kg_m2, vehicle.Iyy_kg_m2, vehicle.Izz_kg_m2, vehicle.Ixz_kg_m2)
+    # the Euler equations read backwards are linear in the rate derivatives: rows of B^-1
+    b_inv = aero_angular_acceleration(np.zeros((3, 3)), np.eye(3), inertia).T
+    s_ang = np.sqrt((s_wdot ** 2) @ (b_inv ** 2).T)  # (N, 3) L, M, N hat
+    qs = fd["qbar_pa"].to_numpy(float) * vehicle.S_m2
+    lengths = (vehicle.length_lateral_m, vehicle.length_pitch_m, vehicle.length_lateral_m)
+    inert = (vehicle.Ixx_kg_m2, vehicle.Iyy_kg_m2, vehicle.Izz_kg_m2)
+    out = {ch: s_ang[:, j] * inert[j] / (qs * lengths[j]) for j, ch in enumerate(MOMENT_CHANNELS)}
+    if set(acc) <= set(fd.columns):
+        sa = np.column_stack([fd[c].to_numpy(float) for c in acc]) * band_noise_gain(fs, band)
+        rx, ry, rz = (float(v) for v in vehicle.accel_offset_m)
+        lever = np.column_stack([np.hypot(s_wdot[:, 1] * rz, s_wdot[:, 2] * ry),  # (w_dot x r) noise
+                                 np.hypot(s_wdot[:, 2] * rx, s_wdot[:, 0] * rz),
+                                 np.hypot(s_wdot[:, 0] * ry, s_wdot[:, 1] * rx)])
+        s_acc = np.hypot(sa, lever)
+        if np.all(np.isfinite(s_acc)):
+            out.update({ch: s_acc[:, j] * vehicle.mass_kg / qs for j, ch in enumerate(FORCE_CHANNELS)})
+    return out
 
-        t = fd["t_s"].to_numpy(float)
-        dts = np.diff(t)
-        dts = dts[dts > 0]
-        band = float(np.nanmedian(fd["band_hz"].to_numpy(float)))
-        if dts.size and math.isfinite(band) and band > 0:
-            gain = band_noise_gain(1.0 / float(np.median(dts)), band)
-    return (gain * fd["eiv_sigma_alpha_rad"].to_numpy(float), gain * fd["eiv_sigma_beta_rad"].to_numpy(float))
 
-
-def angle_part(model, estimate: np.ndarray, fd, vehicle, sig_a: np.ndarray, sig_b: np.ndarray,
-               step_rad: float = 1e-5) -> np.ndarray:
-    """Per-sample error the angles' sigma puts into the model output: sqrt((dm/dalpha sig_a)^2 +
-    (dm/dbeta sig_b)^2), the derivatives by finite differences of the fitted model."""
+def angle_floor_rms(fd, vehicle, models: dict, channels, replicates: int = ANGLE_REPLICATES) -> dict[str, float]:
+    """{channel: RMS the recovered angles' error puts into the fitted model's residual}: the
+    rise of the residual's mean square when the model is refitted with one more draw of the
+    angles' own noise (the SIMEX draw: ``eiv_sigma_*`` per sample, through the band), averaged
+    over `replicates` draws.  Empty when the angles are taken as exact."""
     from aerosid.diagnosis.candidates import derived_signals
-    from aerosid.identification.inversion import total_angles
+    from aerosid.identification.eiv import with_angle_noise
+    from aerosid.identification.identify import _eiv_sigma, angle_cutoff_hz
     from aerosid.modelling.models import vehicle_signals
 
-    def out(da: float, db: float) -> np.ndarray:
-        f = fd.copy()
-        a = f["alpha_rad"].to_numpy(float) + da
-        b = f["beta_rad"].to_numpy(float) + db
-        f["alpha_rad"], f["beta_rad"] = a, b
-        f["alpha_r_rad"], f["phi_r_rad"] = total_angles(a, b)
-        sig = derived_signals(vehicle_signals(f, vehicle), vehicle.length_pitch_m, vehicle.length_lateral_m)
-        X, _ = model.design(sig)
-        return X.to_numpy(float) @ np.nan_to_num(np.asarray(estimate, float))
+    sigma = _eiv_sigma(fd, vehicle)
+    channels = [ch for ch in channels if ch in models and ch in fd]
+    if sigma is None or not channels:
+        return {}
+    groups = (fd["flight"].astype(str) + "/" + fd["segment"].astype(str)).to_numpy()
+    cutoff = angle_cutoff_hz(fd, vehicle)
+    rng = np.random.default_rng(ANGLE_SEED)
 
-    m0 = out(0.0, 0.0)
-    ga = (out(step_rad, 0.0) - m0) / step_rad
-    gb = (out(0.0, step_rad) - m0) / step_rad
-    return np.sqrt((ga * sig_a) ** 2 + (gb * sig_b) ** 2)
+    def mean_squares(frame) -> dict[str, float]:
+        sig = derived_signals(vehicle_signals(frame, vehicle), vehicle.length_pitch_m, vehicle.length_lateral_m)
+        out = {}
+        for ch in channels:
+            A = models[ch].design(sig)[0].to_numpy(float)
+            y = fd[ch].to_numpy(float)
+            ok = np.all(np.isfinite(A), axis=1) & np.isfinite(y)
+            scale = np.linalg.norm(A[ok], axis=0)
+            scale[scale == 0] = 1.0
+            e = y[ok] - A[ok] @ (np.linalg.lstsq(A[ok] / scale, y[ok], rcond=None)[0] / scale)
+            out[ch] = float(np.mean(e * e)) if e.size else float("nan")
+        return out
+
+    base = mean_squares(fd)
+    rise = {ch: 0.0 for ch in channels}
+    for _ in range(replicates):
+        for ch, ms in mean_squares(with_angle_noise(fd, rng, groups, sigma, cutoff)).items():
+            rise[ch] += (ms - base[ch]) / replicates
+    return {ch: math.sqrt(max(v, 0.0)) if math.isfinite(v) else float("nan") for ch, v in rise.items()}
 
 
-def floors(residuals: dict, flight_data, angle_parts: dict | None = None) -> dict[str, ChannelFloor]:
+def floors(residuals: dict, flight_data, angle_rms: dict | None = None, vehicle=None) -> dict[str, ChannelFloor]:
     """{channel: ChannelFloor} from {channel: residual array} and the flight-data rows they
-    belong to (its ``sigma_<channel>`` columns); angle_parts: {channel: per-sample angle part}."""
-    angle_parts = angle_parts or {}
-    return {ch: channel_floor(ch, r, flight_data[f"sigma_{ch}"].to_numpy(float)
-                              if f"sigma_{ch}" in flight_data else None, angle_parts.get(ch))
-            for ch, r in residuals.items()}
+    belong to: the band path's sigma (:func:`band_sigmas`, needs the vehicle) where the flight
+    data carry what it needs, else their ``sigma_<channel>`` columns; angle_rms: {channel:
+    the angles' part} (:func:`angle_floor_rms`)."""
+    angle_rms = angle_rms or {}
+    band = band_sigmas(flight_data, vehicle) if vehicle is not None else None
+    out = {}
+    for ch, r in residuals.items():
+        if band is not None and ch in band:
+            sigma, method = band[ch], "band path: the sensors' noise (the filter's R) through the band"
+        else:
+            sigma = flight_data[f"sigma_{ch}"].to_numpy(float) if f"sigma_{ch}" in flight_data else None
+            method = "smoother sigma"
+        out[ch] = channel_floor(ch, r, sigma, angle_rms.get(ch, 0.0), method)
+    return out
 
 
 def floor_table(floor: dict) -> list[str]:
     """Lines of the summary: residual, floor and the excess over it per channel."""
-    lines = ["The error against its floor (floor = RMS of the flight-derived coefficient's own sigma; excess = "
-             "sqrt(residual^2 - floor^2), what a model term could still remove; angles = the recovered angles' "
-             "sigma through the model, for reference):",
-             f"  {'channel':<8}{'residual':>11}{'floor':>11}{'excess':>11}{'excess/residual':>17}{'angles':>10}"]
+    lines = ["The error against its floor (floor = what a complete model would leave: the flight-derived "
+             "coefficient's own error and the recovered angles' error through the model, in quadrature; excess = "
+             "sqrt(residual^2 - floor^2), what a model term could still remove):",
+             f"  {'channel':<8}{'residual':>11}{'floor':>11}{'excess':>11}{'excess/residual':>17}"
+             f"{'coefficient':>13}{'angles':>10}"]
     for ch, f in floor.items():
         share = f.excess_share
         lines.append(f"  {ch:<8}{f.residual_rms:>11.3g}{f.floor_rms:>11.3g}{f.excess_rms:>11.3g}"
-                     f"{(f'{share:.0%}' if math.isfinite(share) else 'nan'):>17}{f.angle_floor_rms:>10.3g}")
+                     f"{(f'{share:.0%}' if math.isfinite(share) else 'nan'):>17}{f.coefficient_floor_rms:>13.3g}"
+                     f"{f.angle_floor_rms:>10.3g}")
     return lines
-
-
-def angle_floor_parts(fd, vehicle, models: dict, reports: dict) -> dict:
-    """{channel: per-sample angle part} for the channels whose regressors use the recovered
-    angles, except the channels the angles were inverted from (CN, CY without vanes: their
-    residual is ~0 by construction and the angle error *is* their coefficient error)."""
-    sig = angle_sigmas(fd)
-    if sig is None:
-        return {}
-    from aerosid.identification.identify import INVERSION_CHANNELS
-
-    skip = INVERSION_CHANNELS if vehicle.air_data_source != "vanes" else ()
-    return {ch: angle_part(models[ch], rep.fit.estimate, fd, vehicle, *sig)
-            for ch, rep in reports.items() if ch not in skip}

@@ -278,3 +278,15 @@ def band_limited_signals(t_s: np.ndarray, rates_rad_s: np.ndarray, accel_m_s2: n
         accel_noise_m_s2=tuple(white_noise_sigma(a[:, j], runs) for j in range(3)),
         rate_noise_rad_s=tuple(white_noise_sigma(w[:, j], runs) for j in range(3)),
         filter_runs=tuple((r.start, r.stop) for r in runs))
+
+
+def band_derivative_noise_gain(fs_hz: float, band_hz: float) -> float:
+    """Standard deviation [1/s] of the central-difference derivative of unit white noise after
+    :func:`low_pass_runs`: the band path's angular-acceleration noise per unit gyro noise (the
+    square root of the sum of the squared impulse response of low-pass then np.gradient)."""
+    n = int(40 * fs_hz / min(band_hz, 0.5 * fs_hz)) | 1
+    x = np.zeros(n)
+    x[n // 2] = 1.0
+    h = low_pass_runs(x, fs_hz, band_hz, [slice(0, n)])
+    d = np.gradient(h, 1.0 / fs_hz)
+    return float(np.sqrt(np.sum(d * d)))
