@@ -37,7 +37,7 @@ def test_unresolved_lookalikes_name_the_design_command_and_pooling():
     y, base, x1, x2 = _lookalikes(noise_sd=3.0)
     c = compare("Cm", y, base, ["Cm_0"], _cands(), [x1, x2])
     assert c.verdict == "unresolved" and c.recommended is None
-    assert "aerosid design RUN_DIR --effect alpha_nonlinearity --out DIR" in c.message
+    assert "aerosid design RUN_DIR --effect alpha_nonlinearity --versus control_alpha --out DIR" in c.message
     assert "aerosid run TELEMETRY NEW_TELEMETRY" in c.message  # pooled with the flight that could not tell
 
 
@@ -86,7 +86,7 @@ def test_run_summary_names_the_design_command_for_an_unresolved_pair(tmp_path):
            "recommended": None, "effects": [], "lookalikes": [pair]}
     (tmp_path / "diagnosis.json").write_text(json.dumps(doc))
     text = "\n".join(verdict_lines(tmp_path))
-    assert f"aerosid design {tmp_path} --effect alpha_nonlinearity --out DIR" in text
+    assert f"aerosid design {tmp_path} --effect alpha_nonlinearity --versus control_alpha --out DIR" in text
     assert "telemetry together" in text
     assert "two distinct alpha levels" in text
     doc.update(recommended="alpha_nonlinearity", lookalikes=[dict(pair, verdict="separated")])

@@ -14,7 +14,11 @@ import click
 @click.option("--size", type=float, default=None,
               help="Coefficient value to make detectable (default: the catalogue size, else the run's estimate).")
 @click.option("--versus", default=None, metavar="NAME",
-              help="A second term to separate from the first (e.g. --effect Cm_q --versus Cm_alpha_dot).")
+              help="A second term to separate from the first (e.g. --effect control_alpha --versus "
+                   "alpha_nonlinearity): the design looks for the manoeuvre on which either, present at its size, "
+                   "is found significant with the other in the model.")
+@click.option("--versus-size", type=float, default=None,
+              help="Size of the --versus term (default: the catalogue size, else the run's estimate).")
 @click.option("--out", "out_dir", required=True, type=click.Path(file_okay=False, path_type=Path),
               help="Writes DIR/input.parquet, DIR/input.csv and DIR/design.json.")
 @click.option("--mach-half-width", type=float, default=0.5, show_default=True,
@@ -27,7 +31,7 @@ import click
                    "idle throttle, the input gets throttle_cmd_norm = 0) so the propeller's moment stays out of "
                    "the pitch-damping fit.")
 @click.option("--quiet", is_flag=True, help="No progress lines.")
-def design(run_dir, effect, size, versus, out_dir, mach_half_width, no_refine, power, quiet):
+def design(run_dir, effect, size, versus, versus_size, out_dir, mach_half_width, no_refine, power, quiet):
     """Propose a manoeuvre that makes an effect detectable (or separates two terms).
 
     Uses the run's identified model and residual and the vehicle file's limits
@@ -45,8 +49,8 @@ def design(run_dir, effect, size, versus, out_dir, mach_half_width, no_refine, p
 
     say = (lambda msg: None) if quiet else (lambda msg: click.echo(f"  .. {msg}", err=True))
     try:
-        d = run_design(run_dir, effect, size, versus, mach_half_width=mach_half_width, refine=not no_refine,
-                       progress=say, power=power)
+        d = run_design(run_dir, effect, size, versus, versus_size=versus_size, mach_half_width=mach_half_width,
+                       refine=not no_refine, progress=say, power=power)
     except (DesignError, VersionError, VehicleError) as exc:
         raise click.ClickException(str(exc)) from exc
     except ImportError as exc:

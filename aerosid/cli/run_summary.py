@@ -65,7 +65,8 @@ def verdict_lines(run_dir: Path) -> list[str]:
                       and len(c.get("alternatives") or []) > 1), None) if not name else None
     if open_pair:  # the manoeuvre that would separate them, and the command that designs it
         lines.append(f"to separate them: {open_pair.get('separating_manoeuvre', 'another manoeuvre')}; "
-                     f"`aerosid design {run_dir} --effect {open_pair['alternatives'][0]['name']} --out DIR` proposes "
+                     f"`aerosid design {run_dir} --effect {open_pair['alternatives'][0]['name']} --versus "
+                     f"{open_pair['alternatives'][1]['name']} --out DIR` proposes "
                      "one; fly it and `aerosid run` this flight's and the new flight's telemetry together")
     lines.append(f"details: `aerosid diagnose {run_dir}`, {run_dir / 'report.html'}")
     return lines

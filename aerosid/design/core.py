@@ -182,7 +182,7 @@ def _use(truth: pd.DataFrame, limits: Limits, dt: float, mask: np.ndarray | None
 
 # ----------------------------------------------------------------------------- design
 def design(run_dir: str | Path, effect: str, size: float | None = None, versus: str | None = None, *,
-           mach_half_width: float = 0.5, kinds: tuple[str, ...] = ("3211", "doublet", "multisine"),
+           versus_size: float | None = None, mach_half_width: float = 0.5, kinds: tuple[str, ...] = ("3211", "doublet", "multisine"),
            refine: bool = True, progress=None, flyer_factory=None, power: str = "trim") -> Design:
     from aerosid.diagnosis.candidates import derived_signals
     from aerosid.identification.identify import mach_window_mask
@@ -228,15 +228,19 @@ def design(run_dir: str | Path, effect: str, size: float | None = None, versus: 
     sizes = []
     from aerosid.modelling.effects import CATALOGUE
 
+    # the size each target is to be found at: given, else the catalogue's physical default, else
+    # the run's estimate (with --versus, the absent one of two look-alikes has an estimate near
+    # zero in the joint fit: its size must come from the catalogue or --versus-size)
     for i, t in enumerate(targets):
-        if i == 0 and size is not None:
-            sizes.append(float(size))
-        elif terms[i].effect in CATALOGUE and not versus:
+        given = size if i == 0 else versus_size
+        if given is not None:
+            sizes.append(float(given))
+        elif terms[i].effect in CATALOGUE:
             sizes.append(float(CATALOGUE[terms[i].effect].value))
-        elif np.isfinite(estimates.get(t, np.nan)):
+        elif np.isfinite(estimates.get(t, np.nan)) and estimates[t] != 0.0:
             sizes.append(float(estimates[t]))
         else:
-            raise DesignError(f"no size for {t}: give --size")
+            raise DesignError(f"no size for {t}: give {'--size' if i == 0 else '--versus-size'}")
     sizes = tuple(sizes)
 
     def summarise(pred: Prediction, reported: Prediction | None = None) -> dict:
@@ -334,7 +338,20 @@ def design(run_dir: str | Path, effect: str, size: float | None = None, versus: 
     after["noise_free_run_residual"] = summarise(after_run)
 
     ok = all(after[t]["reliable_size"] <= abs(sz) for t, sz in zip(targets, sizes))
-    if len(targets) == 1:
+    # never propose a manoeuvre that identifies the targets worse than the one flown
+    ratio_before = max(before[t]["sigma"] / abs(sz) for t, sz in zip(targets, sizes))
+    ratio_after = max(after[t]["sigma"] / abs(sz) for t, sz in zip(targets, sizes))
+    worse = not ratio_after < ratio_before
+    if worse:
+        ok = False
+        verdict = (f"NO BETTER MANOEUVRE WITHIN THE LIMITS: the best candidate ({best.waveform.label()}, {a:.3g} rad) "
+                   "gives " + ", ".join(f"sigma({t}) = {after[t]['sigma']:.3g}" for t in targets)
+                   + " against the flown manoeuvre's " + ", ".join(f"{before[t]['sigma']:.3g}" for t in targets)
+                   + ": fly the run's manoeuvre again (sigma falls as 1/sqrt(time on condition)); "
+                   + ("each would be found at 90 % from " + ", ".join(
+                       f"{t} {before[t]['reliable_size']:.3g}" for t in targets) + " on it.")
+                   )
+    elif len(targets) == 1:
         t0, sz = targets[0], sizes[0]
         need = abs(sz) / (after_pred.t_crit() + 1.2816)
         if ok:
@@ -349,17 +366,20 @@ def design(run_dir: str | Path, effect: str, size: float | None = None, versus: 
                        f"{need:.3g}, i.e. {after[t0]['sigma'] / need:.2f}x the excitation the limits allow "
                        f"(or {(after[t0]['sigma'] / need) ** 2:.1f}x the time on condition).")
     else:
+        # separated: with both terms in the model, whichever is present at its size is found
+        # significant (p < 0.001) in 90 % of flights, and the model can fit the manoeuvre
         rel = {t: 100 * after[t]["sigma"] / abs(sz) for t, sz in zip(targets, sizes)}
-        ok = all(2.0 * r <= 10.0 for r in rel.values()) and all(abs(v) + 2.0 * rel[t] <= 10.0
-                                                                 for t, v in (oracle or {}).items())
+        ok = ok and all(abs(v) <= MAX_MODEL_ERROR_PCT for v in (oracle or {}).values())
         verdict = (("SEPARATED: " if ok else "NOT SEPARATED WITHIN THE LIMITS: ")
-                   + ", ".join(f"sigma({t}) = {after[t]['sigma']:.3g} ({rel[t]:.1f} % of {sz:.4g})"
+                   + ", ".join(f"sigma({t}) = {after[t]['sigma']:.3g} ({rel[t]:.1f} % of {sz:.4g}; found at 90 % "
+                               f"from {after[t]['reliable_size']:.3g}, run {before[t]['reliable_size']:.3g})"
                                for t, sz in zip(targets, sizes))
                    + f"; correlation {after['correlation']:.3f} (run: {before['correlation']:.3f})"
                    + ("; model error on the manoeuvre " + ", ".join(f"{t} {v:+.1f} %" for t, v in oracle.items())
                       if oracle else "")
-                   + "; the aim is |model error| + 2 sigma <= 10 % of each.")
-        hint = power_hint(oracle, rel, power, flyer)
+                   + f"; the aim is each found at 90 % with the other in the model (found-from <= |size|) and "
+                     f"|model error| <= {MAX_MODEL_ERROR_PCT:g} %.")
+        hint = power_hint(oracle, rel, power, flyer) if not ok else ""
         if hint:
             verdict += " " + hint
     u = np.asarray(a * best.waveform.values)
@@ -393,6 +413,9 @@ def design(run_dir: str | Path, effect: str, size: float | None = None, versus: 
 
 
 REFINE_SEED = 987654
+#: Largest |model error| [%] on the manoeuvre (simulators that state their truth) for two terms to count
+#: as separated: beyond it the model cannot fit the shape that separates them.
+MAX_MODEL_ERROR_PCT = 10.0
 
 
 def _oracle(truth: pd.DataFrame, signals: dict, mask: np.ndarray, model, ch: str, targets, coefficients) -> dict:

@@ -329,7 +329,7 @@ def compare(channel: str, y: np.ndarray, base_X: np.ndarray, base_names: Sequenc
         msg = (f"{pair_txt} cannot be told apart in {channel} on this flight: their parts the model cannot "
                f"explain correlate by r = {max(corr.values()):.2f} and the evidence does not separate them "
                f"(Delta {ds} < {DELTA_MIN:.2f}, or held-out prediction disagrees). No recommendation. "
-               f"To separate them: {manoeuvre}" + (f" (`aerosid design RUN_DIR --effect {names[0]} --out DIR` proposes "
+               f"To separate them: {manoeuvre}" + (f" (`aerosid design RUN_DIR --effect {names[0]} --versus {names[1]} --out DIR` proposes "
                                                    "one within the vehicle's limits; fly it and run both flights "
                                                    "together: `aerosid run TELEMETRY NEW_TELEMETRY --out DIR`)."
                                                    if k > 1 else "."))

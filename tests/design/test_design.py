@@ -100,3 +100,42 @@ def test_a_large_effect_is_called_detectable_and_the_verdict_follows_the_numbers
     big = 2.0 * d0.after["Cm_q"]["reliable_size"]
     d = design(run_dir, "pitch_damping", -big, refine=False, flyer_factory=fake_factory)
     assert d.achievable and d.verdict.startswith("DETECTABLE")
+
+
+def test_versus_sizes_come_from_the_catalogue_and_the_verdict_from_joint_detection(run_dir):
+    """Two look-alikes: the absent one's estimate is ~0 in the joint fit, so the sizes are the
+    catalogue's (or given), and 'SEPARATED' means each would be found at 90 % with the other in
+    the model (found-from <= |size|), on a manoeuvre better than the flown one."""
+    d = design(run_dir, "control_alpha", versus="alpha_nonlinearity", refine=False, flyer_factory=fake_factory)
+    from aerosid.modelling.effects import CATALOGUE
+
+    assert d.sizes == (CATALOGUE["control_alpha"].value, CATALOGUE["alpha_nonlinearity"].value)
+    detect = all(d.after[t]["reliable_size"] <= abs(s) for t, s in zip(d.targets, d.sizes))
+    better = max(d.after[t]["sigma"] / abs(s) for t, s in zip(d.targets, d.sizes)) < \
+        max(d.before[t]["sigma"] / abs(s) for t, s in zip(d.targets, d.sizes))
+    assert d.achievable == (detect and better)
+    assert d.verdict.startswith("SEPARATED" if d.achievable else ("NOT SEPARATED" if better else "NO BETTER"))
+    # a size given for the second term is used; a tiny one cannot be separated
+    d2 = design(run_dir, "control_alpha", versus="alpha_nonlinearity", versus_size=1e-6, refine=False,
+                flyer_factory=fake_factory)
+    assert d2.sizes[1] == 1e-6 and not d2.achievable
+
+
+def test_never_proposes_a_manoeuvre_worse_than_the_flown_one(run_dir):
+    """A vehicle whose pitch rate barely answers the surface (the candidates' pitch rate is 1e-3
+    of the run's): the design says the flown manoeuvre is better instead of proposing a worse one."""
+
+    class Weak(FakeFlyer):
+        def fly(self, u):
+            u = np.asarray(u, float)
+            r = super().fly(1e-3 * u)
+            return truth_frame(self.t, r["alpha_rad"].to_numpy(), r["q_rad_s"].to_numpy(), u)
+
+    def weak_factory(vehicle, limits, coefs, effect, size, say):
+        f = Weak()
+        return f, f.fly(np.zeros_like(f.t)), 5.0, DUR - 2.0, False
+
+    d = design(run_dir, "pitch_damping", -30.0, refine=False, flyer_factory=weak_factory)
+    assert d.after["Cm_q"]["sigma"] > d.before["Cm_q"]["sigma"]
+    assert not d.achievable and d.verdict.startswith("NO BETTER MANOEUVRE WITHIN THE LIMITS")
+    assert f"{d.before['Cm_q']['sigma']:.3g}" in d.verdict
