@@ -148,8 +148,9 @@ def _report(df: pd.DataFrame, seeds: list[int], wall_s: float, other_txt: str | 
          "Each run: seed-rlv with one hidden effect at scale 1 (Table 2 noise), preprocess, EKF + MBF, band-path "
          "flight data, `diagnose` the default models. *recommended* = diagnosis.json `recommended`. For the two "
          "look-alikes the wrong one is then added and the flight re-diagnosed: *closed on wrong* = the "
-         "re-diagnosis ends the loop (`loop_closed`, \"nothing missing\"). Floor = RMS of the channel's "
-         "sigma column; excess = sqrt(residual^2 - floor^2).", "",
+         "re-diagnosis ends the loop (`loop_closed`, \"nothing missing\"). Floor = the diagnosis' `floor_rms` "
+         "(aerosid/diagnosis/floor.py: the band path's coefficient sigma and the angles' part measured by refits, "
+         "in quadrature); excess = sqrt(residual^2 - floor^2).", "",
          "## Look-alikes", "",
          "| effect | true effect recommended | wrong one recommended | none recommended | verdicts | closed on the wrong one | re-diagnosis after the wrong one: recommends the true / unresolved |",
          "|---|---|---|---|---|---|---|"]
@@ -170,7 +171,7 @@ def _report(df: pd.DataFrame, seeds: list[int], wall_s: float, other_txt: str | 
           "*Above its detection floor*: |true coefficient| > the diagnosis' `detectable_size` for it on that flight "
           "(t(p = 0.001) x its coloured-residual sigma); *detected*: the diagnosis calls it significant. Drops are "
           "1 - excess_after / excess_before per run.", "",
-          "| effect | ch | above its detection floor | detected | floor (sigma) | RMS(meas - LP(true)) | ratio | RMS(meas - true) | ratio | residual before -> after (drop) | excess before -> after | excess drop over runs above the floor: mean, min, runs >= 50 % | same over detected runs |",
+          "| effect | ch | above its detection floor | detected | floor | RMS(meas - LP(true)) | ratio | RMS(meas - true) | ratio | residual before -> after (drop) | excess before -> after | excess drop over runs above the floor: mean, min, runs >= 50 % | same over detected runs |",
           "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     eff = df[df["effect"] != "none"]
     for name, g in eff.groupby("effect", sort=False):

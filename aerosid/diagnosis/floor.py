@@ -18,10 +18,10 @@ R, per sample) it is that noise through what the band path does to it: the gyros
 the common low-pass and its central-difference derivative (:func:`band_derivative_noise_gain`)
 and the Euler equations read backwards, the accelerometers' through the low-pass and the
 lever arm; times the coefficient's scale factor (I/(q-bar S l), m/(q-bar S)).  On seed-rlv
-(10 no-effect flights, Mach window) it is 0.85-1.05 x RMS(measured - LP(true)) for Cm, Cl and
-Cn, where the smoother's sigma (the ``sigma_<channel>`` columns, used before, and still the
-fallback for flight data without those columns) was 1.2-1.6 x for Cm: the smoother's
-chains are not the band path's filter.
+(10 no-effect flights, Mach window) it is 0.82-1.05 x RMS(measured - LP(true)) for Cm, 0.83-1.00
+for Cl and 0.76-1.02 for Cn, where the smoother's sigma (the ``sigma_<channel>`` columns, used
+before, and still the fallback for flight data without those columns) was 1.1-1.8 x for Cm:
+the smoother's chains are not the band path's filter.
 
 ``angle_floor_rms``, the recovered angles' error through the fitted model.  Measured, not
 linearised: the channel's model is refitted with one more draw of the angles' own noise
