@@ -119,8 +119,9 @@ def test_a_failed_segment_is_recorded_and_retry_failed_completes_only_it(prefect
 def test_campaign_on_dask_equals_the_serial_run(prefect_harness, flights, tmp_path):
     from flows.pipeline import campaign, campaign_runner
 
-    serial = campaign([str(p) for p in flights], str(tmp_path / "serial"))
-    parallel = campaign_runner(n_workers=2)([str(p) for p in flights], str(tmp_path / "dask"))
+    two = [str(p) for p in flights[:2]]  # one flight per Dask worker (CI time: the third added ~20 s)
+    serial = campaign(two, str(tmp_path / "serial"))
+    parallel = campaign_runner(n_workers=2)(two, str(tmp_path / "dask"))
     assert [s["status"] for s in serial] == [s["status"] for s in parallel]
     assert all(s["status"] in ("ok", "ok with findings") for s in serial)
     for a, b in zip(serial, parallel):
