@@ -134,7 +134,8 @@ def test_fields_added_by_other_stages_render_escaped_and_only_when_present(repor
         assert anchor not in plain
     doc.update({
         "recommended": "control_alpha<script>",
-        "floor": {"Cm": {"residual_rms": 7.2e-4, "floor_rms": 6.0e-4, "excess_rms": 3.98e-4},
+        "floor": {"Cm": {"residual_rms": 7.2e-4, "floor_rms": 6.0e-4, "excess_rms": 3.98e-4,
+                         "coefficient_floor_rms": 3.6e-4, "angle_floor_rms": 4.8e-4},
                   "Cn": {"residual_rms": None}},
         "lookalikes": {"candidates": [{"name": "alpha_nonlinearity", "heldout_rms": 1.23e-4, "verdict": "<b>no</b>"},
                                       {"name": "control_alpha", "heldout_rms": 1.01e-4}],
@@ -148,6 +149,7 @@ def test_fields_added_by_other_stages_render_escaped_and_only_when_present(repor
     assert "Recommended: <b>control_alpha&lt;script&gt;</b>" in html and "<script" not in html.lower()
     floor = html.split('id="floor-table"')[1].split("</table>")[0]
     assert "0.00072" in floor and "0.0006" in floor and "55 %" in floor  # excess / residual = 3.98 / 7.2
+    assert "0.00036" in floor and "0.00048" in floor  # the floor's two parts
     look = html.split('id="lookalikes"')[1]
     assert "alpha_nonlinearity" in look and "&lt;b&gt;no&lt;/b&gt;" in look and "0.000123" in look
     assert "Cm_a3 = alpha**3" in html.split('id="localisation"')[1]
