@@ -155,10 +155,10 @@ def angle_floor_rms(fd, vehicle, models: dict, channels, replicates: int = ANGLE
     over `replicates` draws.  Empty when the angles are taken as exact."""
     from aerosid.diagnosis.candidates import derived_signals
     from aerosid.identification.eiv import with_angle_noise
-    from aerosid.identification.identify import _eiv_sigma, angle_cutoff_hz
+    from aerosid.identification.identify import angle_eiv_sigma, angle_cutoff_hz
     from aerosid.modelling.models import vehicle_signals
 
-    sigma = _eiv_sigma(fd, vehicle)
+    sigma = angle_eiv_sigma(fd, vehicle)
     channels = [ch for ch in channels if ch in models and ch in fd]
     if sigma is None or not channels:
         return {}

@@ -117,7 +117,7 @@ def format_table(table: pd.DataFrame, per_degree: bool = False) -> str:
     return "\n".join(lines)
 
 
-def _eiv_sigma(fd: pd.DataFrame, vehicle: Vehicle):
+def angle_eiv_sigma(fd: pd.DataFrame, vehicle: Vehicle):
     """(sigma_alpha, sigma_beta) [rad] of the white noise in the angles (per sample), or None
     when the angles are taken as exact: the flight data's eiv_sigma_* columns
     (aerosid.identification.flight_data), else the vehicle file's vane noise for vanes."""
@@ -252,7 +252,7 @@ def identify(flight_data: pd.DataFrame, vehicle: Vehicle, models: dict[str, Chan
             raise ValueError(f"[{channel}] the fit of {', '.join(model.names)} on {len(fd)} samples failed: {exc}"
                              + (f" ({'; '.join(notes)})" if notes else "")) from None
         fits[channel] = replace(fit, warnings=tuple(fit.warnings) + notes) if notes else fit
-    sigma = _eiv_sigma(fd, vehicle)
+    sigma = angle_eiv_sigma(fd, vehicle)
     band_limited = "band_hz" in fd.columns and bool(np.all(np.isfinite(fd["band_hz"].to_numpy(float))))
     rate_sigma = _rate_eiv_sigma(fd) if gyro_eiv and band_limited else None
     if sigma is not None or rate_sigma is not None:
