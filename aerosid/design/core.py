@@ -200,6 +200,11 @@ def design(run_dir: str | Path, effect: str, size: float | None = None, versus: 
     vehicle = load_vehicle(vref)
     limits = read_limits(vref)
     models = latest_models(run_dir)
+    if versus_size is not None and not versus:
+        raise DesignError("--versus-size needs --versus (the size of the second term)")
+    for name, val in (("--size", size), ("--versus-size", versus_size)):
+        if val is not None and not (math.isfinite(val) and val != 0.0):
+            raise DesignError(f"{name} {val!r}: a size must be a finite, non-zero coefficient value")
     ch, term = resolve_term(effect, models, vehicle)
     terms = [term]
     if versus:
@@ -338,8 +343,11 @@ def design(run_dir: str | Path, effect: str, size: float | None = None, versus: 
     after = summarise(after_pred)
     after["noise_free_run_residual"] = summarise(after_run)
 
+    t_run = len(fd) / fs
+    t_design = (np.shape(X_new)[0] if refine else int(np.sum(in_win_full))) * dt
     ok, verdict = design_verdict(targets, sizes, before, after, after_pred, oracle, best.waveform.label(), a,
-                                 worst, hint=lambda rel: power_hint(oracle, rel, power, flyer))
+                                 worst, hint=lambda rel: power_hint(oracle, rel, power, flyer),
+                                 time_ratio=t_design / t_run if t_run > 0 else 1.0)
     u = np.asarray(a * best.waveform.values)
     table = pd.DataFrame({"t_s": t, flyer.column: u})
     if getattr(flyer, "extra", None) is not None:

@@ -41,6 +41,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+import pandas as pd
 
 __all__ = ["ChannelFloor", "channel_floor", "floors", "excess", "floor_table", "band_sigmas", "angle_floor_rms",
            "ANGLE_REPLICATES"]
@@ -117,17 +118,28 @@ def band_sigmas(fd, vehicle) -> dict[str, np.ndarray] | None:
 
     gyro = ("eiv_sigma_p_rad_s", "eiv_sigma_q_rad_s", "eiv_sigma_r_rad_s")
     acc = ("R_sigma_ax_m_s2", "R_sigma_ay_m_s2", "R_sigma_az_m_s2")
-    if not ({"band_hz", "t_s", "qbar_pa", *gyro} <= set(fd.columns)):
+    if not len(fd) or not ({"band_hz", "t_s", "qbar_pa", *gyro} <= set(fd.columns)):
         return None
     sg = np.column_stack([fd[c].to_numpy(float) for c in gyro])
-    band = float(np.nanmedian(fd["band_hz"].to_numpy(float))) if len(fd) else float("nan")
-    t = fd["t_s"].to_numpy(float)
-    dts = np.diff(t)
-    dts = dts[dts > 0]
-    if not (dts.size and math.isfinite(band) and band > 0 and np.all(np.isfinite(sg)) and sg.max() > 0):
+    band = fd["band_hz"].to_numpy(float)
+    if not (np.all(np.isfinite(sg)) and sg.max() > 0 and np.isfinite(band).any()):
         return None
-    fs = 1.0 / float(np.median(dts))
-    s_wdot = sg * band_derivative_noise_gain(fs, band)  # (N, 3) [rad/s^2]
+    # the gains per flight segment: pooled flights (or segments whose band the flight set) keep
+    # their own band and sample rate; a segment without a band (smoother path) gets NaN
+    g_der, g_lp = np.full(len(fd), np.nan), np.full(len(fd), np.nan)
+    t = fd["t_s"].to_numpy(float)
+    keys = ((fd["flight"].astype(str) + "/" + fd["segment"].astype(str)).to_numpy()
+            if {"flight", "segment"} <= set(fd.columns) else np.zeros(len(fd)))
+    for k in pd.unique(keys):
+        idx = np.flatnonzero(keys == k)
+        dts = np.diff(t[idx])
+        dts = dts[dts > 0]
+        b = band[idx]
+        b = float(np.median(b[np.isfinite(b)])) if np.isfinite(b).any() else float("nan")
+        if dts.size and math.isfinite(b) and b > 0:
+            fs = 1.0 / float(np.median(dts))
+            g_der[idx], g_lp[idx] = band_derivative_noise_gain(fs, b), band_noise_gain(fs, b)
+    s_wdot = sg * g_der[:, None]  # (N, 3) [rad/s^2]
     inertia = (vehicle.Ixx_kg_m2, vehicle.Iyy_kg_m2, vehicle.Izz_kg_m2, vehicle.Ixz_kg_m2)
     # the Euler equations read backwards are linear in the rate derivatives: rows of B^-1
     b_inv = aero_angular_acceleration(np.zeros((3, 3)), np.eye(3), inertia).T
@@ -137,13 +149,13 @@ def band_sigmas(fd, vehicle) -> dict[str, np.ndarray] | None:
     inert = (vehicle.Ixx_kg_m2, vehicle.Iyy_kg_m2, vehicle.Izz_kg_m2)
     out = {ch: s_ang[:, j] * inert[j] / (qs * lengths[j]) for j, ch in enumerate(MOMENT_CHANNELS)}
     if set(acc) <= set(fd.columns):
-        sa = np.column_stack([fd[c].to_numpy(float) for c in acc]) * band_noise_gain(fs, band)
+        sa = np.column_stack([fd[c].to_numpy(float) for c in acc]) * g_lp[:, None]
         rx, ry, rz = (float(v) for v in vehicle.accel_offset_m)
         lever = np.column_stack([np.hypot(s_wdot[:, 1] * rz, s_wdot[:, 2] * ry),  # (w_dot x r) noise
                                  np.hypot(s_wdot[:, 2] * rx, s_wdot[:, 0] * rz),
                                  np.hypot(s_wdot[:, 0] * ry, s_wdot[:, 1] * rx)])
         s_acc = np.hypot(sa, lever)
-        if np.all(np.isfinite(s_acc)):
+        if np.isfinite(s_acc).any():
             out.update({ch: s_acc[:, j] * vehicle.mass_kg / qs for j, ch in enumerate(FORCE_CHANNELS)})
     return out
 
@@ -152,7 +164,10 @@ def angle_floor_rms(fd, vehicle, models: dict, channels, replicates: int = ANGLE
     """{channel: RMS the recovered angles' error puts into the fitted model's residual}: the
     rise of the residual's mean square when the model is refitted with one more draw of the
     angles' own noise (the SIMEX draw: ``eiv_sigma_*`` per sample, through the band), averaged
-    over `replicates` draws.  Empty when the angles are taken as exact."""
+    over `replicates` draws.  Empty when the angles are taken as exact.  The rise measures the
+    step from sigma^2 to 2 sigma^2 of angle noise; where the fit attenuates strongly that step
+    costs less than the first sigma^2, so the part is then on the low side (a floor that errs
+    toward showing an excess, not toward hiding one)."""
     from aerosid.diagnosis.candidates import derived_signals
     from aerosid.identification.eiv import with_angle_noise
     from aerosid.identification.identify import angle_eiv_sigma, angle_cutoff_hz

@@ -7,7 +7,7 @@ import pandas as pd
 import pytest
 import scipy.signal
 
-from aerosid.design.core import design, write_design
+from aerosid.design.core import DesignError, design, write_design
 from aerosid.design.io import read_input
 from aerosid.design.limits import read_limits
 
@@ -114,11 +114,16 @@ def test_versus_sizes_come_from_the_catalogue_and_the_verdict_from_joint_detecti
     better = max(d.after[t]["sigma"] / abs(s) for t, s in zip(d.targets, d.sizes)) < \
         max(d.before[t]["sigma"] / abs(s) for t, s in zip(d.targets, d.sizes))
     assert d.achievable == (detect and better)
-    assert d.verdict.startswith("SEPARATED" if d.achievable else ("NOT SEPARATED" if better else "NO BETTER"))
+    # the fake vehicle's run is one small doublet at one alpha: the design separates them
+    assert d.achievable and d.verdict.startswith("SEPARATED")
+    assert d.after["correlation"] ** 2 < d.before["correlation"] ** 2
     # a size given for the second term is used; a tiny one cannot be separated
     d2 = design(run_dir, "control_alpha", versus="alpha_nonlinearity", versus_size=1e-6, refine=False,
                 flyer_factory=fake_factory)
     assert d2.sizes[1] == 1e-6 and not d2.achievable
+    for kw in ({"versus_size": 0.1}, {"versus": "alpha_nonlinearity", "versus_size": 0.0}, {"size": float("nan")}):
+        with pytest.raises(DesignError):
+            design(run_dir, "control_alpha", refine=False, flyer_factory=fake_factory, **kw)
 
 
 def test_never_proposes_a_manoeuvre_worse_than_the_flown_one(run_dir):

@@ -31,7 +31,15 @@ def test_not_separated_when_one_is_found_only_above_its_size_or_the_model_cannot
     assert calls and abs(calls[0][T[0]] - 100 * 0.02 / 0.15) < 1e-9
 
 
-def test_never_better_than_flown_is_said_so():
-    ok, text = design_verdict(T, SIZES, _side(0.02, 0.06), _side(0.03, 0.05), None, {}, "3-2-1-1s", 0.3, 1.0)
+def test_never_better_than_flown_is_said_so_per_unit_time():
+    before = _side(0.02, 0.06)
+    ok, text = design_verdict(T, SIZES, before, _side(0.04, 0.1), None, {}, "3-2-1-1s", 0.3, 1.0)
     assert not ok and text.startswith("NO BETTER MANOEUVRE WITHIN THE LIMITS")
-    assert "0.03" in text and "0.02" in text
+    assert "0.04" in text and "0.02" in text and "found at 90 % from" in text
+    # the run had 4x the design's time on condition: per second the design is better
+    ok, text = design_verdict(T, SIZES, _side(0.04, 0.1), _side(0.05, 0.12), None, {}, "3-2-1-1s", 0.3, 1.0,
+                              time_ratio=0.25)
+    assert not ok and text.startswith("NOT SEPARATED")
+    # a design that does what was asked is never called worse
+    ok, text = design_verdict(T, SIZES, before, _side(0.03, 0.05), None, {}, "3-2-1-1s", 0.3, 1.0)
+    assert ok and text.startswith("SEPARATED")
