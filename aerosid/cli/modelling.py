@@ -78,8 +78,9 @@ def diagnose(run_dir, model_spec, version_id, n_windows, mach_half_width, quiet)
     compared on held-out prediction, the shift each forces on the other
     coefficients and partial residuals; one is recommended only when the
     evidence separates them, else none, with the manoeuvre that would.  Each
-    channel's residual is shown against its floor (the flight-derived
-    coefficient's own sigma) and the excess over it.
+    channel's residual is shown against its floor (what a complete model would
+    leave: the flight-derived coefficient's own error and the recovered angles'
+    error through the model) and the excess over it.
 
     Writes RUN_DIR/diagnosis.json (effects best first, recommended, lookalikes,
     floor, regimes, time windows, whiteness, message).  Act on the
