@@ -223,8 +223,9 @@ def floors(residuals: dict, flight_data, angle_rms: dict | None = None, vehicle=
 def floor_table(floor: dict) -> list[str]:
     """Lines of the summary: residual, floor and the excess over it per channel."""
     lines = ["The error against its floor (floor = what a complete model would leave: the flight-derived "
-             "coefficient's own error and the recovered angles' error through the model, in quadrature; excess = "
-             "sqrt(residual^2 - floor^2), what a model term could still remove):",
+             "coefficient's own error and the recovered angles' error through the model, in quadrature, from the "
+             "sensors' white noise; excess = sqrt(residual^2 - floor^2): what a model term could still remove, or "
+             "an error the floor does not know, e.g. turbulence, sensor biases or timing on real flights):",
              f"  {'channel':<8}{'residual':>11}{'floor':>11}{'excess':>11}{'excess/residual':>17}"
              f"{'coefficient':>13}{'angles':>10}"]
     for ch, f in floor.items():
