@@ -18,7 +18,8 @@ import click
                    "alpha_nonlinearity): the design looks for the manoeuvre on which either, present at its size, "
                    "is found significant with the other in the model.")
 @click.option("--versus-size", type=float, default=None,
-              help="Size of the --versus term (default: the catalogue size, else the run's estimate).")
+              help="Size of the --versus term (default: the run's estimate when the run's model has the term, "
+                   "else the catalogue size).")
 @click.option("--out", "out_dir", required=True, type=click.Path(file_okay=False, path_type=Path),
               help="Writes DIR/input.parquet, DIR/input.csv and DIR/design.json.")
 @click.option("--mach-half-width", type=float, default=0.5, show_default=True,

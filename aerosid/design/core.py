@@ -234,17 +234,23 @@ def design(run_dir: str | Path, effect: str, size: float | None = None, versus: 
     sizes = []
     from aerosid.modelling.effects import CATALOGUE
 
-    # the size each target is to be found at: given, else the catalogue's physical default, else
-    # the run's estimate (with --versus, the absent one of two look-alikes has an estimate near
-    # zero in the joint fit: its size must come from the catalogue or --versus-size)
+    # the size each target is to be found at: given; else, one target: the catalogue's physical
+    # default, else the run's estimate; two targets (--versus): a term the run's model already has
+    # takes the run's estimate, a term the design adds the catalogue's size (the absent one of two
+    # look-alikes has an estimate near zero in the joint fit), else the run's estimate
+    in_run = set(models[ch].names)
     for i, t in enumerate(targets):
         given = size if i == 0 else versus_size
+        est = estimates.get(t, np.nan)
+        has_est = bool(np.isfinite(est) and est != 0.0)
         if given is not None:
             sizes.append(float(given))
+        elif versus and t in in_run and has_est:
+            sizes.append(float(est))
         elif terms[i].effect in CATALOGUE:
             sizes.append(float(CATALOGUE[terms[i].effect].value))
-        elif np.isfinite(estimates.get(t, np.nan)) and estimates[t] != 0.0:
-            sizes.append(float(estimates[t]))
+        elif has_est:
+            sizes.append(float(est))
         else:
             raise DesignError(f"no size for {t}: give {'--size' if i == 0 else '--versus-size'}")
     sizes = tuple(sizes)

@@ -121,6 +121,11 @@ def test_versus_sizes_come_from_the_catalogue_and_the_verdict_from_joint_detecti
     d2 = design(run_dir, "control_alpha", versus="alpha_nonlinearity", versus_size=1e-6, refine=False,
                 flyer_factory=fake_factory)
     assert d2.sizes[1] == 1e-6 and not d2.achievable
+    # a term the run's model already has is sized by the run's own estimate, not by the catalogue
+    # (whose sizes are seed-rlv's: Cm_q = -30 would be wrong for an aircraft)
+    d3 = design(run_dir, "control_alpha", versus="Cm_alpha", refine=False, flyer_factory=fake_factory)
+    assert d3.sizes[1] == pytest.approx(d3.before["Cm_alpha"]["estimate"])
+    assert d3.sizes[1] == pytest.approx(TRUE["Cm_alpha"], rel=0.05)
     for kw in ({"versus_size": 0.1}, {"versus": "alpha_nonlinearity", "versus_size": 0.0}, {"size": float("nan")}):
         with pytest.raises(DesignError):
             design(run_dir, "control_alpha", refine=False, flyer_factory=fake_factory, **kw)
