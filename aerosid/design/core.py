@@ -183,7 +183,8 @@ def _use(truth: pd.DataFrame, limits: Limits, dt: float, mask: np.ndarray | None
 
 # ----------------------------------------------------------------------------- design
 def design(run_dir: str | Path, effect: str, size: float | None = None, versus: str | None = None, *,
-           versus_size: float | None = None, mach_half_width: float = 0.5, kinds: tuple[str, ...] = ("3211", "doublet", "multisine"),
+           versus_size: float | None = None, mach_half_width: float = 0.5,
+           kinds: tuple[str, ...] = ("3211", "doublet", "multisine"),
            refine: bool = True, progress=None, flyer_factory=None, power: str = "trim") -> Design:
     from aerosid.diagnosis.candidates import derived_signals
     from aerosid.identification.identify import mach_window_mask

@@ -71,14 +71,15 @@ def design_verdict(targets: tuple, sizes: tuple, before: dict, after: dict, afte
         rel = {t: 100 * after[t]["sigma"] / abs(sz) for t, sz in zip(targets, sizes)}
         ok = passes
         verdict = (("SEPARATED: " if ok else "NOT SEPARATED WITHIN THE LIMITS: ")
-                   + ", ".join(f"sigma({t}) = {after[t]['sigma']:.3g} ({rel[t]:.1f} % of {sz:.4g}; found at 90 % "
-                               f"from {after[t]['reliable_size']:.3g}, run {before[t]['reliable_size']:.3g})"
+                   + ", ".join(f"sigma({t}) = {after[t]['sigma']:.3g} ({rel[t]:.1f} % of {sz:.4g}; found at "
+                               f"{100 * POWER:.0f} % from {after[t]['reliable_size']:.3g}, run "
+                               f"{before[t]['reliable_size']:.3g})"
                                for t, sz in zip(targets, sizes))
                    + f"; correlation {after['correlation']:.3f} (run: {before['correlation']:.3f})"
                    + ("; model error on the manoeuvre " + ", ".join(f"{t} {v:+.1f} %" for t, v in oracle.items())
                       if oracle else "")
-                   + f"; the aim is each found at {100 * POWER:.0f} % with the other in the model (found-from <= |size|) and "
-                     f"|model error| <= {MAX_MODEL_ERROR_PCT:g} %.")
+                   + f"; the aim is each found at {100 * POWER:.0f} % with the other in the model "
+                     f"(found-from <= |size|) and |model error| <= {MAX_MODEL_ERROR_PCT:g} %.")
         extra = hint(rel) if hint is not None and not ok else ""
         if extra:
             verdict += " " + extra

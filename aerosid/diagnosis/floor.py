@@ -169,6 +169,7 @@ def angle_floor_rms(fd, vehicle, models: dict, channels, replicates: int = ANGLE
     costs less than the first sigma^2, so the part is then on the low side (a floor that errs
     toward showing an excess, not toward hiding one)."""
     from aerosid.diagnosis.candidates import derived_signals
+    from aerosid.diagnosis.lookalikes import scaled_lstsq
     from aerosid.identification.eiv import with_angle_noise
     from aerosid.identification.identify import angle_eiv_sigma, angle_cutoff_hz
     from aerosid.modelling.models import vehicle_signals
@@ -188,9 +189,7 @@ def angle_floor_rms(fd, vehicle, models: dict, channels, replicates: int = ANGLE
             A = models[ch].design(sig)[0].to_numpy(float)
             y = fd[ch].to_numpy(float)
             ok = np.all(np.isfinite(A), axis=1) & np.isfinite(y)
-            scale = np.linalg.norm(A[ok], axis=0)
-            scale[scale == 0] = 1.0
-            e = y[ok] - A[ok] @ (np.linalg.lstsq(A[ok] / scale, y[ok], rcond=None)[0] / scale)
+            e = y[ok] - A[ok] @ scaled_lstsq(A[ok], y[ok])
             out[ch] = float(np.mean(e * e)) if e.size else float("nan")
         return out
 

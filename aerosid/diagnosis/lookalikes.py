@@ -329,10 +329,10 @@ def compare(channel: str, y: np.ndarray, base_X: np.ndarray, base_names: Sequenc
         msg = (f"{pair_txt} cannot be told apart in {channel} on this flight: their parts the model cannot "
                f"explain correlate by r = {max(corr.values()):.2f} and the evidence does not separate them "
                f"(Delta {ds} < {DELTA_MIN:.2f}, or held-out prediction disagrees). No recommendation. "
-               f"To separate them: {manoeuvre}" + (f" (`aerosid design RUN_DIR --effect {names[0]} --versus {names[1]} --out DIR` proposes "
-                                                   "one within the vehicle's limits; fly it and run both flights "
-                                                   "together: `aerosid run TELEMETRY NEW_TELEMETRY --out DIR`)."
-                                                   if k > 1 else "."))
+               f"To separate them: {manoeuvre}"
+               + (f" (`aerosid design RUN_DIR --effect {names[0]} --versus {names[1]} --out DIR` proposes one "
+                  "within the vehicle's limits; fly it and run both flights together: "
+                  "`aerosid run TELEMETRY NEW_TELEMETRY --out DIR`)." if k > 1 else "."))
         if all(not (a.p_value < p_distinct) for a in alts):
             msg += (f" Neither is significant on its own here (p = {', '.join(f'{a.p_value:.2g}' for a in alts)}"
                     f" >= {p_distinct:g})" + (f": the model's {in_model} is not supported by this flight." if in_model

@@ -164,15 +164,20 @@ def bridge_spikes(x: np.ndarray, residual: np.ndarray) -> np.ndarray:
     return x2.reshape(x.shape)
 
 
+def _band_impulse_response(fs_hz: float, band_hz: float) -> np.ndarray:
+    """The impulse response of :func:`low_pass_runs` (long enough for its tails to vanish)."""
+    n = int(40 * fs_hz / min(band_hz, 0.5 * fs_hz)) | 1
+    x = np.zeros(n)
+    x[n // 2] = 1.0
+    return low_pass_runs(x, fs_hz, band_hz, [slice(0, n)])
+
+
 def band_noise_gain(fs_hz: float, band_hz: float) -> float:
     """Standard deviation of unit white noise after :func:`low_pass_runs` (the square root
     of the sum of the squared impulse response of the forward-backward filter)."""
     if band_hz >= 0.5 * fs_hz:
         return 1.0
-    n = int(40 * fs_hz / band_hz) | 1
-    x = np.zeros(n)
-    x[n // 2] = 1.0
-    h = low_pass_runs(x, fs_hz, band_hz, [slice(0, n)])
+    h = _band_impulse_response(fs_hz, band_hz)
     return float(np.sqrt(np.sum(h * h)))
 
 
@@ -284,9 +289,5 @@ def band_derivative_noise_gain(fs_hz: float, band_hz: float) -> float:
     """Standard deviation [1/s] of the central-difference derivative of unit white noise after
     :func:`low_pass_runs`: the band path's angular-acceleration noise per unit gyro noise (the
     square root of the sum of the squared impulse response of low-pass then np.gradient)."""
-    n = int(40 * fs_hz / min(band_hz, 0.5 * fs_hz)) | 1
-    x = np.zeros(n)
-    x[n // 2] = 1.0
-    h = low_pass_runs(x, fs_hz, band_hz, [slice(0, n)])
-    d = np.gradient(h, 1.0 / fs_hz)
+    d = np.gradient(_band_impulse_response(fs_hz, band_hz), 1.0 / fs_hz)
     return float(np.sqrt(np.sum(d * d)))
