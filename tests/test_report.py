@@ -286,3 +286,23 @@ def test_broken_inputs_are_reported_not_fatal(run_copy):
     assert_well_formed(doc)
     assert "not valid JSON" in doc and "cannot read" in doc
     assert "No diagnosis yet" in doc
+
+
+def test_scatter_panel_svg_is_compact():
+    """The context dots are one embedded image (not one <use> per dot) and coordinates carry
+    at most five significant digits: the partial-residual figures made reports of 1.7-2.6 MB."""
+    import numpy as np
+
+    from aerosid.report.plots import _figure, _svg, scatter_panel
+
+    rng = np.random.default_rng(0)
+    x = rng.normal(size=5000)
+    fig, axes = _figure((3, 2))
+    scatter_panel(axes[0], x * 1e-4, 0.3 * x + rng.normal(size=5000), xlabel="q_hat", ylabel="Cm residual",
+                  line=(np.array([-3e-4, 3e-4]), np.array([-1.0, 1.0])))
+    svg = _svg(fig, "t", "test")
+    assert svg.count("<image") == 1
+    markers = [u for u in re.findall(r"<use\b[^>]*>", svg) if "DejaVu" not in u]
+    assert len(markers) < 30  # tick marks only
+    long = re.findall(r"(?<![\w#.])-?\d+\.\d{4,}", svg)
+    assert long and all(len(n.lstrip("-").replace(".", "").lstrip("0")) <= 5 for n in long)
