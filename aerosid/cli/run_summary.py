@@ -72,6 +72,28 @@ def verdict_lines(run_dir: Path) -> list[str]:
     return lines
 
 
+def undetermined_line(run_dir: Path) -> str | None:
+    """The coefficients the flight does not determine (95 % interval holds 0), or None."""
+    path = run_dir / "coefficients.parquet"
+    if not path.is_file():
+        return None
+    import pandas as pd
+
+    from aerosid.identification.term_report import undetermined
+
+    try:
+        table = pd.read_parquet(path)
+    except (OSError, ValueError):
+        return None
+    names = undetermined(table)
+    if not names:
+        return None
+    return (f"not determined by this flight (95 % interval holds 0, not even the sign is known): {', '.join(names)}; "
+            f"fly a manoeuvre that excites them (for a vehicle aerosid can fly, `aerosid design {run_dir} --effect "
+            f"{names[0]} --out DIR` proposes one)")
+
+
 def run_outcome_lines(run_dir: Path, mach_half_width: float | None) -> list[str]:
     window = regression_window_line(run_dir, mach_half_width)
-    return ([window] if window else []) + verdict_lines(run_dir)
+    weak = undetermined_line(run_dir)
+    return ([window] if window else []) + ([weak] if weak else []) + verdict_lines(run_dir)

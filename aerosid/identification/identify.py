@@ -85,11 +85,13 @@ def format_table(table: pd.DataFrame, per_degree: bool = False) -> str:
     the header says which.  CRB = Cramer-Rao bound on the std from the gyros' and
     accelerometers' noise (aerosid.identification.crb)."""
     from aerosid.identification.coefficient_units import per_degree_factor, unit_label, units_header
+    from aerosid.identification.term_report import UNDETERMINED_NOTE, undetermined
 
     lines = [f"moments about the CG; {units_header(per_degree)}; CRB = Cramér-Rao bound on the std from the "
              "gyros' and accelerometers' noise (aerosid.identification.crb)",
              f"{'coefficient':<20}{'preflight':>12}{'estimate':>12}{'sigma':>11}{'sigma OLS':>11}{'CRB':>11}"
              f"{'95% interval':>26}  unit"]
+    weak_terms = set(undetermined(table))
     for channel, rows in table.groupby("channel", sort=False):
         first = rows.iloc[0]
         lines.append(f"[{channel}]  F = {first['f_stat']:,.0f} (corrected {first['f_stat_corrected']:,.1f}), "
@@ -103,11 +105,12 @@ def format_table(table: pd.DataFrame, per_degree: bool = False) -> str:
                 why = row.get("note") or f"no excitation in {row['expression']}"
                 lines.append(f"  {row['coefficient']:<18}{ref}   not identifiable ({why})")
                 continue
+            weak = row["coefficient"] in weak_terms
             lines.append(f"  {row['coefficient']:<18}{ref}{row['estimate'] * k:>12.5g}"
                          f"{row['std_error'] * k:>11.2g}{row['std_error_ols'] * k:>11.2g}"
                          f"{row.get('crb_std', np.nan) * k:>11.2g}"
                          f"{'[' + format(row['ci_low'] * k, '.5g') + ', ' + format(row['ci_high'] * k, '.5g') + ']':>26}"
-                         f"  {u}")
+                         f"  {u}" + (f"   <- {UNDETERMINED_NOTE}" if weak else ""))
         for i, w in enumerate(w for w in first["warnings"].split(" | ") if w):
             lines.append(f"  warning [{i + 1}] {w}")
     if "preflight_warning" in table.columns:

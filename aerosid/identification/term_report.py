@@ -66,6 +66,32 @@ def significance_warnings(table: pd.DataFrame, p_max: float = P_MAX) -> list[str
     return out
 
 
+def interval_includes_zero(ci_low, ci_high) -> bool:
+    """Whether a finite 95 % interval [ci_low, ci_high] holds 0: the flight does not tell the
+    coefficient from zero, not even its sign."""
+    lo, hi = float(ci_low), float(ci_high)
+    return math.isfinite(lo) and math.isfinite(hi) and lo <= 0.0 <= hi
+
+
+def undetermined(table: pd.DataFrame) -> list[str]:
+    """The non-constant coefficients of a coefficients table whose 95 % interval holds 0:
+    NOT DETERMINED by this flight (the issue-16 bench once counted such an estimate, F4N's
+    C_n,r -0.024 +- 0.05 against -0.15, as a silent failure: the number alone looked like a
+    result).  Intercepts are left out (0 is a plausible value for them); identities and
+    unidentifiable terms have no interval and are reported as such elsewhere."""
+    out = []
+    for _, row in table.iterrows():
+        if not interval_includes_zero(row.get("ci_low", math.nan), row.get("ci_high", math.nan)):
+            continue
+        if _is_constant(str(row.get("expression", ""))):
+            continue
+        out.append(str(row["coefficient"]))
+    return out
+
+
+UNDETERMINED_NOTE = "95 % interval holds 0: not determined by this flight"
+
+
 def _is_constant(expression: str) -> bool:
     from aerosid.modelling.expressions import parse
 

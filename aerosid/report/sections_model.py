@@ -15,6 +15,7 @@ IDENTITY_TEXT = ("alpha and beta are inverted from this channel through the pref
 
 def _s_coefficients(run: _Run, shown: Shown, truth: dict) -> str:
     from aerosid.identification.identify import ANGLE_TERMS
+    from aerosid.identification.term_report import UNDETERMINED_NOTE, undetermined
 
     table = shown.table
     if table is None or table.empty:
@@ -27,6 +28,7 @@ def _s_coefficients(run: _Run, shown: Shown, truth: dict) -> str:
         headers += ["truth", "error %", "truth in interval"]
     ncol = len(headers)
     rows = []
+    weak_terms = set(undetermined(table))
     for channel, g in table.groupby("channel", sort=False):
         first = g.iloc[0]
         head = (f"{channel}: F = {_num(first.get('f_stat'), ',.0f')} (corrected "
@@ -63,6 +65,8 @@ def _s_coefficients(run: _Run, shown: Shown, truth: dict) -> str:
             lo, hi = r.get("ci_low"), r.get("ci_high")
             cells = [str(r["coefficient"]), per, _sc(ref, k), _sc(est, k), _sc(r.get("std_error"), k, ".2g"),
                      _sc(r.get("std_error_ols"), k, ".2g"), f"[{_num(_k(lo, k), '.5g')}, {_num(_k(hi, k), '.5g')}]"]
+            if name in weak_terms:
+                cells[-1] = _H(f'{_e(cells[-1])}<br><span class="na">{_e(UNDETERMINED_NOTE)}</span>')
             if has_truth:
                 if tv is None:
                     cells += ["—", "—", "—"]
