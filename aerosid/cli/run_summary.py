@@ -88,9 +88,12 @@ def undetermined_line(run_dir: Path) -> str | None:
     names = undetermined(table)
     if not names:
         return None
-    return (f"not determined by this flight (95 % interval holds 0, not even the sign is known): {', '.join(names)}; "
-            f"fly a manoeuvre that excites them (for a vehicle aerosid can fly, `aerosid design {run_dir} --effect "
-            f"{names[0]} --out DIR` proposes one)")
+    channel = dict(zip(table["coefficient"].astype(str), table["channel"].astype(str)))
+    pitch = [n for n in names if channel.get(n) == "Cm"]
+    advice = ("more excitation of their axis would determine them (a longer or larger input)"
+              + (f"; for the pitch terms, `aerosid design {run_dir} --effect {pitch[0]} --out DIR` proposes one "
+                 "(seed-rlv and c172x)" if pitch else ""))
+    return f"not determined by this flight (95 % interval holds 0, not even the sign is known): {', '.join(names)}; {advice}"
 
 
 def run_outcome_lines(run_dir: Path, mach_half_width: float | None) -> list[str]:
