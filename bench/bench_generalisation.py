@@ -294,6 +294,10 @@ def bars(df: pd.DataFrame, suffix: str = "") -> str:
                 out.append(f"- {v}: not computed")
                 continue
         ok = g[(g["failed"] == "") & ~g["diverged"].astype(bool)]
+        if ok.empty:  # nothing to measure: not "every bar met"
+            first = str(g["failed"].iloc[0]) if len(g) and str(g["failed"].iloc[0]) else "diverged"
+            out.append(f"- {v}: no completed run ({len(g)} failed; first: {first[:160]})")
+            continue
         miss = []
         for name, (limit, floor) in BARS.items():
             col = f"{name}_err_pct{suffix}"

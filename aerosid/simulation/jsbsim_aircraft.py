@@ -28,7 +28,7 @@ import numpy as np
 import pandas as pd
 
 from aerosid.simulation import SimulatedFlight
-from aerosid.simulation.jsbsim_design import (DT_S, FT, INCH, LBF, PSF, SLUG, SLUG_FT2, FlightDesign,
+from aerosid.simulation.jsbsim_design import (DT_S, FT, INCH, LBF, PSF, SLUG, SLUG_FT2, FlightDesign, in_catalogue,
                                               UnsupportedAircraft, flight_design, symmetric_loading)
 from aerosid.simulation.jsbsim_linear import abs_beta_slope, mach_slopes, model_coefficients
 from aerosid.simulation.jsbsim_flight import COMMON_PROPERTIES, _fly, _import_jsbsim, _schedule, _takeup_steps
@@ -64,7 +64,7 @@ def _record_list(design: FlightDesign, tables: AeroTables, catalogue: set[str], 
     names = _STANDARD + tables.leaf_properties() + [c.pitch, c.roll, c.yaw]
     names += [p for p in (c.left_aileron, c.right_aileron) if p] + [s for s, _ in c.siblings]
     names += [f"propulsion/engine[{i}]/thrust-lbs" for i in range(n_eng)]
-    return [p for p in dict.fromkeys(names) if p in catalogue]
+    return [p for p in dict.fromkeys(names) if in_catalogue(p, catalogue)]
 
 
 def _surfaces(design: FlightDesign, rec: dict) -> tuple[list[np.ndarray], list[str], list[list[float]], list]:

@@ -388,6 +388,13 @@ def flight_design(jsbsim, aircraft: str) -> FlightDesign:
     return design
 
 
+def in_catalogue(prop: str, catalogue: set[str]) -> bool:
+    """Whether JSBSim defines prop.  Its catalogue lists the first of indexed properties without the
+    index ('propulsion/engine/thrust-coefficient' for engine[0]); an aircraft may spell it either way
+    (pc7 and J3Cub read 'propulsion/engine[0]/thrust-coefficient'), and JSBSim reads both."""
+    return prop in catalogue or prop.replace("[0]", "") in catalogue
+
+
 def _design(jsbsim, aircraft: str) -> FlightDesign:
     xml_path = aircraft_xml(jsbsim, aircraft)
     xml_root = ET.parse(xml_path).getroot()
@@ -400,7 +407,7 @@ def _design(jsbsim, aircraft: str) -> FlightDesign:
     loading = symmetric_loading(fdm, xml_root)
     catalogue = {p.split(" ")[0] for p in fdm.get_property_catalog()}
     controls = find_controls(tables, catalogue)
-    missing = [p for p in tables.leaf_properties() if p not in catalogue]
+    missing = [p for p in tables.leaf_properties() if not in_catalogue(p, catalogue)]
     if missing:
         raise UnsupportedAircraft(f"{xml_path}: its aerodynamics read properties JSBSim does not define: {missing}")
     try:

@@ -224,3 +224,18 @@ def test_evaluator_elements_against_closed_forms(tmp_path):
         AeroTables(bad)
     root = ET.parse(xml).getroot()
     assert root.find("aerodynamics") is not None
+
+
+def test_an_aircraft_that_reads_engine_zero_by_its_index_is_flown():
+    """J3Cub's aerodynamics read 'propulsion/engine[0]/thrust-coefficient'; JSBSim's catalogue
+    lists it as 'propulsion/engine/thrust-coefficient'. It was refused as undefined."""
+    from aerosid.simulation.jsbsim_design import in_catalogue
+
+    cat = {"propulsion/engine/thrust-coefficient", "propulsion/engine[1]/thrust-coefficient"}
+    assert in_catalogue("propulsion/engine[0]/thrust-coefficient", cat)
+    assert in_catalogue("propulsion/engine[1]/thrust-coefficient", cat)
+    assert not in_catalogue("propulsion/engine[2]/thrust-coefficient", cat)
+    flight = simulate_jsbsim("J3Cub", seed=0, faults=False)
+    assert "propulsion/engine[0]/thrust-coefficient" in AeroTables(flight_design(_import_jsbsim(), "J3Cub")
+                                                                   .xml_path).leaf_properties()
+    assert np.all(np.isfinite(flight.truth["Cm"].to_numpy(float)))
