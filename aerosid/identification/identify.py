@@ -221,6 +221,44 @@ def mach_window_mask(mach: np.ndarray, reference: float, half_width: float | Non
 GYRO_EIV_DEFAULT = False
 
 
+#: Widen the sigma of the coefficients that depend on a term the flight does not determine
+#: (aerosid.identification.structure_uncertainty).
+STRUCTURE_UNCERTAINTY = True
+
+
+def _with_structure_uncertainty(fd: pd.DataFrame, signals: dict, models: dict, fits: dict) -> dict:
+    """The fits whose sigma include the model-structure part of a term whose interval holds 0."""
+    from aerosid.identification.regression import with_added_covariance
+    from aerosid.identification.structure_uncertainty import structure_covariance
+    from aerosid.identification.term_report import _is_constant
+
+    out = {}
+    for ch, fit in fits.items():
+        est = np.asarray(fit.estimate, float)
+        if not np.all(np.isfinite(est)) or len(est) < 2:
+            out[ch] = fit
+            continue
+        ci = fit.conf_int()
+        exprs = [t.expression for t in models[ch].terms]
+        weak = np.array([bool(ci[j, 0] <= 0.0 <= ci[j, 1]) and not _is_constant(exprs[j]) for j in range(len(est))])
+        if not weak.any():
+            out[ch] = fit
+            continue
+        X = models[ch].regressors(signals).to_numpy(float)
+        extra, changes = structure_covariance(X, fd[ch].to_numpy(float), est, weak)
+        se = np.sqrt(np.clip(np.diag(fit.cov + extra), 0.0, None))
+        moved = [fit.names[k] for k in range(len(est)) if not weak[k] and se[k] > 1.05 * fit.std_error[k]]
+        if not moved:
+            out[ch] = fit
+            continue
+        note = (f"{', '.join(fit.names[j] for j in changes)}: not determined by this flight (95 % interval holds 0); "
+                f"the sigma of {', '.join(moved)} include how their estimates change when "
+                f"{'it is' if len(changes) == 1 else 'each is'} dropped (model-structure uncertainty, "
+                "aerosid.identification.structure_uncertainty)")
+        out[ch] = with_added_covariance(fit, extra, note)
+    return out
+
+
 def identify(flight_data: pd.DataFrame, vehicle: Vehicle, models: dict[str, ChannelModel] | None = None,
              mach_half_width: float | None = 0.5, cov: str = "morelli_klein",
              gyro_eiv: bool = GYRO_EIV_DEFAULT) -> Identification:
@@ -260,6 +298,8 @@ def identify(flight_data: pd.DataFrame, vehicle: Vehicle, models: dict[str, Chan
     rate_sigma = _rate_eiv_sigma(fd) if gyro_eiv and band_limited else None
     if sigma is not None or rate_sigma is not None:
         fits = _eiv_corrected(fd, vehicle, models, fits, sigma, rate_sigma)
+    if STRUCTURE_UNCERTAINTY:
+        fits = _with_structure_uncertainty(fd, signals, models, fits)
     refs = AeroModel.preflight(vehicle).linear_truth() if vehicle.preflight is not None else {}
     window = (float(fd["mach"].min()), float(fd["mach"].max()))
     identities = tuple(ch for ch in INVERSION_CHANNELS if ch in fits) if vehicle.air_data_source != "vanes" else ()
