@@ -228,7 +228,7 @@ def report(df: pd.DataFrame, seeds: list[int], label: str, load: tuple[str, str]
              "sample's state (bench/generalisation_avg.py: by Stein's lemma what a linear fit estimates for Gaussian "
              "excursions; seed-rlv: analytic and linear, the same truth).", ""]
     if label == "smoke":
-        lines += ["**Smoke run** (a check of the harness on a shared machine, 2 seeds): not the bench result; the "
+        lines += [f"**Smoke run** (fewer than 10 seeds: {len(seeds)}): not the bench result; the "
                   "full bench is `python bench/bench_generalisation.py --seeds 0-9`.", ""]
     lines += ["| vehicle | runs | failed (announced) | with findings | silent failures | band edge [Hz] | "
               "pipeline time per run [s] |", "|---|---|---|---|---|---|---|"]
