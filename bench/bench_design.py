@@ -113,7 +113,7 @@ def oracle_scan(duration_s: float = 90.0, amplitude_rad: float = 0.07, power: st
     propeller's moment) with the true regressors: the model's own error on that manoeuvre.
     power="idle": flown in the power-off glide (throttle_cmd_norm = 0); the table then also
     gives the fit to the aerodynamic Cm alone and the propeller moment's spread."""
-    from aerosid.design.core import _lateral_doublets
+    from aerosid.design.flyers import lateral_doublets as _lateral_doublets
     from aerosid.design.waveforms import candidate_waveforms
     from aerosid.simulation.jsbsim_flight import simulate_jsbsim
 

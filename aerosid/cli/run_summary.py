@@ -92,7 +92,7 @@ def undetermined_line(run_dir: Path) -> str | None:
     pitch = [n for n in names if channel.get(n) == "Cm"]
     advice = ("more excitation of their axis would determine them (a longer or larger input)"
               + (f"; for the pitch terms, `aerosid design {run_dir} --effect {pitch[0]} --out DIR` proposes one "
-                 "(seed-rlv and c172x)" if pitch else ""))
+                 "(seed-rlv and the JSBSim aircraft)" if pitch else ""))
     return f"not determined by this flight (95 % interval holds 0, not even the sign is known): {', '.join(names)}; {advice}"
 
 

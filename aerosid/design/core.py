@@ -26,6 +26,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from aerosid.design.flyers import default_flyer
 from aerosid.design.limits import Limits, read_limits
 from aerosid.design.power import POWER_SETTINGS, power_hint
 from aerosid.design.predict import POWER, Prediction, ResidualModel, predict_covariance
@@ -293,7 +294,7 @@ def design(run_dir: str | Path, effect: str, size: float | None = None, versus: 
     cands = [w for w in candidate_waveforms(t, start, end, ramp) if w.kind in kinds]
     cols = [c for c in base.columns if c not in ("t_s",) and base[c].dtype.kind == "f"]
     evals: list[Evaluation] = []
-    a_ref = 0.08  # JSBSim: well above c172x's elevator hysteresis (0.05 rad wide)
+    a_ref = getattr(flyer, "reference_rad", 0.08)  # the elevator amplitude the shapes are flown at
     for k, w in enumerate(cands):
         say(f"candidate {k + 1}/{len(cands)}: {w.label()}")
         unit = flyer.linear_response(w.values) if linear else flyer.fly(a_ref * w.values)
@@ -318,14 +319,22 @@ def design(run_dir: str | Path, effect: str, size: float | None = None, versus: 
     # ---- fly the best in full (back off if the full flight breaks a limit)
     best = evals[0]
     a = best.amplitude_rad
+    # a limit the flight already uses beyond 1 without the designed input (the lateral doublets of a
+    # generated JSBSim design against an assumed rate limit) is not the input's to keep: the input
+    # is backed off only from what it adds (as _max_amplitude does per sample)
+    base_use = _use(base, limits, dt)
+    keys = ("surface", "surface_rate", "alpha", "load_factor")
     for _ in range(4):
         say(f"flying the chosen design in full: {best.waveform.label()}, amplitude {a:.4g} rad")
         tr = flyer.fly(a * best.waveform.values)
         use = _use(tr, limits, dt)
-        worst = max(use["surface"], use["surface_rate"], use["alpha"], use["load_factor"])
-        if worst <= 1.0:
+        worst = max(use[k] / max(1.0, base_use[k]) for k in keys)
+        if worst <= 1.0 + 1e-9:
             break
         a *= 0.97 / worst
+    notes += [f"the flight without the designed input already uses the {k.replace('_', ' ')} limit at "
+              f"{100 * base_use[k]:.0f} % (its other axes' inputs); the design adds nothing beyond it"
+              for k in keys if base_use[k] > 1.0]
     in_win_full = mach_window_mask(tr["mach"].to_numpy(float), vehicle.mach_reference, mach_half_width)
     s = _signals_from_truth(tr, vehicle)
     Xf, _ = model.design({kk: np.asarray(v)[in_win_full] if np.ndim(v) else v for kk, v in s.items()})
@@ -405,38 +414,6 @@ def _oracle(truth: pd.DataFrame, signals: dict, mask: np.ndarray, model, ch: str
     return {t: float(100.0 * (est[t] / coefficients[t] - 1.0)) for t in targets if coefficients[t] != 0}
 
 
-def default_flyer(vehicle, limits: Limits, coefs: dict, effect: str | None, size: float, say, power: str = "trim"):
-    """(flyer, baseline truth, input start [s], input end [s], linearised?) for the run's vehicle.
-    power: "trim" (the simulator's trim) or "idle" (JSBSim aircraft: a glide at idle throttle)."""
-    if power != "trim" and vehicle.name == "seed-rlv":
-        raise DesignError(f"--power {power}: the built-in simulator (seed-rlv) has no throttle; it is an option "
-                          "of the JSBSim aircraft (c172x)")
-    if vehicle.name == "seed-rlv":
-        from aerosid.design.flyers import RLVFlyer
-        from aerosid.identification.identify import mach_window_mask
-
-        flyer = RLVFlyer(coefs, effect, size)
-        say("flying the baseline and the impulse response (built-in simulator, identified pitch model)")
-        base = flyer.baseline()
-        in_win = mach_window_mask(base["mach"].to_numpy(float), vehicle.mach_reference, 0.5)
-        t_win = base["t_s"].to_numpy(float)[in_win]
-        start = float(t_win.min()) + 0.5
-        return flyer, base, start, min(float(t_win.max()), start + limits.duration_max_s), True
-    from aerosid.simulation.jsbsim_flight import SUPPORTED_AIRCRAFT
-
-    if vehicle.name not in SUPPORTED_AIRCRAFT:
-        raise DesignError(f"no simulator for vehicle {vehicle.name!r}: the design flies candidates in the "
-                          "built-in simulator (seed-rlv) or JSBSim (c172x)")
-    from aerosid.design.flyers import JSBSimFlyer
-
-    duration = limits.duration_max_s
-    end = duration - 16.0
-    extra = _lateral_doublets(np.arange(int(round(duration / 0.01)) + 1) * 0.01, end)
-    flyer = JSBSimFlyer(vehicle.name, duration, extra=extra, throttle=POWER_SETTINGS[power])
-    say(f"flying the baseline in JSBSim ({duration:g} s{', power-off glide at idle throttle' if power == 'idle' else ''})")
-    return flyer, flyer.fly(np.zeros_like(flyer.t)), 3.0, end, False
-
-
 def _pipeline_residual(telemetry: pd.DataFrame, vehicle, model, ch: str, mach_half_width: float) -> ResidualModel:
     """The channel residual of the pipeline on a simulated noisy flight (process_telemetry)."""
     import warnings
@@ -463,22 +440,6 @@ def _pipeline_residual(telemetry: pd.DataFrame, vehicle, model, ch: str, mach_ha
     fs = 1.0 / float(np.median(np.diff(fd["t_s"].to_numpy(float))))
     return (ResidualModel.from_residual(np.asarray(fit.residuals), fs, groups=groups, max_lag=fit.max_lag),
             X.to_numpy(float))
-
-
-def _lateral_doublets(t: np.ndarray, after_s: float) -> pd.DataFrame:
-    """The lateral part of a JSBSim design: an aileron then a rudder doublet after the
-    elevator input (as in c172x's 3211 flight), so that beta and the lateral terms stay excited."""
-    ail = np.zeros_like(t)
-    rud = np.zeros_like(t)
-    a0, r0 = after_s + 1.0, after_s + 8.0
-    ail[(t >= a0) & (t < a0 + 1.0)] = 0.04
-    ail[(t >= a0 + 1.0) & (t < a0 + 2.0)] = -0.04
-    rud[(t >= r0) & (t < r0 + 1.0)] = 0.04
-    rud[(t >= r0 + 1.0) & (t < r0 + 2.0)] = -0.04
-    k = max(int(round(0.2 / (t[1] - t[0]))), 1)  # 0.2 s input ramps, as in c172x's 3211 flight
-    ail = np.convolve(ail, np.full(k, 1.0 / k))[: t.size]
-    rud = np.convolve(rud, np.full(k, 1.0 / k))[: t.size]
-    return pd.DataFrame({"t_s": t, "aileron_cmd_rad": ail, "rudder_cmd_rad": rud})
 
 
 def write_design(d: Design, out_dir: str | Path) -> dict[str, Path]:

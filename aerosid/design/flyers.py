@@ -108,15 +108,17 @@ class RLVFlyer:
 
 
 class JSBSimFlyer:
-    """A JSBSim aircraft; the designed elevator command ``elevator_cmd_rad``.  throttle: None
+    """A JSBSim aircraft; the designed elevator command ``elevator_cmd_rad``, the candidate shapes
+    flown at reference_rad (c172x: 0.08; a generated aircraft: its flight design's 3-2-1-1 size).  throttle: None
     flies the simulator's own trim; a value (0 = idle) a glide trimmed at that fixed throttle
     (the input's ``throttle_cmd_norm`` column, aerosid.design.io)."""
 
     column = "elevator_cmd_rad"
 
     def __init__(self, aircraft: str, duration_s: float, dt: float = 0.01, extra: pd.DataFrame | None = None,
-                 throttle: float | None = None):
+                 throttle: float | None = None, reference_rad: float = 0.08):
         self.aircraft = aircraft
+        self.reference_rad = reference_rad  # the elevator amplitude [rad] the candidate shapes are flown at
         self.dt = dt
         self.t = np.arange(int(round(duration_s / dt)) + 1) * dt
         self.extra = extra  # other axes' inputs (e.g. the lateral doublets), on self.t
@@ -144,3 +146,85 @@ class JSBSimFlyer:
         from aerosid.simulation.jsbsim_flight import simulate_jsbsim
 
         return simulate_jsbsim(self.aircraft, "3211", seed=seed, faults=True, input_table=self.table(u)).telemetry
+
+
+def default_flyer(vehicle, limits, coefs: dict, effect: str | None, size: float, say, power: str = "trim"):
+    """(flyer, baseline truth, input start [s], input end [s], linearised?) for the run's vehicle:
+    seed-rlv in the built-in simulator, c172x and any JSBSim aircraft aerosid can fly (the
+    generated ones: pa28, OV10, T37, F4N, ...; its name is the vehicle file's) in JSBSim.
+    power: "trim" (the simulator's trim) or "idle" (JSBSim aircraft: a glide at idle throttle)."""
+    from aerosid.design.core import DesignError
+    from aerosid.design.power import POWER_SETTINGS
+
+    if power != "trim" and vehicle.name == "seed-rlv":
+        raise DesignError(f"--power {power}: the built-in simulator (seed-rlv) has no throttle; it is an option "
+                          "of the JSBSim aircraft")
+    if vehicle.name == "seed-rlv":
+        from aerosid.identification.identify import mach_window_mask
+
+        flyer = RLVFlyer(coefs, effect, size)
+        say("flying the baseline and the impulse response (built-in simulator, identified pitch model)")
+        base = flyer.baseline()
+        in_win = mach_window_mask(base["mach"].to_numpy(float), vehicle.mach_reference, 0.5)
+        t_win = base["t_s"].to_numpy(float)[in_win]
+        start = float(t_win.min()) + 0.5
+        return flyer, base, start, min(float(t_win.max()), start + limits.duration_max_s), True
+    sizes = jsbsim_input_sizes(vehicle.name)
+    duration = limits.duration_max_s
+    h = sizes["half_s"]
+    end = duration - max(16.0, 6.0 + 4.0 * h + max(5.0, 3.0 * h))  # room for the two lateral doublets
+    extra = lateral_doublets(np.arange(int(round(duration / 0.01)) + 1) * 0.01, end, sizes["aileron_rad"],
+                             sizes["rudder_rad"], sizes["half_s"])
+    flyer = JSBSimFlyer(vehicle.name, duration, extra=extra, throttle=POWER_SETTINGS[power],
+                        reference_rad=sizes["elevator_rad"])
+    say(f"flying the baseline in JSBSim ({duration:g} s{', power-off glide at idle throttle' if power == 'idle' else ''})")
+    return flyer, flyer.fly(np.zeros_like(flyer.t)), 3.0, end, False
+
+
+#: c172x's hand-written flight: the elevator shapes are flown at 0.08 rad (well above its elevator's
+#: hysteresis, 0.05 rad wide), the lateral doublets at 0.04 rad, 1 s per half.
+C172X_INPUT_SIZES = {"elevator_rad": 0.08, "aileron_rad": 0.04, "rudder_rad": 0.04, "half_s": 1.0}
+
+
+def jsbsim_input_sizes(aircraft: str) -> dict:
+    """The input sizes [rad of deflection] and the lateral doublets' half-width [s] of a JSBSim
+    design: c172x's own, else the generated flight design's (its 3-2-1-1 and doublets are sized to
+    the aircraft's surfaces and modes, aerosid.simulation.jsbsim_design).  A vehicle that is not a
+    JSBSim aircraft aerosid can fly raises DesignError, saying why."""
+    from aerosid.design.core import DesignError
+    from aerosid.simulation.jsbsim_flight import SUPPORTED_AIRCRAFT
+
+    if aircraft in SUPPORTED_AIRCRAFT:
+        return dict(C172X_INPUT_SIZES)
+    try:
+        from aerosid.simulation.jsbsim_design import flight_design
+        from aerosid.simulation.jsbsim_flight import _import_jsbsim
+
+        d = flight_design(_import_jsbsim(), aircraft)
+    except ImportError as exc:
+        raise DesignError(f"vehicle {aircraft!r}: the design flies JSBSim, which is not installed ({exc})") from exc
+    except ValueError as exc:  # UnsupportedAircraft: no such aircraft, or one aerosid cannot fly
+        raise DesignError(f"no simulator for vehicle {aircraft!r}: the design flies candidates in the built-in "
+                          f"simulator (seed-rlv) or in JSBSim, and JSBSim says: {exc}") from exc
+    steps = d.manoeuvre["surface_steps_rad"]
+    return {"elevator_rad": abs(float(steps["elevator"])), "aileron_rad": abs(float(steps["aileron"])),
+            "rudder_rad": abs(float(steps["rudder"])), "half_s": float(d.manoeuvre["aileron_half_s"])}
+
+
+def lateral_doublets(t: np.ndarray, after_s: float, aileron_rad: float = 0.04, rudder_rad: float = 0.04,
+                     half_s: float = 1.0) -> pd.DataFrame:
+    """The lateral part of a JSBSim design: an aileron then a rudder doublet after the
+    elevator input (as in the aircraft's 3211 flight), so that beta and the lateral terms stay
+    excited; amplitudes [rad of deflection] and half-width [s] (c172x's by default)."""
+    ail = np.zeros_like(t)
+    rud = np.zeros_like(t)
+    a0 = after_s + 1.0
+    r0 = a0 + 2.0 * half_s + max(5.0, 3.0 * half_s)
+    ail[(t >= a0) & (t < a0 + half_s)] = aileron_rad
+    ail[(t >= a0 + half_s) & (t < a0 + 2 * half_s)] = -aileron_rad
+    rud[(t >= r0) & (t < r0 + half_s)] = rudder_rad
+    rud[(t >= r0 + half_s) & (t < r0 + 2 * half_s)] = -rudder_rad
+    k = max(int(round(0.2 / (t[1] - t[0]))), 1)  # 0.2 s input ramps, as in c172x's 3211 flight
+    ail = np.convolve(ail, np.full(k, 1.0 / k))[: t.size]
+    rud = np.convolve(rud, np.full(k, 1.0 / k))[: t.size]
+    return pd.DataFrame({"t_s": t, "aileron_cmd_rad": ail, "rudder_cmd_rad": rud})

@@ -183,7 +183,7 @@ def simulate_aircraft(aircraft: str, seed: int = 0, *, faults: bool = True, prog
         "p_hat": rec["velocities/p-aero-rad_sec"] * bi2vel, "q_hat": rec["velocities/q-aero-rad_sec"] * ci2vel,
         "r_hat": rec["velocities/r-aero-rad_sec"] * bi2vel, "alpha_dot_hat": rec["aero/alphadot-rad_sec"] * ci2vel,
         **coefficient_columns(rec, S_ft2, cbar_ft, b_ft),
-        "thrust_N": prop_thrust * np.ones(n), "mass_kg": mass_kg, "x_cg_m": rec["inertia/cg-x-in"] * INCH,
+        "thrust_N": prop_thrust * np.ones(len(t)), "mass_kg": mass_kg, "x_cg_m": rec["inertia/cg-x-in"] * INCH,
     })
     xml_diff = _xml_check(tables, rec, truth)
     worst = max(xml_diff, key=xml_diff.get)
