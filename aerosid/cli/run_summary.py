@@ -88,7 +88,8 @@ def undetermined_line(run_dir: Path) -> str | None:
     names = undetermined(table)
     if not names:
         return None
-    channel = dict(zip(table["coefficient"].astype(str), table["channel"].astype(str)))
+    channel = (dict(zip(table["coefficient"].astype(str), table["channel"].astype(str)))
+               if "channel" in table.columns else {})
     pitch = [n for n in names if channel.get(n) == "Cm"]
     advice = ("more excitation of their axis would determine them (a longer or larger input)"
               + (f"; for the pitch terms, `aerosid design {run_dir} --effect {pitch[0]} --out DIR` proposes one "

@@ -320,8 +320,10 @@ def design(run_dir: str | Path, effect: str, size: float | None = None, versus: 
     best = evals[0]
     a = best.amplitude_rad
     # a limit the flight already uses beyond 1 without the designed input (the lateral doublets of a
-    # generated JSBSim design against an assumed rate limit) is not the input's to keep: the input
-    # is backed off only from what it adds (as _max_amplitude does per sample)
+    # generated JSBSim design against an assumed rate limit) is not the input's to keep: the full
+    # flight may use each limit up to what the baseline already uses (whole-flight maxima: a coarser
+    # rule than _max_amplitude's per sample, which sized the candidate; the loop only catches the
+    # full flight's non-linear overshoot)
     base_use = _use(base, limits, dt)
     keys = ("surface", "surface_rate", "alpha", "load_factor")
     for _ in range(4):

@@ -206,9 +206,11 @@ def jsbsim_input_sizes(aircraft: str) -> dict:
     except ValueError as exc:  # UnsupportedAircraft: no such aircraft, or one aerosid cannot fly
         raise DesignError(f"no simulator for vehicle {aircraft!r}: the design flies candidates in the built-in "
                           f"simulator (seed-rlv) or in JSBSim, and JSBSim says: {exc}") from exc
-    steps = d.manoeuvre["surface_steps_rad"]
-    return {"elevator_rad": abs(float(steps["elevator"])), "aileron_rad": abs(float(steps["aileron"])),
-            "rudder_rad": abs(float(steps["rudder"])), "half_s": float(d.manoeuvre["aileron_half_s"])}
+    m, g = d.manoeuvre, d.gains  # the commanded steps (after the travel limit) times the static gains
+    return {"elevator_rad": abs(float(m["elevator_amplitudes_norm"][0]) * float(g["pitch"])),
+            "aileron_rad": abs(float(m["aileron_amplitude_norm"]) * float(g["roll"])),
+            "rudder_rad": abs(float(m["rudder_amplitude_norm"]) * float(g["yaw"])),
+            "half_s": float(m["aileron_half_s"])}
 
 
 def lateral_doublets(t: np.ndarray, after_s: float, aileron_rad: float = 0.04, rudder_rad: float = 0.04,

@@ -30,8 +30,11 @@ def structure_covariance(X: np.ndarray, y: np.ndarray, estimate: np.ndarray,
     """(covariance to add (k, k), {dropped column: change d of every estimate when it is dropped}).
 
     X (n, k), y (n,): the fit's regressors and response (rows with a non-finite value are left
-    out, as the fit did); estimate (k,): the reported estimates; undetermined (k,) bool: the
-    terms whose 95 % interval holds 0 (and that are not constants)."""
+    out, as the fit did); estimate (k,): the reported estimates (the dropped term's change is
+    minus its reported estimate; the others' is the difference of two plain least-squares fits,
+    with and without the term, so an errors-in-variables correction of the reported estimates
+    does not count as structure); undetermined (k,) bool: the terms whose 95 % interval holds 0
+    (and that are not constants)."""
     X = np.asarray(X, float)
     y = np.asarray(y, float)
     est = np.asarray(estimate, float)
@@ -43,11 +46,14 @@ def structure_covariance(X: np.ndarray, y: np.ndarray, estimate: np.ndarray,
     if drop.size == 0 or k < 2 or ok.sum() <= k:
         return extra, changes
     w = MIXTURE_WEIGHT * (1.0 - MIXTURE_WEIGHT)
+    # like with like: the change between two plain least-squares fits; the reported estimates may
+    # carry an errors-in-variables correction, which is not the structure's to count
+    full = np.linalg.lstsq(X[ok], y[ok], rcond=None)[0]
     for j in drop:
         keep = np.array([i for i in range(k) if i != j])
         theta = np.linalg.lstsq(X[ok][:, keep], y[ok], rcond=None)[0]
         d = np.empty(k)
-        d[keep] = theta - est[keep]
+        d[keep] = theta - full[keep]
         d[j] = -est[j]
         d[~np.isfinite(d)] = 0.0
         changes[int(j)] = d

@@ -80,6 +80,8 @@ def undetermined(table: pd.DataFrame) -> list[str]:
     result).  Intercepts are left out (0 is a plausible value for them); identities and
     unidentifiable terms have no interval and are reported as such elsewhere."""
     out = []
+    if "expression" not in table.columns:  # cannot tell an intercept from a term: flag nothing
+        return out
     for _, row in table.iterrows():
         if not interval_includes_zero(row.get("ci_low", math.nan), row.get("ci_high", math.nan)):
             continue

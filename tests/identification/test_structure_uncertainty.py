@@ -49,3 +49,16 @@ def test_rows_the_fit_left_out_are_left_out():
     extra, changes = structure_covariance(Xn, y, est_ok, np.array([False, False, True, False]))
     reduced = np.linalg.lstsq(X[ok][:, [0, 1, 3]], y[ok], rcond=None)[0]
     assert np.isclose(changes[2][1], reduced[1] - est_ok[1])
+
+
+def test_a_correction_of_the_reported_estimates_is_not_counted_as_structure():
+    """The reported estimates may be SIMEX-corrected; the structure part compares two plain fits
+    (review of 2026-11-26: half the correction had leaked into the sigma)."""
+    rng = np.random.default_rng(3)
+    n = 2000
+    x1, x2 = rng.normal(size=n), rng.normal(size=n)  # x2 independent of x1: dropping it moves x1 by ~0
+    X = np.column_stack([x1, x2])
+    y = 1.0 * x1 + 0.001 * x2 + 0.2 * rng.normal(size=n)
+    est = np.linalg.lstsq(X, y, rcond=None)[0] * np.array([1.05, 1.0])  # a 5 % "correction" of x1
+    extra, _ = structure_covariance(X, y, est, np.array([False, True]))
+    assert np.sqrt(extra[0, 0]) < 1e-3
