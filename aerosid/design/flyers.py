@@ -169,6 +169,13 @@ def default_flyer(vehicle, limits, coefs: dict, effect: str | None, size: float,
         t_win = base["t_s"].to_numpy(float)[in_win]
         start = float(t_win.min()) + 0.5
         return flyer, base, start, min(float(t_win.max()), start + limits.duration_max_s), True
+    from aerosid.simulation.jsbsim_flight import SUPPORTED_AIRCRAFT
+
+    if vehicle.name not in SUPPORTED_AIRCRAFT and not generated_for_jsbsim(vehicle):
+        raise DesignError(f"no simulator for vehicle {vehicle.name!r} ({vehicle.source}): the design flies candidates in "
+                          "the built-in simulator (seed-rlv), JSBSim's c172x, or the JSBSim aircraft whose vehicle file "
+                          "`aerosid simulate --jsbsim AIRCRAFT` generated; a vehicle file of your own is not flown in a "
+                          "JSBSim model that happens to share its name")
     sizes = jsbsim_input_sizes(vehicle.name)
     duration = limits.duration_max_s
     h = sizes["half_s"]
@@ -179,6 +186,13 @@ def default_flyer(vehicle, limits, coefs: dict, effect: str | None, size: float,
                         reference_rad=sizes["elevator_rad"])
     say(f"flying the baseline in JSBSim ({duration:g} s{', power-off glide at idle throttle' if power == 'idle' else ''})")
     return flyer, flyer.fly(np.zeros_like(flyer.t)), 3.0, end, False
+
+
+def generated_for_jsbsim(vehicle) -> bool:
+    """Whether the vehicle file is the one aerosid generated for JSBSim's aircraft of that name
+    (aerosid.simulation.jsbsim_vehicle writes 'JSBSim NAME (class), ... generated flight design')."""
+    text = str(getattr(vehicle, "description", ""))
+    return text.startswith(f"JSBSim {vehicle.name} (") and text.endswith("generated flight design")
 
 
 #: c172x's hand-written flight: the elevator shapes are flown at 0.08 rad (well above its elevator's

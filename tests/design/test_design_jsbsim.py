@@ -62,3 +62,18 @@ def test_design_on_a_generated_aircraft(tmp_path):
     assert doc["manoeuvre"]["amplitude_rad"] > 0.1
     before, after = doc["before"]["Cm_alpha_dot"]["sigma"], doc["after"]["Cm_alpha_dot"]["sigma"]
     assert after < 0.5 * before
+
+
+def test_a_vehicle_file_of_ones_own_is_not_flown_in_a_jsbsim_model_of_the_same_name(tmp_path):
+    from types import SimpleNamespace
+
+    from aerosid.design.flyers import default_flyer, generated_for_jsbsim
+
+    mine = SimpleNamespace(name="DHC6", description="our Twin Otter, from the flight-test programme",
+                           source="twin.toml")
+    assert not generated_for_jsbsim(mine)
+    with pytest.raises(DesignError, match="happens to share its name"):
+        default_flyer(mine, None, {}, None, 1.0, lambda m: None)
+    gen = SimpleNamespace(name="DHC6", description="JSBSim DHC6 (propeller), symmetric loading, generated flight "
+                                                   "design", source="v.toml")
+    assert generated_for_jsbsim(gen)
