@@ -230,7 +230,7 @@ def _with_structure_uncertainty(fd: pd.DataFrame, signals: dict, models: dict, f
     """The fits whose sigma include the model-structure part of a term whose interval holds 0."""
     from aerosid.identification.regression import with_added_covariance
     from aerosid.identification.structure_uncertainty import structure_covariance
-    from aerosid.identification.term_report import _is_constant
+    from aerosid.identification.term_report import _is_constant, interval_includes_zero
 
     out = {}
     for ch, fit in fits.items():
@@ -240,7 +240,7 @@ def _with_structure_uncertainty(fd: pd.DataFrame, signals: dict, models: dict, f
             continue
         ci = fit.conf_int()
         exprs = [t.expression for t in models[ch].terms]
-        weak = np.array([bool(ci[j, 0] <= 0.0 <= ci[j, 1]) and not _is_constant(exprs[j]) for j in range(len(est))])
+        weak = np.array([interval_includes_zero(*ci[j]) and not _is_constant(exprs[j]) for j in range(len(est))])
         if not weak.any():
             out[ch] = fit
             continue
