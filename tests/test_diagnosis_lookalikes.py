@@ -127,6 +127,16 @@ def test_separating_manoeuvre_names_what_one_term_has_and_the_other_lacks():
     assert "alpha" in separating_manoeuvre("(mach - 12.4)", "alpha*(mach - 12.4)")
 
 
+def test_a_mach_term_below_mach_0_3_is_flown_at_distinct_airspeeds():
+    # a light aircraft at M 0.1: a fitted "Mach" term is a speed dependence (slipstream, thrust)
+    low = separating_manoeuvre("(mach - 0.1)", "alpha*(mach - 0.1)", mach=0.1)
+    assert "distinct airspeed levels" in low and "Mach levels" not in low and "compressibility" in low
+    high = separating_manoeuvre("(mach - 12.4)", "alpha*(mach - 12.4)", mach=12.4)
+    assert "distinct Mach levels" in high and "compressibility" not in high
+    # terms without Mach say nothing about it, whatever the speed
+    assert "compressibility" not in separating_manoeuvre("alpha*delta_p/2", "alpha*abs(alpha)", mach=0.1)
+
+
 # --------------------------------------------------------------------------- diagnose() on flight data
 @pytest.mark.parametrize("name", ["control_alpha", "alpha_nonlinearity"])
 def test_the_true_lookalike_is_recommended(data, vehicle, name):

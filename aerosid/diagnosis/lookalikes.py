@@ -217,13 +217,29 @@ def _signals_in(term: str) -> set[str]:
     return {w for w in words if w in _SIGNALS}
 
 
-def separating_manoeuvre(term_a: str, term_b: str) -> str:
+#: Below this Mach number compressibility is negligible: a Mach term fitted there stands for a
+#: dependence on airspeed (propeller slipstream, thrust, dynamic pressure), and the manoeuvre
+#: that separates it is flown at distinct airspeeds, not Mach levels.
+INCOMPRESSIBLE_MACH = 0.3
+
+
+def separating_manoeuvre(term_a: str, term_b: str, mach: float | None = None) -> str:
     """A manoeuvre that makes the two terms vary independently: the signals one has and the
-    other lacks, flown at two distinct levels of the signals they share."""
+    other lacks, flown at two distinct levels of the signals they share.  mach: the flight's
+    typical Mach number [-]; below INCOMPRESSIBLE_MACH "Mach" is said as airspeed."""
     sa, sb = _signals_in(term_a), _signals_in(term_b)
     only = sorted((sa ^ sb) - {"t"})
     common = sorted(sa & sb)
-    word = lambda s: _LEVEL_WORDS.get(s, s)  # noqa: E731
+    low_speed = mach is not None and math.isfinite(mach) and mach < INCOMPRESSIBLE_MACH
+    words = dict(_LEVEL_WORDS, mach="airspeed") if low_speed else _LEVEL_WORDS
+    word = lambda s: words.get(s, s)  # noqa: E731
+    note = (f" (at Mach {mach:.2f} a Mach term stands for a dependence on airspeed: propeller slipstream, thrust, "
+            "dynamic pressure; compressibility is negligible below Mach 0.3)"
+            if low_speed and "mach" in sa | sb else "")
+    return _manoeuvre_text(only, common, word, term_a, term_b) + note
+
+
+def _manoeuvre_text(only: list, common: list, word, term_a: str, term_b: str) -> str:
     if only and common:
         return (f"fly {' and '.join(word(s) for s in only)} excursions at two (or more) distinct "
                 f"{' and '.join(word(s) for s in common)} levels, e.g. pitch doublets at two trim angles"
@@ -238,9 +254,10 @@ def separating_manoeuvre(term_a: str, term_b: str) -> str:
 
 def compare(channel: str, y: np.ndarray, base_X: np.ndarray, base_names: Sequence[str], alternatives: Sequence,
             regressors: Sequence[np.ndarray], *, in_model: str | None = None, n_windows: int = LOOKALIKE_WINDOWS,
-            cov: str = "morelli_klein", p_distinct: float = 1e-3) -> LookalikeComparison:
+            cov: str = "morelli_klein", p_distinct: float = 1e-3, mach: float | None = None) -> LookalikeComparison:
     """Compare look-alike alternatives (candidates with name, coefficient, term, spec_term)
-    each added alone to the base design, see module doc."""
+    each added alone to the base design, see module doc.  mach: the flight's typical Mach
+    number, for the wording of the separating manoeuvre (:func:`separating_manoeuvre`)."""
     y = np.asarray(y, float)
     A = np.asarray(base_X, float)
     X = [np.asarray(x, float) for x in regressors]
@@ -299,7 +316,7 @@ def compare(channel: str, y: np.ndarray, base_X: np.ndarray, base_names: Sequenc
     distinct = bool(k > 1 and np.all(np.abs(joint.t_values[nb:]) >= t_distinct))
     ref = alternatives[0]
     other = alternatives[1] if k > 1 else alternatives[0]
-    manoeuvre = separating_manoeuvre(ref.term, other.term)
+    manoeuvre = separating_manoeuvre(ref.term, other.term, mach)
     pair_txt = " and ".join(names)
     if distinct:
         verdict = "distinct"
@@ -382,8 +399,15 @@ def model_lookalikes(channel: str, y: np.ndarray, model, signals: dict, candidat
         if len(alts) > 1:
             alts, regs = alts[:MAX_ALTERNATIVES], regs[:MAX_ALTERNATIVES]
             out.append(compare(channel, y, A, [n for i, n in enumerate(model.names) if i != m], alts, regs,
-                               in_model=cand.name, cov=cov, p_distinct=p_max))
+                               in_model=cand.name, cov=cov, p_distinct=p_max, mach=_typical_mach(signals)))
     return out
+
+
+def _typical_mach(signals: dict) -> float | None:
+    """The median Mach number of the fitted samples, or None without a finite one."""
+    m = np.asarray(signals.get("mach", ()), float)
+    m = m[np.isfinite(m)]
+    return float(np.median(m)) if m.size else None
 
 
 def resolve(ranked: Sequence, models: dict, signals: dict, fd, candidates: Sequence, *, confusion_r: float,
@@ -422,7 +446,7 @@ def resolve(ranked: Sequence, models: dict, signals: dict, fd, candidates: Seque
             y = fd[top.channel].to_numpy(float)
             top_comp = compare(top.channel, y, Xb.to_numpy(float), list(model.names), [by_name[n] for n in names],
                                [np.asarray(by_name[n].regressor(signals), float) for n in names], cov=cov,
-                               p_distinct=p_max)
+                               p_distinct=p_max, mach=_typical_mach(signals))
             comps.insert(0, top_comp)
             recommended = top_comp.recommended
         else:
