@@ -97,7 +97,29 @@ def undetermined_line(run_dir: Path) -> str | None:
     return f"not determined by this flight (95 % interval holds 0, not even the sign is known): {', '.join(names)}; {advice}"
 
 
+def wrong_sign_line(run_dir: Path) -> str | None:
+    """The damping coefficients whose whole 95 % interval is positive, or None."""
+    path = run_dir / "coefficients.parquet"
+    if not path.is_file():
+        return None
+    import pandas as pd
+
+    from aerosid.identification.term_report import wrong_sign
+
+    try:
+        table = pd.read_parquet(path)
+    except (OSError, ValueError):
+        return None
+    names = wrong_sign(table)
+    if not names:
+        return None
+    return (f"positive at 95 %, a sign damping derivatives do not have: {', '.join(names)}; suspect the noise in the "
+            "regressor (alpha-dot read off a vane) or its collinearity with q; the sigma of the channel's other "
+            "coefficients include the model without it")
+
+
 def run_outcome_lines(run_dir: Path, mach_half_width: float | None) -> list[str]:
     window = regression_window_line(run_dir, mach_half_width)
     weak = undetermined_line(run_dir)
-    return ([window] if window else []) + ([weak] if weak else []) + verdict_lines(run_dir)
+    signed = wrong_sign_line(run_dir)
+    return ([window] if window else []) + ([weak] if weak else []) + ([signed] if signed else []) + verdict_lines(run_dir)

@@ -85,13 +85,14 @@ def format_table(table: pd.DataFrame, per_degree: bool = False) -> str:
     the header says which.  CRB = Cramer-Rao bound on the std from the gyros' and
     accelerometers' noise (aerosid.identification.crb)."""
     from aerosid.identification.coefficient_units import per_degree_factor, unit_label, units_header
-    from aerosid.identification.term_report import UNDETERMINED_NOTE, undetermined
+    from aerosid.identification.term_report import UNDETERMINED_NOTE, WRONG_SIGN_NOTE, undetermined, wrong_sign
 
     lines = [f"moments about the CG; {units_header(per_degree)}; CRB = Cramér-Rao bound on the std from the "
              "gyros' and accelerometers' noise (aerosid.identification.crb)",
              f"{'coefficient':<20}{'preflight':>12}{'estimate':>12}{'sigma':>11}{'sigma OLS':>11}{'CRB':>11}"
              f"{'95% interval':>26}  unit"]
     weak_terms = set(undetermined(table))
+    signed_terms = set(wrong_sign(table))
     for channel, rows in table.groupby("channel", sort=False):
         first = rows.iloc[0]
         lines.append(f"[{channel}]  F = {first['f_stat']:,.0f} (corrected {first['f_stat_corrected']:,.1f}), "
@@ -110,7 +111,8 @@ def format_table(table: pd.DataFrame, per_degree: bool = False) -> str:
                          f"{row['std_error'] * k:>11.2g}{row['std_error_ols'] * k:>11.2g}"
                          f"{row.get('crb_std', np.nan) * k:>11.2g}"
                          f"{'[' + format(row['ci_low'] * k, '.5g') + ', ' + format(row['ci_high'] * k, '.5g') + ']':>26}"
-                         f"  {u}" + (f"   <- {UNDETERMINED_NOTE}" if weak else ""))
+                         f"  {u}" + (f"   <- {UNDETERMINED_NOTE}" if weak else "")
+                         + (f"   <- {WRONG_SIGN_NOTE}" if row["coefficient"] in signed_terms else ""))
         for i, w in enumerate(w for w in first["warnings"].split(" | ") if w):
             lines.append(f"  warning [{i + 1}] {w}")
     if "preflight_warning" in table.columns:
@@ -227,10 +229,12 @@ STRUCTURE_UNCERTAINTY = True
 
 
 def _with_structure_uncertainty(fd: pd.DataFrame, signals: dict, models: dict, fits: dict) -> dict:
-    """The fits whose sigma include the model-structure part of a term whose interval holds 0."""
+    """The fits whose sigma include the model-structure part of a term whose interval holds 0, or
+    of a damping term whose whole interval is positive (term_report.wrong_sign_damping: the flight
+    says it is there, but with the sign physics rules out, so the model without it is as likely)."""
     from aerosid.identification.regression import with_added_covariance
     from aerosid.identification.structure_uncertainty import structure_covariance
-    from aerosid.identification.term_report import _is_constant, interval_includes_zero
+    from aerosid.identification.term_report import _is_constant, interval_includes_zero, wrong_sign_damping
 
     out = {}
     for ch, fit in fits.items():
@@ -240,7 +244,9 @@ def _with_structure_uncertainty(fd: pd.DataFrame, signals: dict, models: dict, f
             continue
         ci = fit.conf_int()
         exprs = [t.expression for t in models[ch].terms]
-        weak = np.array([interval_includes_zero(*ci[j]) and not _is_constant(exprs[j]) for j in range(len(est))])
+        holds0 = np.array([interval_includes_zero(*ci[j]) and not _is_constant(exprs[j]) for j in range(len(est))])
+        signs = np.array([wrong_sign_damping(ch, exprs[j], ci[j][0]) for j in range(len(est))])
+        weak = holds0 | signs
         if not weak.any():
             out[ch] = fit
             continue
@@ -251,8 +257,14 @@ def _with_structure_uncertainty(fd: pd.DataFrame, signals: dict, models: dict, f
         if not moved:
             out[ch] = fit
             continue
-        note = (f"{', '.join(fit.names[j] for j in changes)}: not determined by this flight (95 % interval holds 0); "
-                f"the sigma of {', '.join(moved)} include how their estimates change when "
+        why = []
+        if holds0.any():
+            why.append(f"{', '.join(fit.names[j] for j in np.flatnonzero(holds0))}: not determined by this flight "
+                       "(95 % interval holds 0)")
+        if signs.any():
+            why.append(f"{', '.join(fit.names[j] for j in np.flatnonzero(signs))}: positive at 95 %, a sign a damping "
+                       "derivative does not have (suspect the regressor's noise or its collinearity)")
+        note = (f"{'; '.join(why)}; the sigma of {', '.join(moved)} include how their estimates change when "
                 f"{'it is' if len(changes) == 1 else 'each is'} dropped (model-structure uncertainty, "
                 "aerosid.identification.structure_uncertainty)")
         out[ch] = with_added_covariance(fit, extra, note)

@@ -93,6 +93,32 @@ def undetermined(table: pd.DataFrame) -> list[str]:
 
 UNDETERMINED_NOTE = "95 % interval holds 0: not determined by this flight"
 
+#: The pure damping terms, per channel: a rate signal alone.  Body-axis damping derivatives
+#: (C_m,q, C_m,alpha_dot, C_l,p, C_n,r) are negative on a vehicle that is not unstable in that
+#: axis (the tail's or the wing's lift opposes the rotation; for C_m,alpha_dot the downwash lag on
+#: the tail).  A whole 95 % interval above 0 is, far more often than a real positive value, the
+#: signature of errors in the regressor or of its collinearity with another one: on JSBSim's pa28
+#: (C_m,alpha_dot +0.02), alpha-dot read off the noisy vane came out +4.8 .. +6.4 +- 1.3 .. 1.7 on 3 of
+#: 10 flights, with C_m,alpha 9 % short of the truth; with the noise-free angles it is +1.2 and -0.2.
+DAMPING_TERMS = {"Cm": ("q_hat", "alpha_dot_hat"), "Cl": ("p_hat",), "Cn": ("r_hat",)}
+WRONG_SIGN_NOTE = "positive at 95 %: a damping derivative is negative; suspect the regressor's noise"
+
+
+def wrong_sign_damping(channel: str, expression: str, ci_low) -> bool:
+    """Whether a pure damping term (DAMPING_TERMS) has its whole 95 % interval above 0."""
+    lo = float(ci_low)
+    return (str(expression).replace(" ", "") in DAMPING_TERMS.get(str(channel), ())
+            and math.isfinite(lo) and lo > 0.0)
+
+
+def wrong_sign(table: pd.DataFrame) -> list[str]:
+    """The damping coefficients of a coefficients table whose 95 % interval lies wholly above 0
+    (:func:`wrong_sign_damping`)."""
+    if not {"expression", "channel", "ci_low"} <= set(table.columns):
+        return []
+    return [str(row["coefficient"]) for _, row in table.iterrows()
+            if wrong_sign_damping(row["channel"], row["expression"], row["ci_low"])]
+
 
 def _is_constant(expression: str) -> bool:
     from aerosid.modelling.expressions import parse

@@ -15,7 +15,7 @@ IDENTITY_TEXT = ("alpha and beta are inverted from this channel through the pref
 
 def _s_coefficients(run: _Run, shown: Shown, truth: dict) -> str:
     from aerosid.identification.identify import ANGLE_TERMS
-    from aerosid.identification.term_report import UNDETERMINED_NOTE, undetermined
+    from aerosid.identification.term_report import UNDETERMINED_NOTE, WRONG_SIGN_NOTE, undetermined, wrong_sign
 
     table = shown.table
     if table is None or table.empty:
@@ -29,6 +29,7 @@ def _s_coefficients(run: _Run, shown: Shown, truth: dict) -> str:
     ncol = len(headers)
     rows = []
     weak_terms = set(undetermined(table))
+    signed_terms = set(wrong_sign(table))
     for channel, g in table.groupby("channel", sort=False):
         first = g.iloc[0]
         head = (f"{channel}: F = {_num(first.get('f_stat'), ',.0f')} (corrected "
@@ -67,6 +68,8 @@ def _s_coefficients(run: _Run, shown: Shown, truth: dict) -> str:
                      _sc(r.get("std_error_ols"), k, ".2g"), f"[{_num(_k(lo, k), '.5g')}, {_num(_k(hi, k), '.5g')}]"]
             if name in weak_terms:
                 cells[-1] = _H(f'{_e(cells[-1])}<br><span class="na">{_e(UNDETERMINED_NOTE)}</span>')
+            elif name in signed_terms:
+                cells[-1] = _H(f'{_e(cells[-1])}<br><span class="na">{_e(WRONG_SIGN_NOTE)}</span>')
             if has_truth:
                 if tv is None:
                     cells += ["—", "—", "—"]

@@ -49,3 +49,80 @@ def test_the_run_summary_names_it(tmp_path):
     _table().to_parquet(tmp_path / "coefficients.parquet")
     line = undetermined_line(tmp_path)
     assert line.startswith("not determined by this flight") and "Cn_r" in line and "Cm_0" not in line
+
+
+# --------------------------------------------------------------------------- damping of the wrong sign
+def _damping_table() -> pd.DataFrame:
+    rows = [  # channel, coefficient, expression, estimate, sigma
+        ("Cm", "Cm_alpha", "alpha", 2.0, 0.1),               # positive, but not a damping term
+        ("Cm", "Cm_alpha_dot", "alpha_dot_hat", 6.4, 1.4),   # pa28 seed 3 (truth +0.02)
+        ("Cm", "Cm_q", "q_hat", -12.2, 1.3),
+        ("Cl", "Cl_p", "p_hat", 0.02, 0.005),
+        ("Cn", "Cn_r", "r_hat", 0.01, 0.02),                 # holds 0: undetermined, not "wrong sign"
+    ]
+    df = pd.DataFrame(rows, columns=["channel", "coefficient", "expression", "estimate", "std_error"])
+    df["ci_low"] = df["estimate"] - 1.96 * df["std_error"]
+    df["ci_high"] = df["estimate"] + 1.96 * df["std_error"]
+    return df
+
+
+def test_a_damping_term_wholly_positive_is_named():
+    from aerosid.identification.term_report import wrong_sign, wrong_sign_damping
+
+    assert wrong_sign(_damping_table()) == ["Cm_alpha_dot", "Cl_p"]
+    assert wrong_sign_damping("Cm", "q_hat", 0.1) and not wrong_sign_damping("Cl", "q_hat", 0.1)
+    assert not wrong_sign_damping("Cm", "q_hat", -0.1) and not wrong_sign_damping("Cm", "q_hat", math.nan)
+
+
+def test_the_table_and_the_run_summary_say_so(tmp_path):
+    from aerosid.cli.run_summary import wrong_sign_line
+    from aerosid.identification.identify import format_table
+    from aerosid.identification.term_report import WRONG_SIGN_NOTE
+
+    df = _damping_table()
+    for col, val in (("f_stat", 1.0), ("f_stat_corrected", 1.0), ("r2", 0.9), ("pse", 1e-6),
+                     ("condition_number", 2.0), ("n_obs", 100), ("n_eff", 50.0), ("warnings", ""),
+                     ("reference", np.nan), ("std_error_ols", 0.01), ("crb_std", np.nan)):
+        df[col] = val
+    marked = [li.split()[0] for li in format_table(df).splitlines() if WRONG_SIGN_NOTE in li]
+    assert marked == ["Cm_alpha_dot", "Cl_p"]
+    assert wrong_sign_line(tmp_path) is None
+    df.to_parquet(tmp_path / "coefficients.parquet")
+    line = wrong_sign_line(tmp_path)
+    assert "Cm_alpha_dot, Cl_p" in line and "Cn_r" not in line
+
+
+def test_its_partners_sigma_include_the_model_without_it():
+    """A significant positive alpha-dot term (made here by a positive true coefficient: the rule
+    looks at the sign only) widens C_m_alpha's sigma by the two-point mixture with the model
+    without it; the estimates are unchanged; with the same data but a negative alpha-dot, nothing
+    changes."""
+    from aerosid.identification.identify import _with_structure_uncertainty
+    from aerosid.identification.regression import fit_linear
+    from aerosid.modelling.models import ChannelModel, Term
+
+    rng = np.random.default_rng(7)
+    n = 3000
+    alpha = rng.normal(0, 0.05, n)
+    q_hat = 0.8 * alpha + rng.normal(0, 0.01, n)
+    adot = 0.5 * alpha + 0.5 * q_hat + rng.normal(0, 0.004, n)
+    signals = {"alpha": alpha, "q_hat": q_hat, "alpha_dot_hat": adot}
+    model = ChannelModel("Cm", (Term("Cm_0", "1"), Term("Cm_alpha", "alpha"), Term("Cm_q", "q_hat"),
+                                Term("Cm_alpha_dot", "alpha_dot_hat")))
+    X = model.regressors(signals)
+    for sign in (+1.0, -1.0):
+        y = 0.01 - 1.0 * alpha - 10.0 * q_hat + sign * 3.0 * adot + rng.normal(0, 0.002, n)
+        fit = fit_linear(y, X, names=model.names, channel="Cm")
+        out = _with_structure_uncertainty(pd.DataFrame({"Cm": y}), signals, {"Cm": model}, {"Cm": fit})["Cm"]
+        assert np.allclose(out.estimate, fit.estimate)
+        lo = fit.conf_int()[3][0]
+        if sign > 0:
+            assert lo > 0
+            keep = [0, 1, 2]
+            full = np.linalg.lstsq(X.to_numpy(), y, rcond=None)[0]
+            d = np.linalg.lstsq(X.to_numpy()[:, keep], y, rcond=None)[0][1] - full[1]
+            assert np.isclose(out.std_error[1], np.hypot(fit.std_error[1], 0.5 * d), rtol=1e-6)
+            assert out.std_error[1] > 1.5 * fit.std_error[1]
+            assert any("positive at 95 %" in w for w in out.warnings)
+        else:
+            assert out is fit
