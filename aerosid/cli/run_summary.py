@@ -114,8 +114,8 @@ def wrong_sign_line(run_dir: Path) -> str | None:
     if not names:
         return None
     return (f"positive at 95 %, a sign damping derivatives do not have: {', '.join(names)}; suspect the noise in the "
-            "regressor (alpha-dot read off a vane) or its collinearity with q; the sigma of the channel's other "
-            "coefficients include the model without it")
+            "regressor (alpha-dot read off a vane) or its collinearity with q; its interval and those of the "
+            "channel's other coefficients include the model without it")
 
 
 def run_outcome_lines(run_dir: Path, mach_half_width: float | None) -> list[str]:

@@ -39,6 +39,9 @@ class Identification:
     preflight_factor: float = 3.0
     #: coefficient -> Cramér-Rao bound on its std (aerosid.identification.crb), NaN where none
     crb_std: dict = field(default_factory=dict)
+    #: coefficient -> its t before the model-structure mixture, for the damping terms whose whole 95 %
+    #: interval was positive (term_report.wrong_sign_damping); the table's ``wrong_sign`` column
+    wrong_sign: dict = field(default_factory=dict)
 
     def table(self, alpha: float = 0.05) -> pd.DataFrame:
         """The coefficients.parquet rows.  A channel in ``identities`` is reported without
@@ -70,6 +73,7 @@ class Identification:
                     "condition_number": float(fit.condition_number), "n_obs": int(fit.n_obs),
                     "n_eff": float(fit.n_eff), "warnings": " | ".join(fit.warnings),
                     "preflight_ratio": ratio, "preflight_warning": departure,
+                    "wrong_sign": rec["coefficient"] in self.wrong_sign,
                 })
         return pd.DataFrame(rows)
 
@@ -228,15 +232,19 @@ GYRO_EIV_DEFAULT = False
 STRUCTURE_UNCERTAINTY = True
 
 
-def _with_structure_uncertainty(fd: pd.DataFrame, signals: dict, models: dict, fits: dict) -> dict:
-    """The fits whose sigma include the model-structure part of a term whose interval holds 0, or
+def _with_structure_uncertainty(fd: pd.DataFrame, signals: dict, models: dict,
+                                fits: dict) -> tuple[dict, dict[str, float]]:
+    """(the fits whose sigma include the model-structure part of a term whose interval holds 0, or
     of a damping term whose whole interval is positive (term_report.wrong_sign_damping: the flight
-    says it is there, but with the sign physics rules out, so the model without it is as likely)."""
+    says it is there, with a sign physics rules out, so the model without it is as likely);
+    {coefficient: its t before the mixture} of those wrong-sign terms).  The mixture widens the
+    wrong-sign term's own interval too (to hold 0 unless t > ~9.9): the table says why
+    (Identification.wrong_sign)."""
     from aerosid.identification.regression import with_added_covariance
     from aerosid.identification.structure_uncertainty import structure_covariance
     from aerosid.identification.term_report import _is_constant, interval_includes_zero, wrong_sign_damping
 
-    out = {}
+    out, flagged = {}, {}
     for ch, fit in fits.items():
         est = np.asarray(fit.estimate, float)
         if not np.all(np.isfinite(est)) or len(est) < 2:
@@ -247,6 +255,7 @@ def _with_structure_uncertainty(fd: pd.DataFrame, signals: dict, models: dict, f
         holds0 = np.array([interval_includes_zero(*ci[j]) and not _is_constant(exprs[j]) for j in range(len(est))])
         signs = np.array([wrong_sign_damping(ch, exprs[j], ci[j][0]) for j in range(len(est))])
         weak = holds0 | signs
+        flagged.update({fit.names[j]: float(fit.t_values[j]) for j in np.flatnonzero(signs)})
         if not weak.any():
             out[ch] = fit
             continue
@@ -268,7 +277,7 @@ def _with_structure_uncertainty(fd: pd.DataFrame, signals: dict, models: dict, f
                 f"{'it is' if len(changes) == 1 else 'each is'} dropped (model-structure uncertainty, "
                 "aerosid.identification.structure_uncertainty)")
         out[ch] = with_added_covariance(fit, extra, note)
-    return out
+    return out, flagged
 
 
 def identify(flight_data: pd.DataFrame, vehicle: Vehicle, models: dict[str, ChannelModel] | None = None,
@@ -310,11 +319,12 @@ def identify(flight_data: pd.DataFrame, vehicle: Vehicle, models: dict[str, Chan
     rate_sigma = _rate_eiv_sigma(fd) if gyro_eiv and band_limited else None
     if sigma is not None or rate_sigma is not None:
         fits = _eiv_corrected(fd, vehicle, models, fits, sigma, rate_sigma)
+    wrong_sign = {}
     if STRUCTURE_UNCERTAINTY:
-        fits = _with_structure_uncertainty(fd, signals, models, fits)
+        fits, wrong_sign = _with_structure_uncertainty(fd, signals, models, fits)
     refs = AeroModel.preflight(vehicle).linear_truth() if vehicle.preflight is not None else {}
     window = (float(fd["mach"].min()), float(fd["mach"].max()))
     identities = tuple(ch for ch in INVERSION_CHANNELS if ch in fits) if vehicle.air_data_source != "vanes" else ()
     crb = identification_bounds(fd, vehicle, models, fits, identities)
     return Identification(fits, dict(models), refs, len(fd), window, identities, vehicle.envelope.preflight_factor,
-                          crb.std)
+                          crb.std, wrong_sign)

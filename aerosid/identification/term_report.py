@@ -82,7 +82,10 @@ def undetermined(table: pd.DataFrame) -> list[str]:
     out = []
     if "expression" not in table.columns:  # cannot tell an intercept from a term: flag nothing
         return out
+    signed = set(wrong_sign(table))  # named for what they are (the mixture widened their interval)
     for _, row in table.iterrows():
+        if str(row["coefficient"]) in signed:
+            continue
         if not interval_includes_zero(row.get("ci_low", math.nan), row.get("ci_high", math.nan)):
             continue
         if _is_constant(str(row.get("expression", ""))):
@@ -101,7 +104,8 @@ UNDETERMINED_NOTE = "95 % interval holds 0: not determined by this flight"
 #: (C_m,alpha_dot +0.02), alpha-dot read off the noisy vane came out +4.8 .. +6.4 +- 1.3 .. 1.7 on 3 of
 #: 10 flights, with C_m,alpha 9 % short of the truth; with the noise-free angles it is +1.2 and -0.2.
 DAMPING_TERMS = {"Cm": ("q_hat", "alpha_dot_hat"), "Cl": ("p_hat",), "Cn": ("r_hat",)}
-WRONG_SIGN_NOTE = "positive at 95 %: a damping derivative is negative; suspect the regressor's noise"
+WRONG_SIGN_NOTE = ("came out positive at 95 %, a sign damping does not have (suspect the regressor's noise); "
+                   "the interval includes the model without it")
 
 
 def wrong_sign_damping(channel: str, expression: str, ci_low) -> bool:
@@ -112,8 +116,11 @@ def wrong_sign_damping(channel: str, expression: str, ci_low) -> bool:
 
 
 def wrong_sign(table: pd.DataFrame) -> list[str]:
-    """The damping coefficients of a coefficients table whose 95 % interval lies wholly above 0
-    (:func:`wrong_sign_damping`)."""
+    """The damping coefficients of a coefficients table that came out wholly positive at 95 %
+    (:func:`wrong_sign_damping`): the table's ``wrong_sign`` column (identify sets it before the
+    model-structure mixture widens the term's own interval), else the rule on its interval."""
+    if "wrong_sign" in table.columns:
+        return [str(c) for c, w in zip(table["coefficient"], table["wrong_sign"]) if bool(w) and w == w]
     if not {"expression", "channel", "ci_low"} <= set(table.columns):
         return []
     return [str(row["coefficient"]) for _, row in table.iterrows()

@@ -113,7 +113,8 @@ def test_its_partners_sigma_include_the_model_without_it():
     for sign in (+1.0, -1.0):
         y = 0.01 - 1.0 * alpha - 10.0 * q_hat + sign * 3.0 * adot + rng.normal(0, 0.002, n)
         fit = fit_linear(y, X, names=model.names, channel="Cm")
-        out = _with_structure_uncertainty(pd.DataFrame({"Cm": y}), signals, {"Cm": model}, {"Cm": fit})["Cm"]
+        outs, flagged = _with_structure_uncertainty(pd.DataFrame({"Cm": y}), signals, {"Cm": model}, {"Cm": fit})
+        out = outs["Cm"]
         assert np.allclose(out.estimate, fit.estimate)
         lo = fit.conf_int()[3][0]
         if sign > 0:
@@ -124,5 +125,14 @@ def test_its_partners_sigma_include_the_model_without_it():
             assert np.isclose(out.std_error[1], np.hypot(fit.std_error[1], 0.5 * d), rtol=1e-6)
             assert out.std_error[1] > 1.5 * fit.std_error[1]
             assert any("positive at 95 %" in w for w in out.warnings)
+            assert flagged == {"Cm_alpha_dot": float(fit.t_values[3])}
+            # its own interval takes the mixture too (the covariance stays one coherent matrix) ...
+            assert np.isclose(out.std_error[3], np.hypot(fit.std_error[3], 0.5 * fit.estimate[3]), rtol=1e-6)
+            # ... and the table names it for what it is, not as "not determined"
+            from aerosid.identification.identify import Identification
+            from aerosid.identification.term_report import undetermined, wrong_sign
+
+            table = Identification({"Cm": out}, {"Cm": model}, {}, n, (0.1, 0.1), wrong_sign=flagged).table()
+            assert wrong_sign(table) == ["Cm_alpha_dot"] and "Cm_alpha_dot" not in undetermined(table)
         else:
-            assert out is fit
+            assert out is fit and not flagged
