@@ -133,6 +133,12 @@ def test_a_mach_term_below_mach_0_3_is_flown_at_distinct_airspeeds():
     assert "distinct airspeed levels" in low and "Mach levels" not in low and "compressibility" in low
     high = separating_manoeuvre("(mach - 12.4)", "alpha*(mach - 12.4)", mach=12.4)
     assert "distinct Mach levels" in high and "compressibility" not in high
+    # compare() passes the flight's Mach on to the advice
+    y, base, x1, x2 = _two_lookalikes(noise_sd=3.0)
+    alts = (Candidate("a_term", "Cm", "Cm_a", "(mach - 0.1)", "a"),
+            Candidate("b_term", "Cm", "Cm_b", "alpha*(mach - 0.1)", "b"))
+    assert "distinct airspeed levels" in compare("Cm", y, base, ["c0", "c1"], alts, [x1, x2], mach=0.1).manoeuvre
+    assert "distinct Mach levels" in compare("Cm", y, base, ["c0", "c1"], alts, [x1, x2]).manoeuvre
     # terms without Mach say nothing about it, whatever the speed
     assert "compressibility" not in separating_manoeuvre("alpha*delta_p/2", "alpha*abs(alpha)", mach=0.1)
 

@@ -113,9 +113,9 @@ def wrong_sign_line(run_dir: Path) -> str | None:
     names = wrong_sign(table)
     if not names:
         return None
-    return (f"positive at 95 %, a sign damping derivatives do not have: {', '.join(names)}; suspect the noise in the "
-            "regressor (alpha-dot read off a vane) or its collinearity with q; its interval and those of the "
-            "channel's other coefficients include the model without it")
+    return (f"came out positive at 95 %, a sign damping seldom has: {', '.join(names)}; usually the noise in the "
+            "regressor (alpha-dot read off noisy angles, a noisy rate) or its collinearity, not physics; the warnings "
+            "of its channel say how its interval and the others' include the model without it")
 
 
 def run_outcome_lines(run_dir: Path, mach_half_width: float | None) -> list[str]:

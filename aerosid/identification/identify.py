@@ -232,19 +232,34 @@ GYRO_EIV_DEFAULT = False
 STRUCTURE_UNCERTAINTY = True
 
 
-def _with_structure_uncertainty(fd: pd.DataFrame, signals: dict, models: dict,
-                                fits: dict) -> tuple[dict, dict[str, float]]:
-    """(the fits whose sigma include the model-structure part of a term whose interval holds 0, or
-    of a damping term whose whole interval is positive (term_report.wrong_sign_damping: the flight
-    says it is there, with a sign physics rules out, so the model without it is as likely);
-    {coefficient: its t before the mixture} of those wrong-sign terms).  The mixture widens the
-    wrong-sign term's own interval too (to hold 0 unless t > ~9.9): the table says why
-    (Identification.wrong_sign)."""
+def wrong_sign_terms(models: dict, fits: dict) -> dict[str, float]:
+    """{coefficient: t} of the pure damping terms whose whole 95 % interval is positive
+    (term_report.wrong_sign_damping), on the fits as given (before any model-structure mixture);
+    a term without a finite interval is left out."""
+    from aerosid.identification.term_report import wrong_sign_damping
+
+    out = {}
+    for ch, fit in fits.items():
+        ci = fit.conf_int()
+        for j, term in enumerate(models[ch].terms):
+            if j < len(ci) and np.isfinite(fit.estimate[j]) and wrong_sign_damping(ch, term.expression, ci[j][0]):
+                out[fit.names[j]] = float(fit.t_values[j])
+    return out
+
+
+def _with_structure_uncertainty(fd: pd.DataFrame, signals: dict, models: dict, fits: dict) -> dict:
+    """The fits whose sigma include the model-structure part of a term whose interval holds 0, or
+    of a damping term whose whole interval is positive (wrong_sign_terms: the flight says it is
+    there, with a sign damping seldom has, so the model without it is taken as likely).  For a
+    wrong-sign term the mixture is always applied, so its own interval includes the model without
+    it (it then holds 0 unless t > ~9.9); a term whose interval holds 0 changes the fit only where
+    a partner's sigma moves by more than 5 %."""
     from aerosid.identification.regression import with_added_covariance
     from aerosid.identification.structure_uncertainty import structure_covariance
-    from aerosid.identification.term_report import _is_constant, interval_includes_zero, wrong_sign_damping
+    from aerosid.identification.term_report import _is_constant, damping_signal, interval_includes_zero
 
-    out, flagged = {}, {}
+    flagged = wrong_sign_terms(models, fits)
+    out = {}
     for ch, fit in fits.items():
         est = np.asarray(fit.estimate, float)
         if not np.all(np.isfinite(est)) or len(est) < 2:
@@ -253,9 +268,8 @@ def _with_structure_uncertainty(fd: pd.DataFrame, signals: dict, models: dict,
         ci = fit.conf_int()
         exprs = [t.expression for t in models[ch].terms]
         holds0 = np.array([interval_includes_zero(*ci[j]) and not _is_constant(exprs[j]) for j in range(len(est))])
-        signs = np.array([wrong_sign_damping(ch, exprs[j], ci[j][0]) for j in range(len(est))])
+        signs = np.array([fit.names[j] in flagged for j in range(len(est))])
         weak = holds0 | signs
-        flagged.update({fit.names[j]: float(fit.t_values[j]) for j in np.flatnonzero(signs)})
         if not weak.any():
             out[ch] = fit
             continue
@@ -263,21 +277,24 @@ def _with_structure_uncertainty(fd: pd.DataFrame, signals: dict, models: dict,
         extra, changes = structure_covariance(X, fd[ch].to_numpy(float), est, weak)
         se = np.sqrt(np.clip(np.diag(fit.cov + extra), 0.0, None))
         moved = [fit.names[k] for k in range(len(est)) if not weak[k] and se[k] > 1.05 * fit.std_error[k]]
-        if not moved:
+        if not moved and not signs.any():
             out[ch] = fit
             continue
         why = []
         if holds0.any():
             why.append(f"{', '.join(fit.names[j] for j in np.flatnonzero(holds0))}: not determined by this flight "
                        "(95 % interval holds 0)")
-        if signs.any():
-            why.append(f"{', '.join(fit.names[j] for j in np.flatnonzero(signs))}: positive at 95 %, a sign a damping "
-                       "derivative does not have (suspect the regressor's noise or its collinearity)")
-        note = (f"{'; '.join(why)}; the sigma of {', '.join(moved)} include how their estimates change when "
-                f"{'it is' if len(changes) == 1 else 'each is'} dropped (model-structure uncertainty, "
-                "aerosid.identification.structure_uncertainty)")
-        out[ch] = with_added_covariance(fit, extra, note)
-    return out, flagged
+        for j in np.flatnonzero(signs):
+            rate = damping_signal(ch, exprs[j])
+            cause = ("alpha-dot read off noisy angles" if rate == "alpha_dot_hat" else f"the noise in {rate}")
+            why.append(f"{fit.names[j]}: positive at 95 % (t = {fit.t_values[j]:.2g}), a sign damping seldom has "
+                       f"(suspect {cause} or its collinearity with the other regressors); its own interval includes "
+                       "the model without it")
+        note = "; ".join(why) + (f"; the sigma of {', '.join(moved)} include how their estimates change when "
+                                 f"{'it is' if len(changes) == 1 else 'each is'} dropped" if moved else "")
+        out[ch] = with_added_covariance(fit, extra, note + " (model-structure uncertainty, "
+                                        "aerosid.identification.structure_uncertainty)")
+    return out
 
 
 def identify(flight_data: pd.DataFrame, vehicle: Vehicle, models: dict[str, ChannelModel] | None = None,
@@ -319,9 +336,9 @@ def identify(flight_data: pd.DataFrame, vehicle: Vehicle, models: dict[str, Chan
     rate_sigma = _rate_eiv_sigma(fd) if gyro_eiv and band_limited else None
     if sigma is not None or rate_sigma is not None:
         fits = _eiv_corrected(fd, vehicle, models, fits, sigma, rate_sigma)
-    wrong_sign = {}
+    wrong_sign = wrong_sign_terms(models, fits)
     if STRUCTURE_UNCERTAINTY:
-        fits, wrong_sign = _with_structure_uncertainty(fd, signals, models, fits)
+        fits = _with_structure_uncertainty(fd, signals, models, fits)
     refs = AeroModel.preflight(vehicle).linear_truth() if vehicle.preflight is not None else {}
     window = (float(fd["mach"].min()), float(fd["mach"].max()))
     identities = tuple(ch for ch in INVERSION_CHANNELS if ch in fits) if vehicle.air_data_source != "vanes" else ()

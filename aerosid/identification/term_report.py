@@ -9,9 +9,11 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
 import pandas as pd
 
 from aerosid.identification.coefficient_units import per_degree_factor, unit_label, units_header
+from aerosid.modelling.expressions import evaluate
 
 #: Significance level of a term (the diagnosis's rule: corrected p < 0.001).
 P_MAX = 1e-3
@@ -104,27 +106,43 @@ UNDETERMINED_NOTE = "95 % interval holds 0: not determined by this flight"
 #: (C_m,alpha_dot +0.02), alpha-dot read off the noisy vane came out +4.8 .. +6.4 +- 1.3 .. 1.7 on 3 of
 #: 10 flights, with C_m,alpha 9 % short of the truth; with the noise-free angles it is +1.2 and -0.2.
 DAMPING_TERMS = {"Cm": ("q_hat", "alpha_dot_hat"), "Cl": ("p_hat",), "Cn": ("r_hat",)}
-WRONG_SIGN_NOTE = ("came out positive at 95 %, a sign damping does not have (suspect the regressor's noise); "
-                   "the interval includes the model without it")
+WRONG_SIGN_NOTE = ("came out positive at 95 %, a sign damping seldom has (suspect the noise in its regressor or "
+                   "its collinearity; see the channel's warnings)")
+
+
+def damping_signal(channel: str, expression: str) -> str | None:
+    """The rate signal of a pure damping term of `channel` (DAMPING_TERMS): an expression that
+    reads that signal alone, proportional to it with a positive factor (``q_hat``, ``(q_hat)``,
+    ``2*q_hat``); None for anything else."""
+    x = np.array([-2.0, -0.5, 1.0, 3.0])
+    for rate in DAMPING_TERMS.get(str(channel), ()):
+        try:
+            y = evaluate(str(expression), {rate: x})
+        except (ValueError, TypeError, SyntaxError, ZeroDivisionError, KeyError):
+            continue
+        ratio = np.asarray(y, float) / x
+        if np.all(np.isfinite(ratio)) and ratio[0] > 0 and np.ptp(ratio) <= 1e-12 * abs(ratio[0]):
+            return rate
+    return None
 
 
 def wrong_sign_damping(channel: str, expression: str, ci_low) -> bool:
-    """Whether a pure damping term (DAMPING_TERMS) has its whole 95 % interval above 0."""
+    """Whether a pure damping term (:func:`damping_signal`) has its whole 95 % interval above 0."""
     lo = float(ci_low)
-    return (str(expression).replace(" ", "") in DAMPING_TERMS.get(str(channel), ())
-            and math.isfinite(lo) and lo > 0.0)
+    return math.isfinite(lo) and lo > 0.0 and damping_signal(channel, expression) is not None
 
 
 def wrong_sign(table: pd.DataFrame) -> list[str]:
     """The damping coefficients of a coefficients table that came out wholly positive at 95 %
-    (:func:`wrong_sign_damping`): the table's ``wrong_sign`` column (identify sets it before the
-    model-structure mixture widens the term's own interval), else the rule on its interval."""
-    if "wrong_sign" in table.columns:
-        return [str(c) for c, w in zip(table["coefficient"], table["wrong_sign"]) if bool(w) and w == w]
-    if not {"expression", "channel", "ci_low"} <= set(table.columns):
-        return []
-    return [str(row["coefficient"]) for _, row in table.iterrows()
-            if wrong_sign_damping(row["channel"], row["expression"], row["ci_low"])]
+    (:func:`wrong_sign_damping`): the table's ``wrong_sign`` column (identify sets it on the
+    interval before the model-structure mixture widens it), or the rule on the table's interval."""
+    flag = (table["wrong_sign"].map(lambda w: isinstance(w, (bool, np.bool_)) and bool(w))
+            if "wrong_sign" in table.columns else pd.Series(False, index=table.index))
+    rule = (pd.Series([wrong_sign_damping(r["channel"], r["expression"], r["ci_low"]) for _, r in table.iterrows()],
+                      index=table.index, dtype=bool)
+            if {"expression", "channel", "ci_low"} <= set(table.columns) and len(table)
+            else pd.Series(False, index=table.index))
+    return [str(c) for c, f in zip(table["coefficient"], flag | rule) if f]
 
 
 def _is_constant(expression: str) -> bool:

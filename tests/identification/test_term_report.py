@@ -6,7 +6,7 @@ import math
 import numpy as np
 import pandas as pd
 
-from aerosid.identification.term_report import UNDETERMINED_NOTE, interval_includes_zero, undetermined
+from aerosid.identification.term_report import UNDETERMINED_NOTE, interval_includes_zero, undetermined, wrong_sign
 
 
 def _table() -> pd.DataFrame:
@@ -97,7 +97,7 @@ def test_its_partners_sigma_include_the_model_without_it():
     looks at the sign only) widens C_m_alpha's sigma by the two-point mixture with the model
     without it; the estimates are unchanged; with the same data but a negative alpha-dot, nothing
     changes."""
-    from aerosid.identification.identify import _with_structure_uncertainty
+    from aerosid.identification.identify import _with_structure_uncertainty, wrong_sign_terms
     from aerosid.identification.regression import fit_linear
     from aerosid.modelling.models import ChannelModel, Term
 
@@ -113,8 +113,8 @@ def test_its_partners_sigma_include_the_model_without_it():
     for sign in (+1.0, -1.0):
         y = 0.01 - 1.0 * alpha - 10.0 * q_hat + sign * 3.0 * adot + rng.normal(0, 0.002, n)
         fit = fit_linear(y, X, names=model.names, channel="Cm")
-        outs, flagged = _with_structure_uncertainty(pd.DataFrame({"Cm": y}), signals, {"Cm": model}, {"Cm": fit})
-        out = outs["Cm"]
+        out = _with_structure_uncertainty(pd.DataFrame({"Cm": y}), signals, {"Cm": model}, {"Cm": fit})["Cm"]
+        flagged = wrong_sign_terms({"Cm": model}, {"Cm": fit})
         assert np.allclose(out.estimate, fit.estimate)
         lo = fit.conf_int()[3][0]
         if sign > 0:
@@ -136,3 +136,65 @@ def test_its_partners_sigma_include_the_model_without_it():
             assert wrong_sign(table) == ["Cm_alpha_dot"] and "Cm_alpha_dot" not in undetermined(table)
         else:
             assert out is fit and not flagged
+
+
+def test_damping_terms_are_recognised_as_written():
+    from aerosid.identification.term_report import damping_signal
+
+    for expr in ("q_hat", "(q_hat)", "2*q_hat", "q_hat * 1"):
+        assert damping_signal("Cm", expr) == "q_hat"
+    assert damping_signal("Cm", "alpha_dot_hat") == "alpha_dot_hat" and damping_signal("Cl", "p_hat") == "p_hat"
+    for ch, expr in (("Cm", "-q_hat"), ("Cm", "q_hat*alpha"), ("Cm", "q_hat**2"), ("Cm", "alpha"), ("Cm", "1"),
+                     ("Cl", "q_hat"), ("CN", "q_hat"), ("Cm", "not an expression (")):
+        assert damping_signal(ch, expr) is None
+
+
+def test_a_wrong_sign_term_is_widened_and_named_even_when_no_partner_moves():
+    """p_hat orthogonal to the other columns: dropping it moves nothing, but the term's own
+    interval must still include the model without it, as the table and the run say."""
+    from aerosid.identification.identify import Identification, _with_structure_uncertainty, wrong_sign_terms
+    from aerosid.identification.regression import fit_linear
+    from aerosid.modelling.models import ChannelModel, Term
+
+    rng = np.random.default_rng(11)
+    n = 2000
+    k = np.arange(n)
+    beta, p_hat = 0.05 * np.sin(2 * np.pi * 5 * k / n), 0.02 * np.sin(2 * np.pi * 13 * k / n)  # orthogonal, mean 0
+    signals = {"alpha": np.zeros(n), "beta": beta, "p_hat": p_hat}
+    model = ChannelModel("Cl", (Term("Cl_0", "1"), Term("Cl_beta", "beta"), Term("Cl_p", "p_hat")))
+    y = -0.1 * beta + 0.05 * p_hat + rng.normal(0, 1e-4, n)
+    fit = fit_linear(y, model.regressors(signals), names=model.names, channel="Cl")
+    assert fit.conf_int()[2][0] > 0
+    out = _with_structure_uncertainty(pd.DataFrame({"Cl": y}), signals, {"Cl": model}, {"Cl": fit})["Cl"]
+    assert out is not fit and np.isclose(out.std_error[2], np.hypot(fit.std_error[2], 0.5 * fit.estimate[2]))
+    assert np.isclose(out.std_error[1], fit.std_error[1], rtol=0.05)
+    assert any("Cl_p: positive at 95 %" in w and "p_hat" in w for w in out.warnings)
+    flagged = wrong_sign_terms({"Cl": model}, {"Cl": fit})
+    table = Identification({"Cl": out}, {"Cl": model}, {}, n, (0.1, 0.1), wrong_sign=flagged).table()
+    assert wrong_sign(table) == ["Cl_p"]
+
+
+def test_the_flag_does_not_depend_on_the_mixture():
+    """A channel with a term that is not identifiable (NaN estimate) skips the mixture; its
+    wrong-sign damping term is still named (the flag is computed on the fits themselves)."""
+    from aerosid.identification.identify import wrong_sign_terms
+    from aerosid.identification.regression import fit_linear
+    from aerosid.modelling.models import ChannelModel, Term
+
+    rng = np.random.default_rng(12)
+    n = 1000
+    q_hat = rng.normal(0, 0.02, n)
+    signals = {"alpha": np.zeros(n), "q_hat": q_hat, "delta_p": np.zeros(n)}
+    model = ChannelModel("Cm", (Term("Cm_0", "1"), Term("Cm_q", "q_hat"), Term("Cm_delta_p", "delta_p")))
+    y = 0.3 * q_hat + rng.normal(0, 1e-4, n)
+    fit = fit_linear(y, model.regressors(signals), names=model.names, channel="Cm")
+    assert not np.isfinite(fit.estimate[2])  # delta_p never moved
+    assert list(wrong_sign_terms({"Cm": model}, {"Cm": fit})) == ["Cm_q"]
+
+
+def test_the_wrong_sign_column_counts_only_true():
+    from aerosid.identification.term_report import wrong_sign
+
+    df = _damping_table()
+    df["wrong_sign"] = [False, np.nan, None, False, True]  # the rule on the intervals still holds
+    assert wrong_sign(df) == ["Cm_alpha_dot", "Cl_p", "Cn_r"]
