@@ -72,20 +72,25 @@ def verdict_lines(run_dir: Path) -> list[str]:
     return lines
 
 
-def undetermined_line(run_dir: Path) -> str | None:
-    """The coefficients the flight does not determine (95 % interval holds 0), or None."""
+def _coefficients_table(run_dir: Path):
+    """RUN_DIR/coefficients.parquet as a DataFrame, or None when it is missing or unreadable."""
     path = run_dir / "coefficients.parquet"
     if not path.is_file():
         return None
     import pandas as pd
 
-    from aerosid.identification.term_report import undetermined
-
     try:
-        table = pd.read_parquet(path)
+        return pd.read_parquet(path)
     except (OSError, ValueError):
         return None
-    names = undetermined(table)
+
+
+def undetermined_line(run_dir: Path) -> str | None:
+    """The coefficients the flight does not determine (95 % interval holds 0), or None."""
+    from aerosid.identification.term_report import undetermined
+
+    table = _coefficients_table(run_dir)
+    names = undetermined(table) if table is not None else []
     if not names:
         return None
     channel = (dict(zip(table["coefficient"].astype(str), table["channel"].astype(str)))
@@ -98,19 +103,11 @@ def undetermined_line(run_dir: Path) -> str | None:
 
 
 def wrong_sign_line(run_dir: Path) -> str | None:
-    """The damping coefficients whose whole 95 % interval is positive, or None."""
-    path = run_dir / "coefficients.parquet"
-    if not path.is_file():
-        return None
-    import pandas as pd
-
+    """The damping coefficients whose whole 95 % interval came out positive, or None."""
     from aerosid.identification.term_report import wrong_sign
 
-    try:
-        table = pd.read_parquet(path)
-    except (OSError, ValueError):
-        return None
-    names = wrong_sign(table)
+    table = _coefficients_table(run_dir)
+    names = wrong_sign(table) if table is not None else []
     if not names:
         return None
     return (f"came out positive at 95 %, a sign damping seldom has: {', '.join(names)}; usually the noise in the "
