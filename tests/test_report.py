@@ -306,3 +306,26 @@ def test_scatter_panel_svg_is_compact():
     assert len(markers) < 30  # tick marks only
     long = re.findall(r"(?<![\w#.])-?\d+\.\d{4,}", svg)
     assert long and all(len(n.lstrip("-").replace(".", "").lstrip("0")) <= 5 for n in long)
+
+
+def test_a_wrong_sign_damping_term_is_marked_in_the_coefficients_table(run_copy):
+    """The run's wrong_sign column (identify's flag, term_report.wrong_sign) shows as a mark on
+    that coefficient's interval, once, and not as 'not determined'."""
+    import html
+
+    import pandas as pd
+
+    from aerosid.identification.term_report import UNDETERMINED_NOTE, WRONG_SIGN_NOTE
+    from aerosid.report import build_report
+
+    run_dir, _, _ = run_copy
+    shutil.rmtree(run_dir / "models")  # the table then comes from coefficients.parquet
+    path = run_dir / "coefficients.parquet"
+    table = pd.read_parquet(path)
+    name = str(table["coefficient"].iloc[-1])
+    table["wrong_sign"] = table["coefficient"] == name
+    table.to_parquet(path)
+    doc = build_report(run_dir)
+    assert doc.count(html.escape(WRONG_SIGN_NOTE)) == 1
+    row = next(r for r in doc.split("<tr") if f">{name}<" in r and html.escape(WRONG_SIGN_NOTE) in r)
+    assert html.escape(UNDETERMINED_NOTE) not in row
