@@ -183,8 +183,9 @@ def run_bench(args, work: Path, t0: float) -> str:
         "## 2. aerosid end to end",
         "",
         "018 through the in-memory method (preprocessing with the IMU channels alone checked for frozen values "
-        "and the outlier test at 8 sigma: what issue 17 item 3 will make the default; US-1976 density until the "
-        "measured-air-data branch lands), then `validate` on 017 (the same estimation, then the simulation).",
+        "and the outlier test at 8 sigma, PREPROCESS in the script; density and dynamic pressure measured: the "
+        "telemetry's rho_kg_m3 and qbar_pa columns), then `validate` on 017 (the same estimation, then the "
+        "simulation).",
         "",
         "```",
         format_table(run.identification.table()),
