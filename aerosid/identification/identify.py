@@ -247,18 +247,20 @@ def wrong_sign_terms(models: dict, fits: dict) -> dict[str, float]:
     return out
 
 
-def _with_structure_uncertainty(fd: pd.DataFrame, signals: dict, models: dict, fits: dict) -> dict:
+def _with_structure_uncertainty(fd: pd.DataFrame, signals: dict, models: dict, fits: dict,
+                                flagged: dict[str, float] | None = None) -> dict:
     """The fits whose sigma include the model-structure part of a term whose interval holds 0, or
     of a damping term whose whole interval is positive (wrong_sign_terms: the flight says it is
     there, with a sign damping seldom has, so the model without it is taken as likely).  For a
     wrong-sign term the mixture is always applied, so its own interval includes the model without
     it (it then holds 0 unless t > ~9.9); a term whose interval holds 0 changes the fit only where
-    a partner's sigma moves by more than 5 %."""
+    a partner's sigma moves by more than 5 %.  flagged: wrong_sign_terms(models, fits) when the
+    caller has it already (None: computed here)."""
     from aerosid.identification.regression import with_added_covariance
     from aerosid.identification.structure_uncertainty import structure_covariance
     from aerosid.identification.term_report import _is_constant, damping_signal, interval_includes_zero
 
-    flagged = wrong_sign_terms(models, fits)
+    flagged = wrong_sign_terms(models, fits) if flagged is None else flagged
     out = {}
     for ch, fit in fits.items():
         est = np.asarray(fit.estimate, float)
@@ -338,7 +340,7 @@ def identify(flight_data: pd.DataFrame, vehicle: Vehicle, models: dict[str, Chan
         fits = _eiv_corrected(fd, vehicle, models, fits, sigma, rate_sigma)
     wrong_sign = wrong_sign_terms(models, fits)
     if STRUCTURE_UNCERTAINTY:
-        fits = _with_structure_uncertainty(fd, signals, models, fits)
+        fits = _with_structure_uncertainty(fd, signals, models, fits, wrong_sign)
     refs = AeroModel.preflight(vehicle).linear_truth() if vehicle.preflight is not None else {}
     window = (float(fd["mach"].min()), float(fd["mach"].max()))
     identities = tuple(ch for ch in INVERSION_CHANNELS if ch in fits) if vehicle.air_data_source != "vanes" else ()
