@@ -10,7 +10,11 @@ calibrated on simulated truth, the flight itself decides: while a channel's gati
 systematic -- several gated runs, or 5 % of the segment -- (or the windowed NIS has such
 excursions: then the channels whose mean standardised innovation exceeds 1.5, or the
 worst one), the chains that channel sees get ESCALATION times more process
-noise and the segment is smoothed again (at most MAX_ESCALATIONS times).  What is
+noise and the segment is smoothed again (at most MAX_ESCALATIONS times).  An escalation is
+kept only if it condemns fewer samples (gated or in an excursion) than the run before it:
+on the unseen JSBSim J3Cub seed 9 the third, for a NIS excursion alone, took M to x27000,
+the q state ran off after a 1.2 rad/s^2 elevator step and q was gated for the last 25 s
+(209 -> 2601 samples condemned, the segment lost); it is undone and the escalation stops.  What is
 still gated afterwards is a single event: if it is a manoeuvre the model cannot follow
 (several channels out, controls moving), the process noise is raised over its span only
 (aerosid.estimation.local_q); what is left is reported and cut (aerosid.estimation.findings).
@@ -83,6 +87,13 @@ def gated_channels(result: EBMResult, min_run_s: float = GATED_RUN_MIN_S) -> lis
     return [j for j in range(result.gate_flags.shape[1]) if _systematic(result.gate_flags[:, j], need, merge)]
 
 
+def condemned_samples(result: EBMResult) -> int:
+    """Samples the findings would cut: gated on any channel, or in a windowed-NIS excursion."""
+    flags = result.gate_flags.any(axis=1)
+    flags[np.asarray(result.divergence_samples, dtype=int)] = True
+    return int(flags.sum())
+
+
 def smooth_flight_adaptive(t_s, z, valid, inertia_kg_m2, sensor_offset_m, z_filled=None,
                            options: EBMOptions | None = None, controls=None,
                            local_q: bool = True) -> AdaptiveSmoothing:
@@ -107,9 +118,17 @@ def smooth_flight_adaptive(t_s, z, valid, inertia_kg_m2, sensor_offset_m, z_fill
         chains = {c for j in bad for c in CHAINS_OF_CHANNEL[j]}
         for c in chains:
             scale[c] *= ESCALATION
+        escalated = smooth_flight(t_s, z, valid, inertia_kg_m2, sensor_offset_m, z_filled,
+                                  dataclasses.replace(opt, q_chain_scale=tuple(float(v) for v in scale)))
+        before, after = condemned_samples(result), condemned_samples(escalated)
+        if after > before:  # too loose a chain lets the state run off and be gated for good: keep the last
+            for c in chains:
+                scale[c] /= ESCALATION
+            escalations.append((attempt, (f"none: raising {', '.join(result.meas_names[j] for j in bad)} "
+                                          f"condemned {after} samples instead of {before}, undone",)))
+            break
         escalations.append((attempt, tuple(result.meas_names[j] for j in bad) or ("none: NIS excursion",)))
-        result = smooth_flight(t_s, z, valid, inertia_kg_m2, sensor_offset_m, z_filled,
-                               dataclasses.replace(opt, q_chain_scale=tuple(float(v) for v in scale)))
+        result = escalated
     rounds = ()
     if local_q:
         # the local rounds keep the stationary pass's Q scale: re-tuning it once the burst is absorbed
