@@ -116,16 +116,17 @@ def test_a_failed_segment_is_recorded_and_retry_failed_completes_only_it(prefect
     assert retry_failed(str(out))["retried"] == []  # nothing left to retry
 
 
-def test_campaign_on_dask_equals_the_serial_run(prefect_harness, flights, tmp_path):
-    from flows.pipeline import campaign, campaign_runner
+def test_campaign_on_dask_equals_the_core(prefect_harness, flights, tmp_path):
+    from flows.pipeline import campaign_runner
 
     two = [str(p) for p in flights[:2]]  # one flight per Dask worker (CI time: the third added ~20 s)
-    serial = campaign(two, str(tmp_path / "serial"))
     parallel = campaign_runner(n_workers=2)(two, str(tmp_path / "dask"))
-    assert [s["status"] for s in serial] == [s["status"] for s in parallel]
-    assert all(s["status"] in ("ok", "ok with findings") for s in serial)
-    for a, b in zip(serial, parallel):
-        ta = pd.read_parquet(a["coefficients"]["path"])[COLS]
+    assert all(s["status"] in ("ok", "ok with findings") for s in parallel)
+    # the serial flow equals the core (test_flow_gives_the_same_coefficients_as_the_core), so the
+    # core stands in for the serial campaign here (CI time: the serial campaign took ~40 s)
+    for path, b in zip(two, parallel):
+        ta = process_telemetry(pd.read_parquet(path), load_vehicle("seed-rlv"), flight=b["flight"])
+        ta = ta.identification.table()[COLS]
         tb = pd.read_parquet(b["coefficients"]["path"])[COLS]
         pd.testing.assert_frame_equal(ta, tb, check_exact=True)
-    assert np.isfinite(ta["estimate"]).any()
+    assert np.isfinite(tb["estimate"]).any()

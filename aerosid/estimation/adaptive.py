@@ -10,11 +10,17 @@ calibrated on simulated truth, the flight itself decides: while a channel's gati
 systematic -- several gated runs, or 5 % of the segment -- (or the windowed NIS has such
 excursions: then the channels whose mean standardised innovation exceeds 1.5, or the
 worst one), the chains that channel sees get ESCALATION times more process
-noise and the segment is smoothed again (at most MAX_ESCALATIONS times).  An escalation is
-kept only if it condemns fewer samples (gated or in an excursion) than the run before it:
-on the unseen JSBSim J3Cub seed 9 the third, for a NIS excursion alone, took M to x27000,
-the q state ran off after a 1.2 rad/s^2 elevator step and q was gated for the last 25 s
-(209 -> 2601 samples condemned, the segment lost); it is undone and the escalation stops.  What is
+noise and the segment is smoothed again (at most MAX_ESCALATIONS times).  Once a state has
+run off, the gate keeps rejecting its channel for good (a lock-out), and whether a raise
+frees it depends on which chains are raised, so each escalation tries two sets -- every
+chain the channels see, and only the chain that the channel gated first (the cascade's
+cause) measures directly -- and keeps the one
+that condemns fewer samples (gated on any channel, or in a NIS excursion); it is kept only
+if it condemns fewer than the run before it, else undone and the escalation stops.
+Measured on the unseen JSBSim J3Cub: seed 9's third escalation, for a NIS excursion alone,
+took M to x27000, the q state ran off after a 1.2 rad/s^2 elevator step and q was gated for
+the last 25 s (209 -> 2601 samples condemned, the segment lost); on seed 5 raising X, L, M, N
+left q locked out from 3.8 s (3098 condemned) where raising M alone freed it (233).  What is
 still gated afterwards is a single event: if it is a manoeuvre the model cannot follow
 (several channels out, controls moving), the process noise is raised over its span only
 (aerosid.estimation.local_q); what is left is reported and cut (aerosid.estimation.findings).
@@ -37,6 +43,7 @@ MAX_ESCALATIONS = 3
 #: Chains (X, Y, Z, L, M, N) each measurement channel (ax, ay, az, p, q, r) depends on:
 #: the accelerometers see their force chain and, through the lever arm, the angular ones.
 CHAINS_OF_CHANNEL = ((0, 4, 5), (1, 3, 5), (2, 3, 4), (3, 5), (4,), (5, 3))
+CHAIN_NAMES = ("X", "Y", "Z", "L", "M", "N")
 
 
 @dataclass(frozen=True)
@@ -87,6 +94,15 @@ def gated_channels(result: EBMResult, min_run_s: float = GATED_RUN_MIN_S) -> lis
     return [j for j in range(result.gate_flags.shape[1]) if _systematic(result.gate_flags[:, j], need, merge)]
 
 
+def _chain_choices(bad: list[int], first: int) -> list[tuple[int, ...]]:
+    """The chain sets one escalation tries for the channels `bad`: every chain those channels
+    see (CHAINS_OF_CHANNEL), then only the chain that `first` -- the channel gated first, the
+    cause of a lock-out cascade -- measures directly (its own force or moment), when that differs."""
+    seen = tuple(sorted({c for j in bad for c in CHAINS_OF_CHANNEL[j]}))
+    own = (first,)
+    return [seen] if own == seen else [seen, own]
+
+
 def condemned_samples(result: EBMResult) -> int:
     """Samples the findings would cut: gated on any channel, or in a windowed-NIS excursion."""
     flags = result.gate_flags.any(axis=1)
@@ -115,20 +131,28 @@ def smooth_flight_adaptive(t_s, z, valid, inertia_kg_m2, sensor_offset_m, z_fill
         if not bad:  # a windowed-NIS excursion without a gated run: the channels that fit worst
             misfit = np.asarray(result.chan_nis_filter, float)
             bad = [int(j) for j in np.nonzero(misfit > 1.5)[0]] or [int(np.nanargmax(misfit))]
-        chains = {c for j in bad for c in CHAINS_OF_CHANNEL[j]}
-        for c in chains:
-            scale[c] *= ESCALATION
-        escalated = smooth_flight(t_s, z, valid, inertia_kg_m2, sensor_offset_m, z_filled,
-                                  dataclasses.replace(opt, q_chain_scale=tuple(float(v) for v in scale)))
-        before, after = condemned_samples(result), condemned_samples(escalated)
+        names = ", ".join(result.meas_names[j] for j in bad)
+        before = condemned_samples(result)
+        best = None
+        gated = result.gate_flags[:, bad]
+        first = bad[int(np.argmin(np.where(gated.any(axis=0), gated.argmax(axis=0), gated.shape[0])))]
+        for chains in _chain_choices(bad, first):
+            trial = scale.copy()
+            trial[list(chains)] *= ESCALATION
+            run = smooth_flight(t_s, z, valid, inertia_kg_m2, sensor_offset_m, z_filled,
+                                dataclasses.replace(opt, q_chain_scale=tuple(float(v) for v in trial)))
+            if best is None or condemned_samples(run) < condemned_samples(best[2]):
+                best = (chains, trial, run)
+        chains, trial, run = best
+        after = condemned_samples(run)
         if after > before:  # too loose a chain lets the state run off and be gated for good: keep the last
-            for c in chains:
-                scale[c] /= ESCALATION
-            escalations.append((attempt, (f"none: raising {', '.join(result.meas_names[j] for j in bad)} "
-                                          f"condemned {after} samples instead of {before}, undone",)))
+            escalations.append((attempt, (f"none: raising {names} condemned {after} samples instead of "
+                                          f"{before}, undone",)))
             break
-        escalations.append((attempt, tuple(result.meas_names[j] for j in bad) or ("none: NIS excursion",)))
-        result = escalated
+        raised = "".join(CHAIN_NAMES[c] for c in sorted(chains))
+        escalations.append((attempt, tuple(f"{result.meas_names[j]}" for j in bad[:-1])
+                            + (f"{result.meas_names[bad[-1]]} (raised {raised})",)))
+        scale, result = trial, run
     rounds = ()
     if local_q:
         # the local rounds keep the stationary pass's Q scale: re-tuning it once the burst is absorbed

@@ -65,3 +65,26 @@ def test_escalations_that_help_are_all_kept(monkeypatch):
     assert [c[4] for c in calls] == [1.0, 30.0, 900.0]
     assert out.q_chain_scale[4] == 900.0
     assert all("undone" not in " ".join(ch) for _, ch in out.escalations)
+
+
+def test_the_chain_of_the_channel_gated_first_is_tried_alone_and_kept_when_it_frees_more(monkeypatch):
+    """The J3Cub seed 5 pattern: q locked out from 3.8 s, a_x gated later as a consequence;
+    raising every chain a_x and q see (X, M, N) leaves q locked, raising M alone frees it."""
+    def fake(t_s, z, valid, inertia, offset, z_filled, opt, **kw):
+        sc = np.asarray(opt.q_chain_scale)
+        r = _fake_result((1,) * 6)
+        r.gate_flags[:] = False
+        if sc[4] > 1 and sc[0] == 1:  # M alone raised: free
+            return r
+        r.gate_flags[380:, Q] = True
+        r.gate_flags[2000:2300, 0] = True
+        return r
+
+    monkeypatch.setattr(adaptive, "smooth_flight", fake)
+    assert adaptive._chain_choices([0, 4], 4) == [(0, 4, 5), (4,)]
+    assert adaptive._chain_choices([4], 4) == [(4,)]
+    out = adaptive.smooth_flight_adaptive(np.arange(N) * DT, np.zeros((N, 6)), np.ones((N, 6), bool), (1, 1, 1, 0),
+                                          (0, 0, 0), local_q=False)
+    assert out.q_chain_scale == (1.0, 1.0, 1.0, 1.0, 30.0, 1.0)
+    assert adaptive.condemned_samples(out.result) == 0
+    assert "raised M)" in out.summary()
