@@ -14,9 +14,11 @@ noise and the segment is smoothed again (at most MAX_ESCALATIONS times).  Once a
 run off, the gate keeps rejecting its channel for good (a lock-out), and whether a raise
 frees it depends on which chains are raised, so each escalation tries two sets -- every
 chain the channels see, and only the chain that the channel gated first (the cascade's
-cause) measures directly -- and keeps the one
-that condemns fewer samples (gated on any channel, or in a NIS excursion); it is kept only
-if it condemns fewer than the run before it, else undone and the escalation stops.
+cause) measures directly -- and keeps the one that condemns fewer samples (gated on any
+channel, or in a NIS excursion).  A raise can make things worse before a further one makes
+them better (unseen pa28 seed 10: raising M for a NIS excursion 376 -> 479 samples, the next
+raises removed them), so the whole path is walked and the run that condemns fewest is kept
+(the later on a tie); the runs after it are undone and the summary says so.
 Measured on the unseen JSBSim J3Cub: seed 9's third escalation, for a NIS excursion alone,
 took M to x27000, the q state ran off after a 1.2 rad/s^2 elevator step and q was gated for
 the last 25 s (209 -> 2601 samples condemned, the segment lost); on seed 5 raising X, L, M, N
@@ -32,7 +34,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from aerosid.estimation.findings import GATED_RUN_MIN_S, MERGE_GAP_S, dilate, sample_interval, true_runs
+from aerosid.estimation.findings import (GATED_RUN_MIN_S, MERGE_GAP_S, condemned_samples, dilate, sample_interval,
+                                         true_runs)
 from aerosid.estimation.local_q import follow_locally
 from aerosid.estimation.pipeline import EBMOptions, EBMResult, smooth_flight
 
@@ -52,7 +55,7 @@ class AdaptiveSmoothing:
 
     result: EBMResult
     q_chain_scale: tuple
-    escalations: tuple  # (attempt, channels with gated runs) per re-run
+    escalations: tuple  # (attempt, channels with gated runs) per re-run; (0, (why,)): runs undone
     local_rounds: tuple = ()  # per local round: the aerosid.estimation.local_q.LocalEvent's it classified
 
     def summary(self) -> str:
@@ -62,7 +65,7 @@ class AdaptiveSmoothing:
                 f"round {i + 1}: " + ", ".join(ev.summary() for ev in evs) for i, evs in enumerate(self.local_rounds))
         if not self.escalations:
             return "process noise: spectral, no escalation needed" + local
-        steps = "; ".join(f"run {a}: gated {', '.join(ch)}" for a, ch in self.escalations)
+        steps = "; ".join(f"run {a}: gated {', '.join(ch)}" if a else ch[0] for a, ch in self.escalations)
         return f"process noise escalated on gated channels ({steps}); chain factors {self.q_chain_scale}" + local
 
 
@@ -103,13 +106,6 @@ def _chain_choices(bad: list[int], first: int) -> list[tuple[int, ...]]:
     return [seen] if own == seen else [seen, own]
 
 
-def condemned_samples(result: EBMResult) -> int:
-    """Samples the findings would cut: gated on any channel, or in a windowed-NIS excursion."""
-    flags = result.gate_flags.any(axis=1)
-    flags[np.asarray(result.divergence_samples, dtype=int)] = True
-    return int(flags.sum())
-
-
 def smooth_flight_adaptive(t_s, z, valid, inertia_kg_m2, sensor_offset_m, z_filled=None,
                            options: EBMOptions | None = None, controls=None,
                            local_q: bool = True) -> AdaptiveSmoothing:
@@ -120,6 +116,7 @@ def smooth_flight_adaptive(t_s, z, valid, inertia_kg_m2, sensor_offset_m, z_fill
     scale = np.asarray(opt.q_chain_scale, dtype=float).copy()
     escalations = []
     result = smooth_flight(t_s, z, valid, inertia_kg_m2, sensor_offset_m, z_filled, opt)
+    path = [(condemned_samples(result), scale, result, 0)]  # (condemned, chain factors, result, escalations)
     for attempt in range(1, MAX_ESCALATIONS + 1):
         bad = gated_channels(result)
         flagged = np.zeros(result.t_s.size, bool)
@@ -131,8 +128,6 @@ def smooth_flight_adaptive(t_s, z, valid, inertia_kg_m2, sensor_offset_m, z_fill
         if not bad:  # a windowed-NIS excursion without a gated run: the channels that fit worst
             misfit = np.asarray(result.chan_nis_filter, float)
             bad = [int(j) for j in np.nonzero(misfit > 1.5)[0]] or [int(np.nanargmax(misfit))]
-        names = ", ".join(result.meas_names[j] for j in bad)
-        before = condemned_samples(result)
         best = None
         gated = result.gate_flags[:, bad]
         first = bad[int(np.argmin(np.where(gated.any(axis=0), gated.argmax(axis=0), gated.shape[0])))]
@@ -143,16 +138,19 @@ def smooth_flight_adaptive(t_s, z, valid, inertia_kg_m2, sensor_offset_m, z_fill
                                 dataclasses.replace(opt, q_chain_scale=tuple(float(v) for v in trial)))
             if best is None or condemned_samples(run) < condemned_samples(best[2]):
                 best = (chains, trial, run)
-        chains, trial, run = best
-        after = condemned_samples(run)
-        if after > before:  # too loose a chain lets the state run off and be gated for good: keep the last
-            escalations.append((attempt, (f"none: raising {names} condemned {after} samples instead of "
-                                          f"{before}, undone",)))
-            break
+        chains, scale, result = best
         raised = "".join(CHAIN_NAMES[c] for c in sorted(chains))
         escalations.append((attempt, tuple(f"{result.meas_names[j]}" for j in bad[:-1])
                             + (f"{result.meas_names[bad[-1]]} (raised {raised})",)))
-        scale, result = trial, run
+        path.append((condemned_samples(result), scale, result, len(escalations)))
+    # the run of the path that condemns fewest samples (the later one on a tie): a raise can make
+    # things worse before a further one makes them better, so the path is walked, then chosen on
+    n_best = min(h[0] for h in path)
+    kept = [h for h in path if h[0] == n_best][-1]
+    if kept is not path[-1]:
+        _, scale, result, k = kept
+        runs = f"run {k + 1}" if k + 1 == len(path) - 1 else f"runs {k + 1}-{len(path) - 1}"
+        escalations.append((0, (f"{runs} undone: {path[-1][0]} samples condemned at the end, {n_best} before",)))
     rounds = ()
     if local_q:
         # the local rounds keep the stationary pass's Q scale: re-tuning it once the burst is absorbed

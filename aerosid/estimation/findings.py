@@ -104,6 +104,14 @@ def dilate(mask: np.ndarray, margin: int) -> np.ndarray:
     return (c[np.minimum(i + margin + 1, m.size)] - c[np.maximum(i - margin, 0)]) > 0
 
 
+def condemned_samples(result) -> int:
+    """Samples of an EBMResult the findings would cut: gated on any channel, or in a
+    windowed-NIS excursion (counted once)."""
+    flags = np.asarray(result.gate_flags).any(axis=1)
+    flags[np.asarray(result.divergence_samples, dtype=int)] = True
+    return int(flags.sum())
+
+
 def span_findings(kind: str, segment: str, channel: str, t_s: np.ndarray, mask: np.ndarray, min_samples: int,
                   cut: bool, detail: str) -> tuple[list[Finding], np.ndarray]:
     """Findings for the runs of `mask` of at least `min_samples`, and the mask of those runs."""

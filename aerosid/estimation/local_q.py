@@ -24,6 +24,8 @@ side, the segment smoothed again (at most MAX_ROUNDS times) -- when
 * and, when the control positions are known, a control surface moves within the span (or
   CONTROL_LEAD_S before it) by at least CONTROL_SHARE of its range over the segment.
 
+A round is kept only if it condemns no more samples (gated, or in a NIS excursion) than the
+result before it, as an escalation is (aerosid.estimation.adaptive).
 Anything else (one channel, or no control activity) stays what it was: reported and cut
 (aerosid.estimation.findings).  The stationary path is untouched: no manoeuvre, no
 multiplier, and smooth_flight with q_local=None is the filter as before, bit for bit.
@@ -35,7 +37,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.stats import chi2
 
-from aerosid.estimation.findings import MERGE_GAP_S, dilate, merge_close, sample_interval, true_runs
+from aerosid.estimation.findings import MERGE_GAP_S, condemned_samples, dilate, merge_close, sample_interval, true_runs
 
 #: Factor on the involved chains' intensity over a manoeuvre's span, per round.
 ESCALATION = 30.0
@@ -165,6 +167,8 @@ def follow_locally(smooth, result, controls: np.ndarray | None = None):
         trial = smooth(trial_q)
         if not (np.all(np.isfinite(trial.x_smooth)) and np.all(np.isfinite(trial.sigma_smooth))):
             break  # numerically lost with the raised noise: keep the last finite result
+        if condemned_samples(trial) > condemned_samples(result):
+            break  # the raise let a state run off elsewhere (a lock-out): keep the last result
         rounds.append(tuple(events))
         result, q_local = trial, trial_q
     return result, q_local, tuple(rounds)

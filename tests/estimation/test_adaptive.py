@@ -1,5 +1,6 @@
-"""The whole-segment escalation of aerosid.estimation.adaptive: it raises the chains of a
-systematically gated channel, and keeps a raise only while it condemns fewer samples."""
+"""The whole-segment escalation of aerosid.estimation.adaptive (it raises the chains of a
+systematically gated channel and keeps the run of its path that condemns fewest samples)
+and the local rounds of aerosid.estimation.local_q (a round that condemns more is not kept)."""
 from types import SimpleNamespace
 
 import numpy as np
@@ -48,15 +49,15 @@ def test_condemned_samples_counts_gated_or_excursion_once():
     assert adaptive.condemned_samples(r) == 500
 
 
-def test_an_escalation_that_condemns_more_is_undone_and_the_escalation_stops(monkeypatch):
+def test_the_run_of_the_path_that_condemns_fewest_is_kept_and_the_later_runs_undone(monkeypatch):
     out, calls = _run(monkeypatch)
     # stiff -> x30 (gating gone) -> x900 (smaller excursion) -> x27000 tried, worse, undone
     assert [c[4] for c in calls] == [1.0, 30.0, 900.0, 27000.0]
     assert out.q_chain_scale[4] == 900.0
     assert out.result.scale[4] == 900.0
     assert adaptive.condemned_samples(out.result) == 250
-    assert "undone" in out.escalations[-1][1][0] and "3100 samples instead of 250" in out.escalations[-1][1][0]
-    assert "undone" in out.summary()
+    assert out.escalations[-1] == (0, ("run 3 undone: 3100 samples condemned at the end, 250 before",))
+    assert "run 3 undone" in out.summary()
 
 
 def test_escalations_that_help_are_all_kept(monkeypatch):
@@ -64,7 +65,7 @@ def test_escalations_that_help_are_all_kept(monkeypatch):
     out, calls = _run(monkeypatch)
     assert [c[4] for c in calls] == [1.0, 30.0, 900.0]
     assert out.q_chain_scale[4] == 900.0
-    assert all("undone" not in " ".join(ch) for _, ch in out.escalations)
+    assert all(a > 0 for a, _ in out.escalations)  # nothing undone
 
 
 def test_the_chain_of_the_channel_gated_first_is_tried_alone_and_kept_when_it_frees_more(monkeypatch):
@@ -88,3 +89,46 @@ def test_the_chain_of_the_channel_gated_first_is_tried_alone_and_kept_when_it_fr
     assert out.q_chain_scale == (1.0, 1.0, 1.0, 1.0, 30.0, 1.0)
     assert adaptive.condemned_samples(out.result) == 0
     assert "raised M)" in out.summary()
+
+
+def test_a_local_round_that_condemns_more_is_not_kept(monkeypatch):
+    from aerosid.estimation import local_q
+
+    def result(gated_from):
+        r = _fake_result((1,) * 6)
+        r.gate_flags[:] = False
+        r.gate_flags[gated_from:gated_from + 100, 5] = True  # a gated r span, the manoeuvre
+        if gated_from == 0:
+            r.gate_flags[1000:, Q] = True  # ... freed, but q locked out from 10 s
+        r.diverged, r.x_smooth, r.sigma_smooth = False, np.zeros((N, 2)), np.ones((N, 2))
+        return r
+
+    monkeypatch.setattr(local_q, "classify", lambda res, controls: [SimpleNamespace(manoeuvre=True)])
+    monkeypatch.setattr(local_q, "raise_locally", lambda base, t, events: base * 30.0)
+    first = result(2000)
+    worse = result(0)
+    out, q_local, rounds = local_q.follow_locally(lambda ql: worse, first)
+    assert out is first and q_local is None and rounds == ()
+    better = result(2000)
+    better.gate_flags[:] = False
+    out, q_local, rounds = local_q.follow_locally(lambda ql: better, first)
+    assert out is better and len(rounds) == local_q.MAX_ROUNDS  # the fake classify always finds one
+
+
+def test_a_raise_that_makes_things_worse_before_the_next_makes_them_better_is_walked_through(monkeypatch):
+    """The pa28 seed 10 pattern: the second raise condemns more, the third removes everything."""
+    def fake(t_s, z, valid, inertia, offset, z_filled, opt, **kw):
+        m = opt.q_chain_scale[4]
+        r = _fake_result((1,) * 6)
+        r.gate_flags[:] = False
+        if m < 30:
+            r.gate_flags[500:700, Q] = r.gate_flags[1500:1700, Q] = True  # 400 condemned
+        elif m < 900:
+            r.divergence_samples = np.arange(1000, 1600)                   # 600: worse
+        return r                                                           # x900: clean
+
+    monkeypatch.setattr(adaptive, "smooth_flight", fake)
+    out = adaptive.smooth_flight_adaptive(np.arange(N) * DT, np.zeros((N, 6)), np.ones((N, 6), bool), (1, 1, 1, 0),
+                                          (0, 0, 0), local_q=False)
+    assert out.q_chain_scale[4] == 900.0 and adaptive.condemned_samples(out.result) == 0
+    assert all(a > 0 for a, _ in out.escalations) and len(out.escalations) == 2
