@@ -14,8 +14,9 @@ noise and the segment is smoothed again (at most MAX_ESCALATIONS times).  Once a
 run off, the gate keeps rejecting its channel for good (a lock-out), and whether a raise
 frees it depends on which chains are raised, so each escalation tries two sets -- every
 chain the channels see, and only the chain that the channel gated first (the cascade's
-cause) measures directly -- and keeps the one that condemns fewer samples (gated on any
-channel, or in a NIS excursion).  A raise can make things worse before a further one makes
+cause; for a NIS excursion without gating, the worst-fitting channel) measures directly --
+and keeps the one that condemns fewer samples (gated on any channel, or in a NIS excursion;
+the first set on a tie).  A raise can make things worse before a further one makes
 them better (unseen pa28 seed 10: raising M for a NIS excursion 376 -> 479 samples, the next
 raises removed them), so the whole path is walked and the run that condemns fewest is kept
 (the later on a tie); the runs after it are undone and the summary says so.
@@ -125,12 +126,17 @@ def smooth_flight_adaptive(t_s, z, valid, inertia_kg_m2, sensor_offset_m, z_fill
         excursion = _systematic(flagged, 1, int(round(MERGE_GAP_S / dt)))
         if not bad and not excursion:
             break
+        misfit = np.asarray(result.chan_nis_filter, float)
+        why = "gated"
         if not bad:  # a windowed-NIS excursion without a gated run: the channels that fit worst
-            misfit = np.asarray(result.chan_nis_filter, float)
             bad = [int(j) for j in np.nonzero(misfit > 1.5)[0]] or [int(np.nanargmax(misfit))]
+            why = "no channel gated, NIS excursion; worst fit"
         best = None
         gated = result.gate_flags[:, bad]
-        first = bad[int(np.argmin(np.where(gated.any(axis=0), gated.argmax(axis=0), gated.shape[0])))]
+        if gated.any():  # the channel gated first: the cause of a lock-out cascade
+            first = bad[int(np.argmin(np.where(gated.any(axis=0), gated.argmax(axis=0), gated.shape[0])))]
+        else:  # the worst-fitting one
+            first = bad[int(np.nanargmax(misfit[bad]))]
         for chains in _chain_choices(bad, first):
             trial = scale.copy()
             trial[list(chains)] *= ESCALATION
@@ -142,6 +148,8 @@ def smooth_flight_adaptive(t_s, z, valid, inertia_kg_m2, sensor_offset_m, z_fill
         raised = "".join(CHAIN_NAMES[c] for c in sorted(chains))
         escalations.append((attempt, tuple(f"{result.meas_names[j]}" for j in bad[:-1])
                             + (f"{result.meas_names[bad[-1]]} (raised {raised})",)))
+        if why != "gated":
+            escalations[-1] = (attempt, (f"{why} {escalations[-1][1][0]}",) + escalations[-1][1][1:])
         path.append((condemned_samples(result), scale, result, len(escalations)))
     # the run of the path that condemns fewest samples (the later one on a tie): a raise can make
     # things worse before a further one makes them better, so the path is walked, then chosen on

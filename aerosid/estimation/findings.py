@@ -105,8 +105,9 @@ def dilate(mask: np.ndarray, margin: int) -> np.ndarray:
 
 
 def condemned_samples(result) -> int:
-    """Samples of an EBMResult the findings would cut: gated on any channel, or in a
-    windowed-NIS excursion (counted once)."""
+    """How much of a segment an EBMResult loses to its filter: the samples gated on any
+    channel or in a windowed-NIS excursion, counted once (the escalation's yardstick; the
+    findings below cut less: they merge, and skip short runs and excursions)."""
     flags = np.asarray(result.gate_flags).any(axis=1)
     flags[np.asarray(result.divergence_samples, dtype=int)] = True
     return int(flags.sum())

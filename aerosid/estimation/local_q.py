@@ -25,7 +25,8 @@ side, the segment smoothed again (at most MAX_ROUNDS times) -- when
   CONTROL_LEAD_S before it) by at least CONTROL_SHARE of its range over the segment.
 
 A round is kept only if it condemns no more samples (gated, or in a NIS excursion) than the
-result before it, as an escalation is (aerosid.estimation.adaptive).
+result before it; the rounds stop at the first that condemns more (a raise that let a state
+run off elsewhere).
 Anything else (one channel, or no control activity) stays what it was: reported and cut
 (aerosid.estimation.findings).  The stationary path is untouched: no manoeuvre, no
 multiplier, and smooth_flight with q_local=None is the filter as before, bit for bit.

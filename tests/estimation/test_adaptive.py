@@ -132,3 +132,22 @@ def test_a_raise_that_makes_things_worse_before_the_next_makes_them_better_is_wa
                                           (0, 0, 0), local_q=False)
     assert out.q_chain_scale[4] == 900.0 and adaptive.condemned_samples(out.result) == 0
     assert all(a > 0 for a, _ in out.escalations) and len(out.escalations) == 2
+
+
+def test_an_excursion_without_gating_tries_the_worst_fitting_channels_chain_alone(monkeypatch):
+    calls = []
+
+    def fake(t_s, z, valid, inertia, offset, z_filled, opt, **kw):
+        calls.append(tuple(opt.q_chain_scale))
+        r = _fake_result(opt.q_chain_scale)
+        r.gate_flags[:] = False
+        r.chan_nis_filter = np.array([1.6, 1.0, 1.0, 1.0, 2.5, 1.0])  # a_x and q fit badly, q worst
+        r.divergence_samples = np.arange(1000, 1300) if len(calls) == 1 else np.arange(0)
+        return r
+
+    monkeypatch.setattr(adaptive, "smooth_flight", fake)
+    out = adaptive.smooth_flight_adaptive(np.arange(N) * DT, np.zeros((N, 6)), np.ones((N, 6), bool), (1, 1, 1, 0),
+                                          (0, 0, 0), local_q=False)
+    assert calls[1] == (30.0, 1.0, 1.0, 1.0, 30.0, 30.0)  # every chain a_x and q see
+    assert calls[2] == (1.0, 1.0, 1.0, 1.0, 30.0, 1.0)    # M alone: q fits worst, a_x is not first
+    assert "no channel gated, NIS excursion" in out.summary()
