@@ -56,7 +56,7 @@ class AdaptiveSmoothing:
 
     result: EBMResult
     q_chain_scale: tuple
-    escalations: tuple  # (attempt, channels with gated runs) per re-run; (0, (why,)): runs undone
+    escalations: tuple  # (attempt, (why + channels ...)) per re-run; (0, (why,)): runs undone
     local_rounds: tuple = ()  # per local round: the aerosid.estimation.local_q.LocalEvent's it classified
 
     def summary(self) -> str:
@@ -66,8 +66,8 @@ class AdaptiveSmoothing:
                 f"round {i + 1}: " + ", ".join(ev.summary() for ev in evs) for i, evs in enumerate(self.local_rounds))
         if not self.escalations:
             return "process noise: spectral, no escalation needed" + local
-        steps = "; ".join(f"run {a}: gated {', '.join(ch)}" if a else ch[0] for a, ch in self.escalations)
-        return f"process noise escalated on gated channels ({steps}); chain factors {self.q_chain_scale}" + local
+        steps = "; ".join(f"run {a}: {', '.join(ch)}" if a else ch[0] for a, ch in self.escalations)
+        return f"process noise escalated ({steps}); chain factors {self.q_chain_scale}" + local
 
 
 #: A channel's gating is the model's (escalate) rather than one local event (a sensor fault:
@@ -130,7 +130,7 @@ def smooth_flight_adaptive(t_s, z, valid, inertia_kg_m2, sensor_offset_m, z_fill
         why = "gated"
         if not bad:  # a windowed-NIS excursion without a gated run: the channels that fit worst
             bad = [int(j) for j in np.nonzero(misfit > 1.5)[0]] or [int(np.nanargmax(misfit))]
-            why = "no channel gated, NIS excursion; worst fit"
+            why = "NIS excursion, no channel gated; worst fit"
         best = None
         gated = result.gate_flags[:, bad]
         if gated.any():  # the channel gated first: the cause of a lock-out cascade
@@ -146,10 +146,10 @@ def smooth_flight_adaptive(t_s, z, valid, inertia_kg_m2, sensor_offset_m, z_fill
                 best = (chains, trial, run)
         chains, scale, result = best
         raised = "".join(CHAIN_NAMES[c] for c in sorted(chains))
-        escalations.append((attempt, tuple(f"{result.meas_names[j]}" for j in bad[:-1])
-                            + (f"{result.meas_names[bad[-1]]} (raised {raised})",)))
-        if why != "gated":
-            escalations[-1] = (attempt, (f"{why} {escalations[-1][1][0]}",) + escalations[-1][1][1:])
+        label = [result.meas_names[j] for j in bad]
+        label[-1] += f" (raised {raised})"
+        label[0] = f"{why} {label[0]}"
+        escalations.append((attempt, tuple(label)))
         path.append((condemned_samples(result), scale, result, len(escalations)))
     # the run of the path that condemns fewest samples (the later one on a tie): a raise can make
     # things worse before a further one makes them better, so the path is walked, then chosen on

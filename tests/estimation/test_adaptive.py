@@ -150,4 +150,4 @@ def test_an_excursion_without_gating_tries_the_worst_fitting_channels_chain_alon
                                           (0, 0, 0), local_q=False)
     assert calls[1] == (30.0, 1.0, 1.0, 1.0, 30.0, 30.0)  # every chain a_x and q see
     assert calls[2] == (1.0, 1.0, 1.0, 1.0, 30.0, 1.0)    # M alone: q fits worst, a_x is not first
-    assert "no channel gated, NIS excursion" in out.summary()
+    assert "run 1: NIS excursion, no channel gated; worst fit ax, q (raised XMN)" in out.summary()
