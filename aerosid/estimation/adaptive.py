@@ -37,7 +37,8 @@ import numpy as np
 
 from aerosid.estimation.findings import (GATED_RUN_MIN_S, MERGE_GAP_S, condemned_samples, dilate, sample_interval,
                                          true_runs)
-from aerosid.estimation.local_q import follow_locally
+from aerosid.estimation.local_q import CHAIN_NAMES, follow_locally
+from aerosid.estimation.local_q import CHAINS_OF_CHANNEL as MEASURED_CHAIN
 from aerosid.estimation.pipeline import EBMOptions, EBMResult, smooth_flight
 
 #: Factor on a chain's process-noise intensity per escalation.
@@ -47,7 +48,6 @@ MAX_ESCALATIONS = 3
 #: Chains (X, Y, Z, L, M, N) each measurement channel (ax, ay, az, p, q, r) depends on:
 #: the accelerometers see their force chain and, through the lever arm, the angular ones.
 CHAINS_OF_CHANNEL = ((0, 4, 5), (1, 3, 5), (2, 3, 4), (3, 5), (4,), (5, 3))
-CHAIN_NAMES = ("X", "Y", "Z", "L", "M", "N")
 
 
 @dataclass(frozen=True)
@@ -101,9 +101,10 @@ def gated_channels(result: EBMResult, min_run_s: float = GATED_RUN_MIN_S) -> lis
 def _chain_choices(bad: list[int], first: int) -> list[tuple[int, ...]]:
     """The chain sets one escalation tries for the channels `bad`: every chain those channels
     see (CHAINS_OF_CHANNEL), then only the chain that `first` -- the channel gated first, the
-    cause of a lock-out cascade -- measures directly (its own force or moment), when that differs."""
+    cause of a lock-out cascade -- measures directly (its own force or moment: local_q's
+    CHAINS_OF_CHANNEL), when that differs."""
     seen = tuple(sorted({c for j in bad for c in CHAINS_OF_CHANNEL[j]}))
-    own = (first,)
+    own = MEASURED_CHAIN[first]
     return [seen] if own == seen else [seen, own]
 
 
@@ -142,15 +143,16 @@ def smooth_flight_adaptive(t_s, z, valid, inertia_kg_m2, sensor_offset_m, z_fill
             trial[list(chains)] *= ESCALATION
             run = smooth_flight(t_s, z, valid, inertia_kg_m2, sensor_offset_m, z_filled,
                                 dataclasses.replace(opt, q_chain_scale=tuple(float(v) for v in trial)))
-            if best is None or condemned_samples(run) < condemned_samples(best[2]):
-                best = (chains, trial, run)
-        chains, scale, result = best
+            n = condemned_samples(run)
+            if best is None or n < best[0]:
+                best = (n, chains, trial, run)
+        n, chains, scale, result = best
         raised = "".join(CHAIN_NAMES[c] for c in sorted(chains))
         label = [result.meas_names[j] for j in bad]
         label[-1] += f" (raised {raised})"
         label[0] = f"{why} {label[0]}"
         escalations.append((attempt, tuple(label)))
-        path.append((condemned_samples(result), scale, result, len(escalations)))
+        path.append((n, scale, result, len(escalations)))
     # the run of the path that condemns fewest samples (the later one on a tie): a raise can make
     # things worse before a further one makes them better, so the path is walked, then chosen on
     n_best = min(h[0] for h in path)
