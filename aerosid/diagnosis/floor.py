@@ -44,7 +44,7 @@ import numpy as np
 import pandas as pd
 
 __all__ = ["ChannelFloor", "channel_floor", "floors", "excess", "floor_table", "band_sigmas", "angle_floor_rms",
-           "ANGLE_REPLICATES"]
+           "band_nonlinearity_rms", "ANGLE_REPLICATES"]
 
 #: Draws of the angles' noise whose refits measure the angles' part of the floor.
 ANGLE_REPLICATES = 8
@@ -60,10 +60,11 @@ class ChannelFloor:
 
     channel: str
     residual_rms: float
-    floor_rms: float  # sqrt(coefficient_floor_rms^2 + angle_floor_rms^2)
+    floor_rms: float  # the three parts below in quadrature
     method: str
     coefficient_floor_rms: float = float("nan")  # the flight-derived coefficient's own error
     angle_floor_rms: float = 0.0  # the recovered angles' error through the fitted model
+    nonlinearity_floor_rms: float = 0.0  # the band path's LP(m(x)) - m(LP(x)) of the fitted model
 
     @property
     def excess_rms(self) -> float:
@@ -78,7 +79,8 @@ class ChannelFloor:
         f = lambda x: float(x) if math.isfinite(x) else None  # noqa: E731
         return {"residual_rms": f(self.residual_rms), "floor_rms": f(self.floor_rms),
                 "excess_rms": f(self.excess_rms), "coefficient_floor_rms": f(self.coefficient_floor_rms),
-                "angle_floor_rms": f(self.angle_floor_rms), "method": self.method}
+                "angle_floor_rms": f(self.angle_floor_rms),
+                "nonlinearity_floor_rms": f(self.nonlinearity_floor_rms), "method": self.method}
 
 
 def excess(residual_rms: float, floor_rms: float) -> float:
@@ -95,17 +97,21 @@ def _rms(x) -> float:
 
 
 def channel_floor(channel: str, residual: np.ndarray, sigma: np.ndarray | None, angle_rms: float = 0.0,
-                  method: str = "smoother sigma") -> ChannelFloor:
+                  method: str = "smoother sigma", nonlinearity_rms: float = 0.0) -> ChannelFloor:
     """One channel's residual RMS against its floor: the RMS of the coefficient's per-sample
-    sigma combined in quadrature with the angles' part angle_rms (module doc)."""
+    sigma combined in quadrature with the angles' part angle_rms and the band path's
+    non-linearity nonlinearity_rms (module doc)."""
     res_rms = _rms(residual) if np.size(residual) else float("nan")
     ang = float(angle_rms) if math.isfinite(angle_rms) else 0.0
+    nonlin = float(nonlinearity_rms) if math.isfinite(nonlinearity_rms) else 0.0
     if sigma is None:
-        return ChannelFloor(channel, res_rms, float("nan"), "none (no sigma of the coefficient)", float("nan"), ang)
+        return ChannelFloor(channel, res_rms, float("nan"), "none (no sigma of the coefficient)", float("nan"), ang,
+                            nonlin)
     coef = _rms(sigma)
     if not math.isfinite(coef):
-        return ChannelFloor(channel, res_rms, float("nan"), "none (sigma not finite)", float("nan"), ang)
-    return ChannelFloor(channel, res_rms, math.hypot(coef, ang), method, coef, ang)
+        return ChannelFloor(channel, res_rms, float("nan"), "none (sigma not finite)", float("nan"), ang, nonlin)
+    return ChannelFloor(channel, res_rms, math.sqrt(coef * coef + ang * ang + nonlin * nonlin), method, coef, ang,
+                        nonlin)
 
 
 def band_sigmas(fd, vehicle) -> dict[str, np.ndarray] | None:
@@ -201,12 +207,109 @@ def angle_floor_rms(fd, vehicle, models: dict, channels, replicates: int = ANGLE
     return {ch: math.sqrt(max(v, 0.0)) if math.isfinite(v) else float("nan") for ch, v in rise.items()}
 
 
-def floors(residuals: dict, flight_data, angle_rms: dict | None = None, vehicle=None) -> dict[str, ChannelFloor]:
+def band_nonlinearity_rms(fd, vehicle, models: dict, channels) -> dict[str, float]:
+    """{channel: RMS of LP(m(x)) - m(LP(x))}: what the band path's order of operations puts
+    into the fitted model's residual (module doc).  x: the regressor signals before the
+    low-pass (the flight data's wide-band columns, aerosid.identification.flight_data.
+    WIDEBAND_COLUMNS; where one is NaN, the low-passed signal); LP: the band's low-pass on
+    every run of consecutive rows; m: the channel's model fitted to the flight data.  Both
+    sides are formed from the same x, so the band's own attenuation cancels and only the
+    model's non-linearity is left.  The first and last band period of every run (the
+    filter's transients) are left out of the RMS.  Empty without those columns (the smoother
+    path, older files)."""
+    from aerosid.diagnosis.candidates import derived_signals
+    from aerosid.diagnosis.lookalikes import scaled_lstsq
+    from aerosid.identification.band import low_pass_runs
+    from aerosid.identification.flight_data import WIDEBAND_COLUMNS
+    from aerosid.identification.inversion import total_angles
+    from aerosid.modelling.models import vehicle_signals
+
+    channels = [ch for ch in channels if ch in models and ch in fd]
+    need = {*WIDEBAND_COLUMNS, *WIDEBAND_COLUMNS.values(), "band_hz", "t_s", "mach", "qbar_pa"}
+    if not channels or len(fd) < 3 or not need <= set(fd.columns):
+        return {}
+    runs = flight_data_runs(fd)
+    if not runs:
+        return {}
+
+    def low_pass(x):  # rows outside every run are left as they are (and out of the RMS)
+        out = np.array(x, float)
+        for r, fs, band, _ in runs:
+            out[r] = low_pass_runs(x[r], fs, band, [slice(0, r.stop - r.start)])
+        return out
+
+    def signals(values: dict):
+        frame = fd.copy()
+        for c, v in values.items():
+            frame[c] = v
+        v_ratio = frame["V_m_s"].to_numpy(float) / fd["V_m_s"].to_numpy(float)
+        frame["mach"] = fd["mach"].to_numpy(float) * v_ratio  # the same speed of sound and density
+        frame["qbar_pa"] = fd["qbar_pa"].to_numpy(float) * v_ratio ** 2
+        frame["alpha_r_rad"], frame["phi_r_rad"] = total_angles(frame["alpha_rad"], frame["beta_rad"])
+        return derived_signals(vehicle_signals(frame, vehicle), vehicle.length_pitch_m, vehicle.length_lateral_m)
+
+    wide = {c: np.where(np.isfinite(fd[w].to_numpy(float)), fd[w].to_numpy(float), fd[c].to_numpy(float))
+            for c, w in WIDEBAND_COLUMNS.items()}
+    if not all(np.isfinite(x).all() for x in wide.values()):
+        return {}
+    inner = np.zeros(len(fd), bool)
+    for r, _, _, edge in runs:
+        inner[r.start + edge:r.stop - edge] = True
+    sig_fd = derived_signals(vehicle_signals(fd, vehicle), vehicle.length_pitch_m, vehicle.length_lateral_m)
+    sig_w, sig_lp = signals(wide), signals({c: low_pass(x) for c, x in wide.items()})
+    out = {}
+    for ch in channels:
+        A = models[ch].design(sig_fd)[0].to_numpy(float)
+        y = fd[ch].to_numpy(float)
+        ok = np.all(np.isfinite(A), axis=1) & np.isfinite(y)
+        if ok.sum() <= A.shape[1]:
+            continue
+        theta = scaled_lstsq(A[ok], y[ok])
+        m_lp = models[ch].design(sig_lp)[0].to_numpy(float) @ theta
+        m_w = models[ch].design(sig_w)[0].to_numpy(float) @ theta
+        m_w = np.where(np.isfinite(m_w), m_w, m_lp)  # a non-finite value would spread over its whole run
+        d = low_pass(m_w) - m_lp
+        use = inner & ok & np.isfinite(d)
+        # what a refit leaves of it: the part the model's own columns can take is taken
+        e = d[use] - A[use] @ scaled_lstsq(A[use], d[use]) if use.sum() > A.shape[1] else d[use]
+        out[ch] = _rms(e)
+    return out
+
+
+def flight_data_runs(fd) -> list[tuple[slice, float, float, int]]:
+    """(rows, sample rate [Hz], band edge [Hz], edge samples) of every run of consecutive
+    flight-data rows (one flight and segment, no step longer than 1.5 sample periods) with a
+    band edge and longer than two band periods and a few samples."""
+    t = fd["t_s"].to_numpy(float)
+    band = fd["band_hz"].to_numpy(float)
+    keys = ((fd["flight"].astype(str) + "/" + fd["segment"].astype(str)).to_numpy()
+            if {"flight", "segment"} <= set(fd.columns) else np.zeros(len(fd)))
+    dt = np.diff(t)
+    step = float(np.median(dt[dt > 0])) if (dt > 0).any() else float("nan")
+    if not math.isfinite(step):
+        return []
+    cut = np.flatnonzero((dt > 1.5 * step) | (dt <= 0) | (keys[1:] != keys[:-1])) + 1
+    out = []
+    for a, b in zip(np.r_[0, cut], np.r_[cut, len(t)]):
+        bb = band[a:b]
+        if b - a < 3 or not np.isfinite(bb).all():
+            continue
+        fs, edge_hz = 1.0 / step, float(np.median(bb))
+        edge = int(math.ceil(fs / edge_hz))
+        if b - a > 2 * edge + 16:
+            out.append((slice(int(a), int(b)), fs, edge_hz, edge))
+    return out
+
+
+def floors(residuals: dict, flight_data, angle_rms: dict | None = None, vehicle=None,
+           nonlinearity_rms: dict | None = None) -> dict[str, ChannelFloor]:
     """{channel: ChannelFloor} from {channel: residual array} and the flight-data rows they
     belong to: the band path's sigma (:func:`band_sigmas`, needs the vehicle) where the flight
     data carry what it needs, else their ``sigma_<channel>`` columns; angle_rms: {channel:
-    the angles' part} (:func:`angle_floor_rms`)."""
+    the angles' part} (:func:`angle_floor_rms`); nonlinearity_rms: {channel: the band path's
+    non-linearity} (:func:`band_nonlinearity_rms`)."""
     angle_rms = angle_rms or {}
+    nonlinearity_rms = nonlinearity_rms or {}
     band = band_sigmas(flight_data, vehicle) if vehicle is not None else None
     out = {}
     for ch, r in residuals.items():
@@ -215,21 +318,23 @@ def floors(residuals: dict, flight_data, angle_rms: dict | None = None, vehicle=
         else:
             sigma = flight_data[f"sigma_{ch}"].to_numpy(float) if f"sigma_{ch}" in flight_data else None
             method = "smoother sigma"
-        out[ch] = channel_floor(ch, r, sigma, angle_rms.get(ch, 0.0), method)
+        out[ch] = channel_floor(ch, r, sigma, angle_rms.get(ch, 0.0), method, nonlinearity_rms.get(ch, 0.0))
     return out
 
 
 def floor_table(floor: dict) -> list[str]:
     """Lines of the summary: residual, floor and the excess over it per channel."""
     lines = ["The error against its floor (floor = what a complete model would leave: the flight-derived "
-             "coefficient's own error and the recovered angles' error through the model, in quadrature, from the "
-             "sensors' white noise; excess = sqrt(residual^2 - floor^2): what a model term could still remove, or "
-             "an error the floor does not know, e.g. turbulence, sensor biases or timing on real flights):",
+             "coefficient's own error and the recovered angles' error through the model, from the sensors' white "
+             "noise, and the band path's low-pass taken before the model's non-linear terms, in quadrature; "
+             "excess = sqrt(residual^2 - floor^2): what a model term could still remove, or an error the floor "
+             "does not know, e.g. turbulence, sensor biases, timing or the force database's own error in the "
+             "inverted angles):",
              f"  {'channel':<8}{'residual':>11}{'floor':>11}{'excess':>11}{'excess/residual':>17}"
-             f"{'coefficient':>13}{'angles':>10}"]
+             f"{'coefficient':>13}{'angles':>10}{'band':>10}"]
     for ch, f in floor.items():
         share = f.excess_share
         lines.append(f"  {ch:<8}{f.residual_rms:>11.3g}{f.floor_rms:>11.3g}{f.excess_rms:>11.3g}"
                      f"{(f'{share:.0%}' if math.isfinite(share) else 'nan'):>17}{f.coefficient_floor_rms:>13.3g}"
-                     f"{f.angle_floor_rms:>10.3g}")
+                     f"{f.angle_floor_rms:>10.3g}{f.nonlinearity_floor_rms:>10.3g}")
     return lines

@@ -24,6 +24,12 @@ FIN_COLUMNS = ("d1_rad", "d2_rad", "d3_rad", "d4_rad")
 #: The margin cut around a condemned span: one band period, at most this [s].
 MAX_MARGIN_S = 1.0
 BAND_IMU = ("ax_m_s2", "ay_m_s2", "az_m_s2", "p_rad_s", "q_rad_s", "r_rad_s")
+#: The band path's regressor signals before its low-pass (band path only; see _wideband_signals):
+#: {flight-data column: its wide-band column}.
+WIDEBAND_COLUMNS = {"alpha_rad": "alpha_wideband_rad", "beta_rad": "beta_wideband_rad",
+                    "p_rad_s": "p_wideband_rad_s", "q_rad_s": "q_wideband_rad_s", "r_rad_s": "r_wideband_rad_s",
+                    "delta_p_rad": "delta_p_wideband_rad", "delta_y_rad": "delta_y_wideband_rad",
+                    "delta_r_rad": "delta_r_wideband_rad", "V_m_s": "V_wideband_m_s"}
 
 
 class SegmentUnusable(ValueError):
@@ -109,6 +115,7 @@ def build_flight_data(smoothed: pd.DataFrame, measured: pd.DataFrame, vehicle: V
                          axis=1) & (clean["V_m_s"] > 0)
         bl, used, findings = _band_signals(t, measured, smoothed, vehicle, filt_ok, segment)
         fs = 1.0 / float(np.median(np.diff(t)))
+        raw = clean
         clean = {c: (v if c in scale_cols else bl.low_pass(v, fs)) for c, v in clean.items()}
         ok = used & scales_ok
         band_hz = bl.band_hz
@@ -150,6 +157,9 @@ def build_flight_data(smoothed: pd.DataFrame, measured: pd.DataFrame, vehicle: V
                                  "the table is clamped there, the angle would be made up")
             findings += f
             drop_rows = dilate(edge, margin)
+    wide = {}
+    if signals == "band":
+        wide = _wideband_signals(raw, ok, s, fc, vehicle, db, segment)
     # errors in variables: the 1-sigma of the white noise whose band-limited part is in the
     # angles (vanes: the vehicle file's vane noise; inverted angles: the accelerometers' noise
     # through the inversion's sensitivity), for the SIMEX correction of aerosid.identification.eiv
@@ -174,7 +184,7 @@ def build_flight_data(smoothed: pd.DataFrame, measured: pd.DataFrame, vehicle: V
         "delta_p_rad": delta_p, "delta_y_rad": delta_y, "delta_r_rad": delta_r,
         **rates,
         "band_hz": np.full(len(V), band_hz),
-        "eiv_sigma_alpha_rad": eiv_a, "eiv_sigma_beta_rad": eiv_b, **eiv_rates,
+        "eiv_sigma_alpha_rad": eiv_a, "eiv_sigma_beta_rad": eiv_b, **eiv_rates, **wide,
         **{c: s[c].to_numpy(float) for c in R_COLUMNS if c in s},  # the filter's R (Cramér-Rao bounds)
     })
     if not vanes and signals == "band" and edge.any():
@@ -300,6 +310,30 @@ def _inverted_angles(fc, s: pd.DataFrame, delta_p, delta_y, vehicle: Vehicle, db
     if grid[0] > 0:
         edge |= inv.alpha_r_rad <= grid[0] + 1e-3 * step
     return inv.alpha_rad, inv.beta_rad, inv.alpha_r_rad, inv.phi_r_rad, inv.J, edge
+
+
+def _wideband_signals(raw: dict, ok: np.ndarray, s: pd.DataFrame, fc, vehicle: Vehicle, db: AeroDatabase | None,
+                      segment: str) -> dict[str, np.ndarray]:
+    """The regressor signals on the flight-data rows *before* the band's low-pass, as
+    WIDEBAND_COLUMNS names them, for the floor's band-path non-linearity
+    (aerosid.diagnosis.floor.band_nonlinearity_rms): the clean fins (mixed) and V, the
+    smoother's rates, and the vanes' clean angles minus their bias or the angles inverted from
+    the smoother's accelerations (the smoother's own bandwidth, wider than the band).  NaN
+    where the inversion is at the database's edge."""
+    delta_r, delta_p, delta_y = (np.asarray(x) for x in vehicle.mix(*[raw[c][ok] for c in FIN_COLUMNS]))
+    if vehicle.air_data_source == "vanes":
+        alpha = raw[vehicle.alpha_column][ok] - vehicle.alpha_bias_rad
+        beta = raw[vehicle.beta_column][ok] - vehicle.beta_bias_rad
+    else:
+        acc = s[["X1_m_s2", "Y1_m_s2", "Z1_m_s2"]].to_numpy(float)
+        ang = s[["L1_rad_s2", "M1_rad_s2", "N1_rad_s2"]].to_numpy(float)
+        fc_w = flight_coefficients(vehicle, None, None, acc, ang, air=fc.air)  # the same air data
+        alpha, beta, _, _, _, edge = _inverted_angles(fc_w, s, delta_p, delta_y, vehicle, db, segment, strict=False)
+        alpha, beta = np.where(edge, np.nan, alpha), np.where(edge, np.nan, beta)
+    values = {"alpha_rad": alpha, "beta_rad": beta, "delta_p_rad": delta_p, "delta_y_rad": delta_y,
+              "delta_r_rad": delta_r, "V_m_s": raw["V_m_s"][ok],
+              **{c: s[c].to_numpy(float) for c in ("p_rad_s", "q_rad_s", "r_rad_s")}}
+    return {WIDEBAND_COLUMNS[c]: v for c, v in values.items()}
 
 
 def _inversion_noise(fc, delta_p, delta_y, vehicle: Vehicle, db: AeroDatabase, alpha, beta, accel_noise):
