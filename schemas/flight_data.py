@@ -55,16 +55,17 @@ class FlightData(pa.DataFrameModel):
                                                     "low-pass; 0: the rates are taken as exact)", ge=0)
     # the band path's regressor signals before its low-pass (aerosid.identification.flight_data.
     # WIDEBAND_COLUMNS), for the floor's band-path non-linearity; optional (smoother path, older files)
+    # and nullable (flight data pooled with older files)
     alpha_wideband_rad: Optional[Series[float]] = _f("rad", "alpha before the band's low-pass (vanes, or inverted "
                                                      "from the smoother's accelerations)", nullable=True)
     beta_wideband_rad: Optional[Series[float]] = _f("rad", "beta before the band's low-pass", nullable=True)
-    p_wideband_rad_s: Optional[Series[float]] = _f("rad/s", "the smoother's roll rate (before the band)")
-    q_wideband_rad_s: Optional[Series[float]] = _f("rad/s", "the smoother's pitch rate (before the band)")
-    r_wideband_rad_s: Optional[Series[float]] = _f("rad/s", "the smoother's yaw rate (before the band)")
-    delta_p_wideband_rad: Optional[Series[float]] = _f("rad", "delta_p before the band's low-pass")
-    delta_y_wideband_rad: Optional[Series[float]] = _f("rad", "delta_y before the band's low-pass")
-    delta_r_wideband_rad: Optional[Series[float]] = _f("rad", "delta_r before the band's low-pass")
-    V_wideband_m_s: Optional[Series[float]] = _f("m/s", "airspeed before the band's low-pass", gt=0)
+    p_wideband_rad_s: Optional[Series[float]] = _f("rad/s", "the smoother's roll rate (before the band)", nullable=True)
+    q_wideband_rad_s: Optional[Series[float]] = _f("rad/s", "the smoother's pitch rate (before the band)", nullable=True)
+    r_wideband_rad_s: Optional[Series[float]] = _f("rad/s", "the smoother's yaw rate (before the band)", nullable=True)
+    delta_p_wideband_rad: Optional[Series[float]] = _f("rad", "delta_p before the band's low-pass", nullable=True)
+    delta_y_wideband_rad: Optional[Series[float]] = _f("rad", "delta_y before the band's low-pass", nullable=True)
+    delta_r_wideband_rad: Optional[Series[float]] = _f("rad", "delta_r before the band's low-pass", nullable=True)
+    V_wideband_m_s: Optional[Series[float]] = _f("m/s", "airspeed before the band's low-pass", gt=0, nullable=True)
 
     class Config:
         strict = False
