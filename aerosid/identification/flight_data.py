@@ -227,7 +227,6 @@ def _band_signals(t, measured: pd.DataFrame, smoothed: pd.DataFrame, vehicle: Ve
     # spikes the preprocessing left (it leaves 5-7 sigma ones to the filter) would go through
     # the derivative and the band into a band period of C_m: bridge them as the preprocessing
     # does its own outliers (aerosid.identification.band.bridge_spikes), against the smoother
-    inertia0 = (vehicle.Ixx_kg_m2, vehicle.Iyy_kg_m2, vehicle.Izz_kg_m2, vehicle.Ixz_kg_m2)
     ws = smoothed[["p_rad_s", "q_rad_s", "r_rad_s"]].to_numpy(float)
     if {"X1_m_s2", "Y1_m_s2", "Z1_m_s2"} <= set(smoothed.columns):
         wd = np.gradient(ws, t, axis=0) if len(t) > 2 else np.zeros_like(ws)
