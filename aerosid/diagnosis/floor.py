@@ -41,7 +41,10 @@ regressor signals *before* the low-pass, which the band path writes into the fli
 (``*_wideband_*``: the smoother's angles and rates, the clean fins and V), and what a refit
 would absorb of it (its projection on the model's columns) is taken off.  Both sides come from
 the same x, so the low-pass's attenuation of in-band content cancels.  Against the truth
-(seed 0): 3.9e-5 from the smoother's angles, 3.8e-5 from the true ones.
+(seed 0): 3.9e-5 from the smoother's angles, 3.8e-5 from the true ones.  An approximation
+where the angles are inverted from the force database: the band path's angles are the
+inversion of the low-passed forces, not the low-pass of the angles, and the inversion's own
+non-linearity is not in this part.
 
 A floor from the residual's high-frequency power was tried and rejected: the error spectrum
 falls faster above the band than a 2nd-order low-pass of differentiated white noise.
@@ -144,17 +147,8 @@ def band_sigmas(fd, vehicle) -> dict[str, np.ndarray] | None:
     # the gains per flight segment: pooled flights (or segments whose band the flight set) keep
     # their own band and sample rate; a segment without a band (smoother path) gets NaN
     g_der, g_lp = np.full(len(fd), np.nan), np.full(len(fd), np.nan)
-    t = fd["t_s"].to_numpy(float)
-    keys = ((fd["flight"].astype(str) + "/" + fd["segment"].astype(str)).to_numpy()
-            if {"flight", "segment"} <= set(fd.columns) else np.zeros(len(fd)))
-    for k in pd.unique(keys):
-        idx = np.flatnonzero(keys == k)
-        dts = np.diff(t[idx])
-        dts = dts[dts > 0]
-        b = band[idx]
-        b = float(np.median(b[np.isfinite(b)])) if np.isfinite(b).any() else float("nan")
-        if dts.size and math.isfinite(b) and b > 0:
-            fs = 1.0 / float(np.median(dts))
+    for idx, fs, b in _segments(fd):
+        if math.isfinite(fs) and math.isfinite(b):
             g_der[idx], g_lp[idx] = band_derivative_noise_gain(fs, b), band_noise_gain(fs, b)
     s_wdot = sg * g_der[:, None]  # (N, 3) [rad/s^2]
     inertia = (vehicle.Ixx_kg_m2, vehicle.Iyy_kg_m2, vehicle.Izz_kg_m2, vehicle.Ixz_kg_m2)
@@ -195,7 +189,7 @@ def angle_floor_rms(fd, vehicle, models: dict, channels, replicates: int = ANGLE
     channels = [ch for ch in channels if ch in models and ch in fd]
     if sigma is None or not channels:
         return {}
-    groups = (fd["flight"].astype(str) + "/" + fd["segment"].astype(str)).to_numpy()
+    groups = _segment_keys(fd)
     cutoff = angle_cutoff_hz(fd, vehicle)
     rng = np.random.default_rng(ANGLE_SEED)
 
@@ -222,12 +216,12 @@ def band_nonlinearity_rms(fd, vehicle, models: dict, channels) -> dict[str, floa
     """{channel: RMS of LP(m(x)) - m(LP(x))}: what the band path's order of operations puts
     into the fitted model's residual (module doc).  x: the regressor signals before the
     low-pass (the flight data's wide-band columns, aerosid.identification.flight_data.
-    WIDEBAND_COLUMNS; where one is NaN, the low-passed signal); LP: the band's low-pass on
-    every run of consecutive rows; m: the channel's model fitted to the flight data.  Both
-    sides are formed from the same x, so the band's own attenuation cancels and only the
-    model's non-linearity is left.  The first and last band period of every run (the
-    filter's transients) are left out of the RMS.  Empty without those columns (the smoother
-    path, older files)."""
+    WIDEBAND_COLUMNS; rows where one is NaN are left out); LP: the band's low-pass on every
+    run of consecutive rows (:func:`flight_data_runs`); m: the channel's model fitted to the
+    flight data.  Both sides are formed from the same x, so the band's own attenuation cancels
+    and only the model's non-linearity is left.  The first and last band period of every run
+    (the filter's transients) are left out of the RMS.  Empty without those columns (the
+    smoother path, older files)."""
     from aerosid.diagnosis.candidates import derived_signals
     from aerosid.diagnosis.lookalikes import scaled_lstsq
     from aerosid.identification.band import low_pass_runs
@@ -239,7 +233,10 @@ def band_nonlinearity_rms(fd, vehicle, models: dict, channels) -> dict[str, floa
     need = {*WIDEBAND_COLUMNS, *WIDEBAND_COLUMNS.values(), "band_hz", "t_s", "mach", "qbar_pa"}
     if not channels or len(fd) < 3 or not need <= set(fd.columns):
         return {}
-    runs = flight_data_runs(fd)
+    # rows without their wide-band values (pooled with older files, or the inversion of the
+    # smoother's forces at the database's edge) end a run and are not counted
+    valid = np.all(np.column_stack([np.isfinite(fd[w].to_numpy(float)) for w in WIDEBAND_COLUMNS.values()]), axis=1)
+    runs = flight_data_runs(fd, valid)
     if not runs:
         return {}
 
@@ -259,8 +256,8 @@ def band_nonlinearity_rms(fd, vehicle, models: dict, channels) -> dict[str, floa
         frame["alpha_r_rad"], frame["phi_r_rad"] = total_angles(frame["alpha_rad"], frame["beta_rad"])
         return derived_signals(vehicle_signals(frame, vehicle), vehicle.length_pitch_m, vehicle.length_lateral_m)
 
-    wide = {c: np.where(np.isfinite(fd[w].to_numpy(float)), fd[w].to_numpy(float), fd[c].to_numpy(float))
-            for c, w in WIDEBAND_COLUMNS.items()}
+    # (outside the runs the low-passed values stand in, only so that every signal is finite)
+    wide = {c: np.where(valid, fd[w].to_numpy(float), fd[c].to_numpy(float)) for c, w in WIDEBAND_COLUMNS.items()}
     if not all(np.isfinite(x).all() for x in wide.values()):
         return {}
     inner = np.zeros(len(fd), bool)
@@ -287,28 +284,52 @@ def band_nonlinearity_rms(fd, vehicle, models: dict, channels) -> dict[str, floa
     return out
 
 
-def flight_data_runs(fd) -> list[tuple[slice, float, float, int]]:
-    """(rows, sample rate [Hz], band edge [Hz], edge samples) of every run of consecutive
-    flight-data rows (one flight and segment, no step longer than 1.5 sample periods) with a
-    band edge and longer than two band periods and a few samples."""
+def _segment_keys(fd) -> np.ndarray:
+    """flight/segment per row (zeros without those columns)."""
+    return ((fd["flight"].astype(str) + "/" + fd["segment"].astype(str)).to_numpy()
+            if {"flight", "segment"} <= set(fd.columns) else np.zeros(len(fd)))
+
+
+def _segments(fd) -> list[tuple[np.ndarray, float, float]]:
+    """(rows, sample rate [Hz], band edge [Hz]) of every flight segment: pooled flights (or
+    segments whose band the flight set) keep their own sample rate and band; NaN for a segment
+    without a band (the smoother path) or without a time step."""
     t = fd["t_s"].to_numpy(float)
     band = fd["band_hz"].to_numpy(float)
-    keys = ((fd["flight"].astype(str) + "/" + fd["segment"].astype(str)).to_numpy()
-            if {"flight", "segment"} <= set(fd.columns) else np.zeros(len(fd)))
-    dt = np.diff(t)
-    step = float(np.median(dt[dt > 0])) if (dt > 0).any() else float("nan")
-    if not math.isfinite(step):
-        return []
-    cut = np.flatnonzero((dt > 1.5 * step) | (dt <= 0) | (keys[1:] != keys[:-1])) + 1
+    keys = _segment_keys(fd)
     out = []
-    for a, b in zip(np.r_[0, cut], np.r_[cut, len(t)]):
-        bb = band[a:b]
-        if b - a < 3 or not np.isfinite(bb).all():
+    for k in pd.unique(keys):
+        idx = np.flatnonzero(keys == k)
+        dts = np.diff(t[idx])
+        dts = dts[dts > 0]
+        b = band[idx]
+        b = float(np.median(b[np.isfinite(b)])) if np.isfinite(b).any() else float("nan")
+        out.append((idx, 1.0 / float(np.median(dts)) if dts.size else float("nan"), b if b > 0 else float("nan")))
+    return out
+
+
+def flight_data_runs(fd, valid: np.ndarray | None = None) -> list[tuple[slice, float, float, int]]:
+    """(rows, sample rate [Hz], band edge [Hz], edge samples = one band period) of every run of
+    consecutive flight-data rows: one flight segment (its own rate and band), adjacent rows, time
+    increasing by at most 1.5 of the segment's steps, ``valid`` (default all), and longer than two
+    band periods and 16 samples.  Rows are expected in flight and time order (as diagnose sorts
+    them); a segment whose rows are not adjacent is cut where they are not."""
+    from aerosid.identification.band import finite_runs
+
+    t = fd["t_s"].to_numpy(float)
+    valid = np.ones(len(fd), bool) if valid is None else np.asarray(valid, bool)
+    out = []
+    for idx, fs, band in _segments(fd):
+        if not (math.isfinite(fs) and math.isfinite(band)) or idx.size < 2:
             continue
-        fs, edge_hz = 1.0 / step, float(np.median(bb))
-        edge = int(math.ceil(fs / edge_hz))
-        if b - a > 2 * edge + 16:
-            out.append((slice(int(a), int(b)), fs, edge_hz, edge))
+        edge = int(math.ceil(fs / band - 1e-6))
+        dt = np.diff(t[idx])
+        joined = np.r_[False, (np.diff(idx) == 1) & (dt > 0) & (dt <= 1.5 / fs)]
+        for r in finite_runs(valid[idx]):
+            cuts = [r.start, *(r.start + 1 + np.flatnonzero(~joined[r.start + 1:r.stop])), r.stop]
+            for a, b in zip(cuts[:-1], cuts[1:]):
+                if b - a > 2 * edge + 16:
+                    out.append((slice(int(idx[a]), int(idx[a]) + int(b - a)), fs, band, edge))
     return out
 
 

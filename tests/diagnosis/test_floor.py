@@ -117,6 +117,10 @@ def test_band_nonlinearity_of_a_square_closed_form(vehicle):
     assert expected > 0.2 * np.std(c)  # the refit does not take it all
     assert band_nonlinearity_rms(fd, vehicle, {"Cm": square}, ["Cm"])["Cm"] == pytest.approx(expected, rel=0.03)
     assert band_nonlinearity_rms(fd, vehicle, {"Cm": linear}, ["Cm"])["Cm"] < 1e-9
+    # pooled with a flight written before the wide-band columns (NaN there): that flight is left out
+    old = fd.assign(flight="older", **{c: np.nan for c in fd.columns if "wideband" in c})
+    pooled = pd.concat([fd, old], ignore_index=True)
+    assert band_nonlinearity_rms(pooled, vehicle, {"Cm": square}, ["Cm"])["Cm"] == pytest.approx(expected, rel=0.03)
     # without the wide-band columns (smoother path, older files) there is no such part
     assert band_nonlinearity_rms(fd.drop(columns=["alpha_wideband_rad"]), vehicle, {"Cm": square}, ["Cm"]) == {}
 
@@ -160,3 +164,21 @@ def test_band_nonlinearity_is_what_a_complete_model_leaves_on_noise_free_band_li
     # coefficients, which the band path itself tilts, not the true ones
     assert 0.6 * resid["Cl"] < part["Cl"] <= 1.05 * resid["Cl"]
     assert part["Cm"] < 0.1 * part["Cl"]
+
+
+def test_flight_data_runs_keep_each_flights_rate_and_cut_at_holes_and_invalid_rows():
+    """Two flights pooled, 100 Hz and 50 Hz, band 1 Hz: each run gets its own flight's rate
+    (and so its own edge of one band period); a time hole, a change of segment and a row
+    without its wide-band values each end a run; runs of two band periods or less are dropped."""
+    from aerosid.diagnosis.floor import flight_data_runs
+
+    t_a = np.r_[np.arange(0, 1000) * 0.01, 12.0 + np.arange(0, 600) * 0.01]  # a 2 s hole
+    t_b = np.arange(0, 800) * 0.02
+    fd = pd.DataFrame({"t_s": np.r_[t_a, t_b], "flight": ["a"] * t_a.size + ["b"] * t_b.size,
+                       "segment": ["s0"] * 1300 + ["s1"] * 300 + ["s0"] * 800, "band_hz": 1.0})
+    valid = np.ones(len(fd), bool)
+    valid[1600 + 100] = False  # flight b, row 100: the 100 rows before it are too short a run
+    runs = [(r.start, r.stop, round(fs), edge) for r, fs, _, edge in flight_data_runs(fd, valid)]
+    assert runs == [(0, 1000, 100, 100), (1000, 1300, 100, 100), (1300, 1600, 100, 100), (1701, 2400, 50, 50)]
+    # a flight without a band (smoother path) or with a zero band has no runs
+    assert flight_data_runs(fd.assign(band_hz=np.where(fd["flight"] == "b", 0.0, 1.0)))[-1][0].stop == 1600
