@@ -218,31 +218,6 @@ def gyro_eiv_sigma(smoothed: pd.DataFrame, band_white_rad_s) -> dict[str, np.nda
     return out
 
 
-def _smoother_filled(imu: np.ndarray, measured: pd.DataFrame, ws: np.ndarray, wd: np.ndarray, a_cg: np.ndarray | None,
-                     offset_m) -> np.ndarray:
-    """imu (N, 6: BAND_IMU) with every sample the preprocessing interpolated over a fault (its
-    flags hold INTERPOLATED and a fault bit; held samples between updates are left alone)
-    replaced by the smoother's estimate: its rates ws, and its specific force at the CG a_cg
-    moved to the accelerometer (the lever arm with the smoother's rates and their derivative wd;
-    a_cg None: the accelerometers are left as they are)."""
-    from aerosid.preprocess.flags import FAULT, QualityFlag
-
-    out = np.array(imu, float, copy=True)
-    r = np.asarray(offset_m, float)
-    a_sensor = (None if a_cg is None else a_cg + np.cross(wd, r) + np.cross(ws, np.cross(ws, r)))
-    for j, c in enumerate(BAND_IMU):
-        col = f"flags_{c}"
-        if col not in measured:
-            continue
-        f = measured[col].to_numpy().astype(np.int64)
-        hit = ((f & int(QualityFlag.INTERPOLATED)) != 0) & ((f & int(FAULT)) != 0)
-        est = ws[:, j - 3] if j >= 3 else (None if a_sensor is None else a_sensor[:, j])
-        if est is not None and hit.any():
-            hit &= np.isfinite(est)
-            out[hit, j] = est[hit]
-    return out
-
-
 def _band_signals(t, measured: pd.DataFrame, smoothed: pd.DataFrame, vehicle: Vehicle, ok: np.ndarray, segment: str):
     """The band-limited signals of a segment with the smoother's condemned samples (the
     ``suspect`` column) and the spans where the smoothed signals depart from their
@@ -253,17 +228,10 @@ def _band_signals(t, measured: pd.DataFrame, smoothed: pd.DataFrame, vehicle: Ve
     # the derivative and the band into a band period of C_m: bridge them as the preprocessing
     # does its own outliers (aerosid.identification.band.bridge_spikes), against the smoother
     ws = smoothed[["p_rad_s", "q_rad_s", "r_rad_s"]].to_numpy(float)
-    wd = np.gradient(ws, t, axis=0) if len(t) > 2 else np.zeros_like(ws)
-    have_accel = {"X1_m_s2", "Y1_m_s2", "Z1_m_s2"} <= set(smoothed.columns)
-    ref = (np.column_stack([smoothed[c].to_numpy(float) for c in ("X1_m_s2", "Y1_m_s2", "Z1_m_s2")])
-           if have_accel else None)
-    # a fault the preprocessing bridged with a straight line (a dropout: up to max_interp_gap_s)
-    # takes the smoother's estimate instead: the line has no curvature, and its derivative went
-    # through the band into C_m, C_n (seed-rlv with dropouts alone: the coefficients' error
-    # 18-37 % above the sensors' noise, against 1-4 % without faults)
-    imu = _smoother_filled(imu, measured, ws, wd, ref, vehicle.accel_offset_m)
-    if have_accel:
+    if {"X1_m_s2", "Y1_m_s2", "Z1_m_s2"} <= set(smoothed.columns):
+        wd = np.gradient(ws, t, axis=0) if len(t) > 2 else np.zeros_like(ws)
         a_cg_meas = accel_at_cg(imu[:, :3], ws, wd, vehicle.accel_offset_m)
+        ref = np.column_stack([smoothed[c].to_numpy(float) for c in ("X1_m_s2", "Y1_m_s2", "Z1_m_s2")])
         imu[:, :3] = bridge_spikes(imu[:, :3], a_cg_meas - ref)
     imu[:, 3:] = bridge_spikes(imu[:, 3:], imu[:, 3:] - ws)
     inertia = (vehicle.Ixx_kg_m2, vehicle.Iyy_kg_m2, vehicle.Izz_kg_m2, vehicle.Ixz_kg_m2)

@@ -1,7 +1,6 @@
 """The common band of the regression (aerosid.identification.band): closed forms and a
 seeded recovery that the smoother-attenuated path could not pass."""
 import numpy as np
-import pandas as pd
 import pytest
 
 from aerosid.estimation.model import PlantModel, measure, rate_rhs
@@ -120,35 +119,3 @@ def test_bridge_spikes_replaces_isolated_spikes_only():
     assert abs(y[500] - truth[500]) < 0.03 and abs(y[1500] - truth[1500]) < 0.03
     assert np.array_equal(y[3000:3050], x[3000:3050])
     assert np.count_nonzero(y != x) == 3
-
-
-def test_bridged_faults_take_the_smoothers_estimate_and_held_samples_do_not():
-    """A dropout the preprocessing bridged (INTERPOLATED with a fault bit) takes the smoother's
-    rate, and for the accelerometer its specific force at the CG moved to the sensor, which
-    accel_at_cg moves back exactly; samples held between updates (INTERPOLATED | HELD) and clean
-    ones are left as measured."""
-    from aerosid.identification.band import accel_at_cg
-    from aerosid.identification.flight_data import BAND_IMU, _smoother_filled
-    from aerosid.preprocess.flags import QualityFlag
-
-    rng = np.random.default_rng(3)
-    n = 200
-    imu = rng.standard_normal((n, 6))
-    ws, wd, a_cg = rng.standard_normal((n, 3)), rng.standard_normal((n, 3)), rng.standard_normal((n, 3))
-    flags = {f"flags_{c}": np.zeros(n, np.uint16) for c in BAND_IMU}
-    dropout = slice(50, 80)
-    held = slice(120, 125)
-    for c in ("az_m_s2", "q_rad_s"):
-        flags[f"flags_{c}"][dropout] = QualityFlag.INTERPOLATED | QualityFlag.NAN
-        flags[f"flags_{c}"][held] = QualityFlag.INTERPOLATED | QualityFlag.HELD
-    offset = (1.2, -0.1, 0.3)
-    out = _smoother_filled(imu, pd.DataFrame(flags), ws, wd, a_cg, offset)
-    assert np.array_equal(out[dropout, 4], ws[dropout, 1])  # q
-    back = accel_at_cg(out[dropout, :3], ws[dropout], wd[dropout], offset)
-    assert np.allclose(back[:, 2], a_cg[dropout, 2])  # a_z: the smoother's, at the CG
-    untouched = np.ones(n, bool)
-    untouched[dropout] = False
-    assert np.array_equal(out[untouched], imu[untouched])  # held samples and every other channel
-    assert np.array_equal(out[dropout][:, [0, 1, 3, 5]], imu[dropout][:, [0, 1, 3, 5]])
-    # without the smoother's specific force the accelerometers stay as measured
-    assert np.array_equal(_smoother_filled(imu, pd.DataFrame(flags), ws, wd, None, offset)[:, :3], imu[:, :3])
