@@ -53,6 +53,12 @@ class FlightData(pa.DataFrameModel):
                                                     "low-pass; 0: the rates are taken as exact)", ge=0)
     eiv_sigma_r_rad_s: Optional[Series[float]] = _f("rad/s", "gyro white noise in r_rad_s (before the band "
                                                     "low-pass; 0: the rates are taken as exact)", ge=0)
+    eiv_sigma_delta_p_rad: Optional[Series[float]] = _f("rad", "surface-sensor white noise in delta_p_rad (before "
+                                                        "the band low-pass; 0: none found)", ge=0, nullable=True)
+    eiv_sigma_delta_y_rad: Optional[Series[float]] = _f("rad", "surface-sensor white noise in delta_y_rad (before "
+                                                        "the band low-pass; 0: none found)", ge=0, nullable=True)
+    eiv_sigma_delta_r_rad: Optional[Series[float]] = _f("rad", "surface-sensor white noise in delta_r_rad (before "
+                                                        "the band low-pass; 0: none found)", ge=0, nullable=True)
     # the band path's regressor signals before its low-pass (aerosid.identification.flight_data.
     # WIDEBAND_COLUMNS), for the floor's band-path non-linearity; optional (smoother path, older files)
     # and nullable (flight data pooled with older files)

@@ -6,6 +6,8 @@ control mixing, and alpha/beta, either inverted from the force database (the fin
 class) or read from air-data vanes (a vehicle file with ``[air_data] source = "vanes"``)."""
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pandas as pd
 
@@ -160,6 +162,7 @@ def build_flight_data(smoothed: pd.DataFrame, measured: pd.DataFrame, vehicle: V
     wide = {}
     if signals == "band":
         wide = _wideband_signals(raw, ok, s, fc, vehicle, db, segment)
+        wide.update(_control_noise(raw, vehicle, bl, len(V)))
     # errors in variables: the 1-sigma of the white noise whose band-limited part is in the
     # angles (vanes: the vehicle file's vane noise; inverted angles: the accelerometers' noise
     # through the inversion's sensitivity), for the SIMEX correction of aerosid.identification.eiv
@@ -333,6 +336,31 @@ def _wideband_signals(raw: dict, ok: np.ndarray, s: pd.DataFrame, fc, vehicle: V
               "delta_r_rad": delta_r, "V_m_s": raw["V_m_s"][ok],
               **{c: s[c].to_numpy(float) for c in ("p_rad_s", "q_rad_s", "r_rad_s")}}
     return {WIDEBAND_COLUMNS[c]: v for c, v in values.items()}
+
+
+#: The flight data's white-noise 1-sigma of the mixed controls before the band [rad].
+CONTROL_NOISE_COLUMNS = {"delta_p": "eiv_sigma_delta_p_rad", "delta_y": "eiv_sigma_delta_y_rad",
+                         "delta_r": "eiv_sigma_delta_r_rad"}
+
+
+def _control_noise(raw: dict, vehicle: Vehicle, bl, n: int) -> dict[str, np.ndarray]:
+    """The white noise of the mixed controls [rad] (CONTROL_NOISE_COLUMNS), per row: each fin's
+    from its second differences over the band's runs (1.4826 MAD / sqrt(6): a surface's own
+    motion, slow next to the sample rate, cancels there where it would bias first differences;
+    0 for a surface quantised or held between updates), through the linear mixing.  The
+    controls are regressors taken as exact; identify warns where this noise is a sizeable share
+    of one's variation."""
+    runs = [slice(a, b) for a, b in bl.filter_runs]
+
+    def white(x) -> float:
+        d = np.concatenate([np.diff(np.asarray(x, float)[r], 2) for r in runs] or [np.array([np.nan])])
+        d = d[np.isfinite(d)]
+        return float(1.4826 * np.median(np.abs(d - np.median(d))) / math.sqrt(6.0)) if d.size >= 8 else 0.0
+
+    fin = np.array([white(raw[c]) for c in FIN_COLUMNS])
+    mixed = dict(zip(("delta_r", "delta_p", "delta_y"), (math.sqrt(float(np.sum((np.asarray(row, float) * fin) ** 2)))
+                                                            for row in vehicle.mixing)))
+    return {col: np.full(n, mixed[c]) for c, col in CONTROL_NOISE_COLUMNS.items()}
 
 
 def _inversion_noise(fc, delta_p, delta_y, vehicle: Vehicle, db: AeroDatabase, alpha, beta, accel_noise):

@@ -158,6 +158,52 @@ def _rate_eiv_sigma(fd: pd.DataFrame):
     return None
 
 
+#: A control whose white noise through the band is more than this share of its variance in the
+#: fit window gets a warning on every term that reads it: the controls are taken as exact, so a
+#: share s attenuates such a term's estimate by about s (errors in variables, not corrected).
+CONTROL_NOISE_SHARE = 0.05
+
+
+def control_noise_warnings(fd: pd.DataFrame, models: dict) -> dict[str, str]:
+    """{channel: warning} for the channels with terms that read a control whose own noise is a
+    sizeable share of its variation in this flight data (CONTROL_NOISE_SHARE): the flight
+    data's eiv_sigma_delta_*_rad (the mixed surfaces' white noise, aerosid.identification.
+    flight_data) through the band's low-pass against the control's variance.  Measured on the
+    JSBSim A320 (rudder doublet against the yaw damper): the rudder moved 2.9e-4 rad in the
+    band, its surfaces' 0.05 deg noise is 1.2e-4 rad there, and C_n,delta_y came out 12 % low
+    from that alone.  Empty for flight data without those columns or without a band."""
+    from aerosid.identification.band import band_noise_gain
+    from aerosid.identification.flight_data import CONTROL_NOISE_COLUMNS
+    from aerosid.modelling.expressions import signal_names
+    from aerosid.modelling.models import SIGNALS
+
+    if len(fd) < 3 or not ({"band_hz", "t_s", *CONTROL_NOISE_COLUMNS.values()} <= set(fd.columns)):
+        return {}
+    dt = np.diff(fd["t_s"].to_numpy(float))
+    band = fd["band_hz"].to_numpy(float)
+    if not ((dt > 0).any() and np.isfinite(band).any()):
+        return {}
+    gain = band_noise_gain(1.0 / float(np.median(dt[dt > 0])), float(np.nanmedian(band)))
+    flagged = {}
+    for c, col in CONTROL_NOISE_COLUMNS.items():
+        noise = float(np.nanmedian(fd[col].to_numpy(float))) * gain
+        spread = float(np.nanstd(fd[f"{c}_rad"].to_numpy(float)))
+        if noise > 0 and spread > 0 and (noise / spread) ** 2 > CONTROL_NOISE_SHARE:
+            flagged[c] = (spread, noise)
+    out = {}
+    for ch, model in models.items():
+        for c, (spread, noise) in flagged.items():
+            names = [t.coefficient for t in model.terms if c in signal_names(t.expression, SIGNALS)]
+            if names:
+                share = (noise / spread) ** 2
+                text = (f"{', '.join(names)}: {c} moves only {spread / noise:.1f} x its own noise in the band "
+                        f"(std {spread:.2g} rad against {noise:.2g} rad of surface-sensor noise through the band); "
+                        f"the controls are taken as exact, so these estimates are low by about {share:.0%} "
+                        "(errors in variables, not corrected): excite the control more")
+                out[ch] = f"{out[ch]}; {text}" if ch in out else text
+    return out
+
+
 #: Channels whose flight values define the angles for a vehicle without vanes (alpha, beta
 #: are inverted from C_N and C_Y): their fits are identities, not estimates.
 INVERSION_CHANNELS = ("CN", "CY")
@@ -338,6 +384,9 @@ def identify(flight_data: pd.DataFrame, vehicle: Vehicle, models: dict[str, Chan
     rate_sigma = _rate_eiv_sigma(fd) if gyro_eiv and band_limited else None
     if sigma is not None or rate_sigma is not None:
         fits = _eiv_corrected(fd, vehicle, models, fits, sigma, rate_sigma)
+    for ch, text in control_noise_warnings(fd, models).items():
+        if ch in fits:
+            fits[ch] = replace(fits[ch], warnings=tuple(fits[ch].warnings) + (text,))
     wrong_sign = wrong_sign_terms(models, fits)
     if STRUCTURE_UNCERTAINTY:
         fits = _with_structure_uncertainty(fd, signals, models, fits, wrong_sign)
