@@ -169,9 +169,9 @@ def control_noise_warnings(fd: pd.DataFrame, models: dict) -> dict[str, str]:
     sizeable share of its variation in this flight data (CONTROL_NOISE_SHARE): the flight
     data's eiv_sigma_delta_*_rad (the mixed surfaces' white noise, aerosid.identification.
     flight_data) through the band's low-pass against the control's variance.  Measured on the
-    JSBSim A320 (rudder doublet against the yaw damper): the rudder moved 2.9e-4 rad in the
-    band, its surfaces' 0.05 deg noise is 1.2e-4 rad there, and C_n,delta_y came out 12 % low
-    from that alone.  Empty for flight data without those columns or without a band."""
+    JSBSim A320 (rudder doublet against the yaw damper): the rudder moved 2.8e-4 rad in the
+    band and its surfaces' 0.05 deg noise is 1.1e-4 rad there (a share of ~15 %).  Empty for
+    flight data without those columns or without a band."""
     from aerosid.identification.band import band_noise_gain
     from aerosid.identification.flight_data import CONTROL_NOISE_COLUMNS
     from aerosid.modelling.expressions import signal_names
