@@ -346,10 +346,11 @@ CONTROL_NOISE_COLUMNS = {"delta_p": "eiv_sigma_delta_p_rad", "delta_y": "eiv_sig
 def _control_noise(raw: dict, vehicle: Vehicle, bl, n: int) -> dict[str, np.ndarray]:
     """The white noise of the mixed controls [rad] (CONTROL_NOISE_COLUMNS), per row: each fin's
     from its second differences over the band's runs (1.4826 MAD / sqrt(6): a surface's own
-    motion, slow next to the sample rate, cancels there where it would bias first differences;
-    0 for a surface quantised or held between updates), through the linear mixing.  The
-    controls are regressors taken as exact; identify warns where this noise is a sizeable share
-    of one's variation."""
+    motion, slow next to the sample rate, cancels there where it would bias first differences),
+    through the linear mixing.  0 where it cannot be measured this way: a surface quantised, or
+    held between updates and interpolated by the preprocessing (its noise is then not seen, and
+    identify does not warn).  The controls are regressors taken as exact; identify warns where
+    this noise is a sizeable share of one's variation."""
     runs = [slice(a, b) for a, b in bl.filter_runs]
 
     def white(x) -> float:

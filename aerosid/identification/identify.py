@@ -164,14 +164,16 @@ def _rate_eiv_sigma(fd: pd.DataFrame):
 CONTROL_NOISE_SHARE = 0.05
 
 
-def control_noise_warnings(fd: pd.DataFrame, models: dict) -> dict[str, str]:
+def control_noise_warnings(fd: pd.DataFrame, models: dict, skip=()) -> dict[str, str]:
     """{channel: warning} for the channels with terms that read a control whose own noise is a
     sizeable share of its variation in this flight data (CONTROL_NOISE_SHARE): the flight
     data's eiv_sigma_delta_*_rad (the mixed surfaces' white noise, aerosid.identification.
     flight_data) through the band's low-pass against the control's variance.  Measured on the
     JSBSim A320 (rudder doublet against the yaw damper): the rudder moved 2.8e-4 rad in the
-    band and its surfaces' 0.05 deg noise is 1.1e-4 rad there (a share of ~15 %).  Empty for
-    flight data without those columns or without a band."""
+    band and its surfaces' 0.05 deg noise is 1.1e-4 rad there (a share of ~15 %).  The noise
+    goes through each flight segment's own band and sample rate.  skip: channels not to warn on
+    (the identities alpha and beta are inverted from).  Empty for flight data without those
+    columns or without a band."""
     from aerosid.identification.band import band_noise_gain
     from aerosid.identification.flight_data import CONTROL_NOISE_COLUMNS
     from aerosid.modelling.expressions import signal_names
@@ -179,19 +181,28 @@ def control_noise_warnings(fd: pd.DataFrame, models: dict) -> dict[str, str]:
 
     if len(fd) < 3 or not ({"band_hz", "t_s", *CONTROL_NOISE_COLUMNS.values()} <= set(fd.columns)):
         return {}
-    dt = np.diff(fd["t_s"].to_numpy(float))
-    band = fd["band_hz"].to_numpy(float)
-    if not ((dt > 0).any() and np.isfinite(band).any()):
-        return {}
-    gain = band_noise_gain(1.0 / float(np.median(dt[dt > 0])), float(np.nanmedian(band)))
+    t, band = fd["t_s"].to_numpy(float), fd["band_hz"].to_numpy(float)
+    keys = ((fd["flight"].astype(str) + "/" + fd["segment"].astype(str)).to_numpy()
+            if {"flight", "segment"} <= set(fd.columns) else np.zeros(len(fd)))
+    gain = np.full(len(fd), np.nan)  # the band's noise gain per row, from its segment's rate and band
+    for k in pd.unique(keys):
+        idx = np.flatnonzero(keys == k)
+        dt = np.diff(t[idx])
+        b = band[idx][np.isfinite(band[idx])]
+        if (dt > 0).any() and b.size and np.median(b) > 0:
+            gain[idx] = band_noise_gain(1.0 / float(np.median(dt[dt > 0])), float(np.median(b)))
     flagged = {}
     for c, col in CONTROL_NOISE_COLUMNS.items():
-        noise = float(np.nanmedian(fd[col].to_numpy(float))) * gain
+        in_band = (fd[col].to_numpy(float) * gain) ** 2
+        in_band = in_band[np.isfinite(in_band)]
+        noise = math.sqrt(float(np.mean(in_band))) if in_band.size else 0.0
         spread = float(np.nanstd(fd[f"{c}_rad"].to_numpy(float)))
         if noise > 0 and spread > 0 and (noise / spread) ** 2 > CONTROL_NOISE_SHARE:
             flagged[c] = (spread, noise)
     out = {}
     for ch, model in models.items():
+        if ch in skip:
+            continue
         for c, (spread, noise) in flagged.items():
             names = [t.coefficient for t in model.terms if c in signal_names(t.expression, SIGNALS)]
             if names:
@@ -384,7 +395,8 @@ def identify(flight_data: pd.DataFrame, vehicle: Vehicle, models: dict[str, Chan
     rate_sigma = _rate_eiv_sigma(fd) if gyro_eiv and band_limited else None
     if sigma is not None or rate_sigma is not None:
         fits = _eiv_corrected(fd, vehicle, models, fits, sigma, rate_sigma)
-    for ch, text in control_noise_warnings(fd, models).items():
+    identities = INVERSION_CHANNELS if vehicle.air_data_source != "vanes" else ()
+    for ch, text in control_noise_warnings(fd, models, skip=identities).items():
         if ch in fits:
             fits[ch] = replace(fits[ch], warnings=tuple(fits[ch].warnings) + (text,))
     wrong_sign = wrong_sign_terms(models, fits)

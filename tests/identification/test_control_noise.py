@@ -27,10 +27,12 @@ def test_control_noise_is_the_fins_white_noise_through_the_mixing():
     raw = {c: 0.05 * np.sin(2 * np.pi * 0.3 * t + j) + sigma[j] * rng.standard_normal(n)
            for j, c in enumerate(FIN_COLUMNS)}
     got = _control_noise(raw, vehicle, _Band(n), 7)
-    mix = dict(zip(("delta_r", "delta_p", "delta_y"), np.asarray(vehicle.mixing, float)))
+    # each control's weight on each fin, from the vehicle's own mix of unit deflections
+    unit = [dict(zip(("delta_r", "delta_p", "delta_y"), vehicle.mix(*np.eye(4)[j]))) for j in range(4)]
     for c, col in CONTROL_NOISE_COLUMNS.items():
+        expected = np.sqrt(sum((unit[j][c] * sigma[j]) ** 2 for j in range(4)))
         assert got[col].shape == (7,)
-        assert got[col][0] == pytest.approx(np.sqrt(np.sum((mix[c] * sigma) ** 2)), rel=0.05), c
+        assert got[col][0] == pytest.approx(expected, rel=0.05), c
     # a surface quantised far above its noise (held between steps) has none
     held = {c: np.round(x, 2) for c, x in raw.items()}
     assert all(v[0] == 0.0 for v in _control_noise(held, vehicle, _Band(n), 1).values())
@@ -56,6 +58,14 @@ def test_identify_warns_where_a_controls_noise_is_a_sizeable_share_of_its_variat
     warned = control_noise_warnings(_flight_data(n, fs, band, 2e-3, in_band), models)
     assert set(warned) == {"CN", "Cm"}
     assert "Cm_delta_p" in warned["Cm"] and "about 25%" in warned["Cm"]
+    # but not on an identity channel (alpha, beta inverted from C_N, C_Y): identify skips those
+    assert set(control_noise_warnings(_flight_data(n, fs, band, 2e-3, in_band), models, skip=("CN", "CY"))) == {"Cm"}
+    # two segments pooled, the second at half the rate: each through its own band gain
+    a, b = _flight_data(n, fs, band, 2e-3, in_band), _flight_data(n, fs / 2, band, 2e-3, in_band)
+    b["t_s"] = 1000.0 + b["t_s"]  # (already at half the rate)
+    pooled = pd.concat([a.assign(flight="f", segment="a"), b.assign(flight="f", segment="b")], ignore_index=True)
+    share = (1e-3 ** 2 + (in_band * band_noise_gain(fs / 2, band)) ** 2) / 2 / np.var(pooled["delta_p_rad"])
+    assert f"about {share:.0%}" in control_noise_warnings(pooled, models)["Cm"]
     # 10 x its noise (share 1 % < CONTROL_NOISE_SHARE): nothing
     assert 0.01 < CONTROL_NOISE_SHARE
     assert control_noise_warnings(_flight_data(n, fs, band, 1e-2, in_band), models) == {}
