@@ -55,7 +55,8 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-import pandas as pd
+
+from aerosid.identification.band import segment_keys, segment_rates_and_bands
 
 __all__ = ["ChannelFloor", "channel_floor", "floors", "excess", "floor_table", "band_sigmas", "angle_floor_rms",
            "band_nonlinearity_rms", "ANGLE_REPLICATES"]
@@ -147,7 +148,7 @@ def band_sigmas(fd, vehicle) -> dict[str, np.ndarray] | None:
     # the gains per flight segment: pooled flights (or segments whose band the flight set) keep
     # their own band and sample rate; a segment without a band (smoother path) gets NaN
     g_der, g_lp = np.full(len(fd), np.nan), np.full(len(fd), np.nan)
-    for idx, fs, b in _segments(fd):
+    for idx, fs, b in segment_rates_and_bands(fd):
         if math.isfinite(fs) and math.isfinite(b):
             g_der[idx], g_lp[idx] = band_derivative_noise_gain(fs, b), band_noise_gain(fs, b)
     s_wdot = sg * g_der[:, None]  # (N, 3) [rad/s^2]
@@ -189,7 +190,7 @@ def angle_floor_rms(fd, vehicle, models: dict, channels, replicates: int = ANGLE
     channels = [ch for ch in channels if ch in models and ch in fd]
     if sigma is None or not channels:
         return {}
-    groups = _segment_keys(fd)
+    groups = segment_keys(fd)
     cutoff = angle_cutoff_hz(fd, vehicle)
     rng = np.random.default_rng(ANGLE_SEED)
 
@@ -284,30 +285,6 @@ def band_nonlinearity_rms(fd, vehicle, models: dict, channels) -> dict[str, floa
     return out
 
 
-def _segment_keys(fd) -> np.ndarray:
-    """flight/segment per row (zeros without those columns)."""
-    return ((fd["flight"].astype(str) + "/" + fd["segment"].astype(str)).to_numpy()
-            if {"flight", "segment"} <= set(fd.columns) else np.zeros(len(fd)))
-
-
-def _segments(fd) -> list[tuple[np.ndarray, float, float]]:
-    """(rows, sample rate [Hz], band edge [Hz]) of every flight segment: pooled flights (or
-    segments whose band the flight set) keep their own sample rate and band; NaN for a segment
-    without a band (the smoother path) or without a time step."""
-    t = fd["t_s"].to_numpy(float)
-    band = fd["band_hz"].to_numpy(float)
-    keys = _segment_keys(fd)
-    out = []
-    for k in pd.unique(keys):
-        idx = np.flatnonzero(keys == k)
-        dts = np.diff(t[idx])
-        dts = dts[dts > 0]
-        b = band[idx]
-        b = float(np.median(b[np.isfinite(b)])) if np.isfinite(b).any() else float("nan")
-        out.append((idx, 1.0 / float(np.median(dts)) if dts.size else float("nan"), b if b > 0 else float("nan")))
-    return out
-
-
 def flight_data_runs(fd, valid: np.ndarray | None = None) -> list[tuple[slice, float, float, int]]:
     """(rows, sample rate [Hz], band edge [Hz], edge samples = one band period) of every run of
     consecutive flight-data rows: one flight segment (its own rate and band), adjacent rows, time
@@ -319,7 +296,7 @@ def flight_data_runs(fd, valid: np.ndarray | None = None) -> list[tuple[slice, f
     t = fd["t_s"].to_numpy(float)
     valid = np.ones(len(fd), bool) if valid is None else np.asarray(valid, bool)
     out = []
-    for idx, fs, band in _segments(fd):
+    for idx, fs, band in segment_rates_and_bands(fd):
         if not (math.isfinite(fs) and math.isfinite(band)) or idx.size < 2:
             continue
         edge = int(math.ceil(fs / band - 1e-6))

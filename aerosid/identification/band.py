@@ -41,6 +41,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+import pandas as pd
 import scipy.signal
 
 from aerosid.estimation.findings import true_runs
@@ -291,3 +292,28 @@ def band_derivative_noise_gain(fs_hz: float, band_hz: float) -> float:
     square root of the sum of the squared impulse response of low-pass then np.gradient)."""
     d = np.gradient(_band_impulse_response(fs_hz, band_hz), 1.0 / fs_hz)
     return float(np.sqrt(np.sum(d * d)))
+
+
+def segment_keys(fd) -> np.ndarray:
+    """flight/segment of every row of a flight-data frame (zeros without those columns)."""
+    return ((fd["flight"].astype(str) + "/" + fd["segment"].astype(str)).to_numpy()
+            if {"flight", "segment"} <= set(fd.columns) else np.zeros(len(fd)))
+
+
+def segment_rates_and_bands(fd) -> list[tuple[np.ndarray, float, float]]:
+    """(rows, sample rate [Hz], band edge [Hz]) of every flight segment of a flight-data frame
+    (its t_s and band_hz columns): pooled flights (or segments whose band the flight set) keep
+    their own sample rate and band; NaN for a segment without a band (the smoother path) or
+    without a time step."""
+    t = fd["t_s"].to_numpy(float)
+    band = fd["band_hz"].to_numpy(float)
+    keys = segment_keys(fd)
+    out = []
+    for k in pd.unique(keys):
+        idx = np.flatnonzero(keys == k)
+        dts = np.diff(t[idx])
+        dts = dts[dts > 0]
+        b = band[idx]
+        b = float(np.median(b[np.isfinite(b)])) if np.isfinite(b).any() else float("nan")
+        out.append((idx, 1.0 / float(np.median(dts)) if dts.size else float("nan"), b if b > 0 else float("nan")))
+    return out

@@ -174,23 +174,17 @@ def control_noise_warnings(fd: pd.DataFrame, models: dict, skip=()) -> dict[str,
     goes through each flight segment's own band and sample rate.  skip: channels not to warn on
     (the identities alpha and beta are inverted from).  Empty for flight data without those
     columns or without a band."""
-    from aerosid.identification.band import band_noise_gain
+    from aerosid.identification.band import band_noise_gain, segment_rates_and_bands
     from aerosid.identification.flight_data import CONTROL_NOISE_COLUMNS
     from aerosid.modelling.expressions import signal_names
     from aerosid.modelling.models import SIGNALS
 
     if len(fd) < 3 or not ({"band_hz", "t_s", *CONTROL_NOISE_COLUMNS.values()} <= set(fd.columns)):
         return {}
-    t, band = fd["t_s"].to_numpy(float), fd["band_hz"].to_numpy(float)
-    keys = ((fd["flight"].astype(str) + "/" + fd["segment"].astype(str)).to_numpy()
-            if {"flight", "segment"} <= set(fd.columns) else np.zeros(len(fd)))
     gain = np.full(len(fd), np.nan)  # the band's noise gain per row, from its segment's rate and band
-    for k in pd.unique(keys):
-        idx = np.flatnonzero(keys == k)
-        dt = np.diff(t[idx])
-        b = band[idx][np.isfinite(band[idx])]
-        if (dt > 0).any() and b.size and np.median(b) > 0:
-            gain[idx] = band_noise_gain(1.0 / float(np.median(dt[dt > 0])), float(np.median(b)))
+    for idx, fs, band in segment_rates_and_bands(fd):
+        if math.isfinite(fs) and math.isfinite(band):
+            gain[idx] = band_noise_gain(fs, band)
     flagged = {}
     for c, col in CONTROL_NOISE_COLUMNS.items():
         in_band = (fd[col].to_numpy(float) * gain) ** 2
