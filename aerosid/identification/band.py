@@ -38,6 +38,7 @@ shorter than :data:`MIN_RUN_CYCLES` period of the band edge (and 16 samples) are
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -182,15 +183,19 @@ def band_noise_gain(fs_hz: float, band_hz: float) -> float:
     return float(np.sqrt(np.sum(h * h)))
 
 
-def white_noise_sigma(x: np.ndarray, runs: list[slice]) -> float:
-    """1-sigma of the white noise on a smooth signal [x units]: 1.4826 MAD of the first
-    differences over sqrt(2) (the signal's own change between two samples is negligible
-    next to the noise at flight-test sample rates)."""
-    d = np.concatenate([np.diff(np.asarray(x, float)[r]) for r in runs] or [np.array([np.nan])])
+def white_noise_sigma(x: np.ndarray, runs: list[slice], order: int = 1) -> float:
+    """1-sigma of the white noise on a smooth signal [x units]: 1.4826 MAD of the differences of
+    the given order over the runs, over the noise's gain through them (sqrt(2) for first, sqrt(6)
+    for second differences).  First differences assume the signal's own change between two
+    samples is negligible next to the noise (the sensors at flight-test sample rates); second
+    differences also cancel a steady slope (a control surface's own slow motion).  NaN with
+    fewer than 8 differences."""
+    d = np.concatenate([np.diff(np.asarray(x, float)[r], order) for r in runs] or [np.array([np.nan])])
     d = d[np.isfinite(d)]
     if d.size < 8:
         return float("nan")
-    return float(1.4826 * np.median(np.abs(d - np.median(d))) / np.sqrt(2.0))
+    gain = math.sqrt(math.comb(2 * order, order))
+    return float(1.4826 * np.median(np.abs(d - np.median(d))) / gain)
 
 
 def finite_runs(ok: np.ndarray) -> list[slice]:

@@ -17,7 +17,7 @@ from aerosid.identification.flight_coefficients import flight_coefficients
 from aerosid.identification.derivatives import zero_phase_low_pass
 from aerosid.estimation.findings import DEPARTURE_MIN_S, DEPARTURE_SIGMA, Finding, dilate, span_findings
 from aerosid.identification.band import (accel_at_cg, band_limited_signals, band_noise_gain, bridge_spikes,
-                                         finite_runs, low_pass_runs)
+                                         finite_runs, low_pass_runs, white_noise_sigma)
 from aerosid.identification.crb import R_COLUMNS
 from aerosid.identification.inversion import invert_alpha_beta, total_angles
 from aerosid.vehicles.vehicle import Vehicle
@@ -352,13 +352,7 @@ def _control_noise(raw: dict, vehicle: Vehicle, bl, n: int) -> dict[str, np.ndar
     identify does not warn).  The controls are regressors taken as exact; identify warns where
     this noise is a sizeable share of one's variation."""
     runs = [slice(a, b) for a, b in bl.filter_runs]
-
-    def white(x) -> float:
-        d = np.concatenate([np.diff(np.asarray(x, float)[r], 2) for r in runs] or [np.array([np.nan])])
-        d = d[np.isfinite(d)]
-        return float(1.4826 * np.median(np.abs(d - np.median(d))) / math.sqrt(6.0)) if d.size >= 8 else 0.0
-
-    fin = np.array([white(raw[c]) for c in FIN_COLUMNS])
+    fin = np.nan_to_num([white_noise_sigma(raw[c], runs, order=2) for c in FIN_COLUMNS], nan=0.0)
     mixed = dict(zip(("delta_r", "delta_p", "delta_y"), (math.sqrt(float(np.sum((np.asarray(row, float) * fin) ** 2)))
                                                             for row in vehicle.mixing)))
     return {col: np.full(n, mixed[c]) for c, col in CONTROL_NOISE_COLUMNS.items()}
