@@ -56,7 +56,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from aerosid.identification.band import segment_keys, segment_rates_and_bands
+from aerosid.identification.band import finite_runs, segment_keys, segment_rates_and_bands
 
 __all__ = ["ChannelFloor", "channel_floor", "floors", "excess", "floor_table", "band_sigmas", "angle_floor_rms",
            "band_nonlinearity_rms", "ANGLE_REPLICATES"]
@@ -291,8 +291,6 @@ def flight_data_runs(fd, valid: np.ndarray | None = None) -> list[tuple[slice, f
     increasing by at most 1.5 of the segment's steps, ``valid`` (default all), and longer than two
     band periods and 16 samples.  Rows are expected in flight and time order (as diagnose sorts
     them); a segment whose rows are not adjacent is cut where they are not."""
-    from aerosid.identification.band import finite_runs
-
     t = fd["t_s"].to_numpy(float)
     valid = np.ones(len(fd), bool) if valid is None else np.asarray(valid, bool)
     out = []

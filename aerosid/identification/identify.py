@@ -389,7 +389,7 @@ def identify(flight_data: pd.DataFrame, vehicle: Vehicle, models: dict[str, Chan
     rate_sigma = _rate_eiv_sigma(fd) if gyro_eiv and band_limited else None
     if sigma is not None or rate_sigma is not None:
         fits = _eiv_corrected(fd, vehicle, models, fits, sigma, rate_sigma)
-    identities = INVERSION_CHANNELS if vehicle.air_data_source != "vanes" else ()
+    identities = tuple(ch for ch in INVERSION_CHANNELS if ch in fits) if vehicle.air_data_source != "vanes" else ()
     for ch, text in control_noise_warnings(fd, models, skip=identities).items():
         if ch in fits:
             fits[ch] = replace(fits[ch], warnings=tuple(fits[ch].warnings) + (text,))
@@ -398,7 +398,6 @@ def identify(flight_data: pd.DataFrame, vehicle: Vehicle, models: dict[str, Chan
         fits = _with_structure_uncertainty(fd, signals, models, fits, wrong_sign)
     refs = AeroModel.preflight(vehicle).linear_truth() if vehicle.preflight is not None else {}
     window = (float(fd["mach"].min()), float(fd["mach"].max()))
-    identities = tuple(ch for ch in INVERSION_CHANNELS if ch in fits) if vehicle.air_data_source != "vanes" else ()
     crb = identification_bounds(fd, vehicle, models, fits, identities)
     return Identification(fits, dict(models), refs, len(fd), window, identities, vehicle.envelope.preflight_factor,
                           crb.std, wrong_sign)
