@@ -89,6 +89,7 @@ class FlightDesign:
     manoeuvre: dict        # jsbsim_flight._schedule keys
     duration_s: float
     notes: list = field(default_factory=list)
+    feedback: dict = field(default_factory=dict)  # state_feedback: surface per body rate / angle at trim
 
 
 # --------------------------------------------------------------------------------------
@@ -262,9 +263,12 @@ def fcs_statics(fdm, point: TrimPoint, controls: Controls) -> tuple[dict, dict]:
     return gains, limits
 
 
-def rate_feedback(fdm, point: TrimPoint, controls: Controls, rate: float = 0.05) -> dict[str, dict[str, float]]:
-    """d(surface)/d(body rate) [rad per rad/s] of the FCS at trim, commands held: a
-    stability augmentation or fly-by-wire law feeding back p, q or r."""
+def state_feedback(fdm, point: TrimPoint, controls: Controls, rate: float = 0.05,
+                   angle_deg: float = 0.5) -> dict[str, dict[str, float]]:
+    """What the FCS feeds back at trim, commands held: d(surface)/d(body rate) [rad per
+    rad/s] under "p", "q", "r" and d(surface)/d(angle) [rad per rad] under "alpha" (about
+    the trim's) and "beta" (central differences): a stability augmentation, a yaw damper
+    (r), a sideslip feedback (beta: A320's rudder) or a fly-by-wire law."""
     props = {"pitch": controls.pitch, "roll": controls.roll, "yaw": controls.yaw}
     base = _probe(fdm, point, None, props.values())
     out = {}
@@ -273,8 +277,25 @@ def rate_feedback(fdm, point: TrimPoint, controls: Controls, rate: float = 0.05)
         rates[k] = rate
         initialise(fdm, point, None, tuple(rates))
         out[axis] = {name: (fdm[prop] - base[prop]) / rate for name, prop in props.items()}
+    h = math.radians(angle_deg)
+    for angle, key in (("alpha", "alpha_offset_deg"), ("beta", "beta_deg")):
+        ends = []
+        for sign in (1.0, -1.0):
+            initialise(fdm, point, None, **{key: sign * angle_deg})
+            ends.append({name: fdm[prop] for name, prop in props.items()})
+        out[angle] = {name: (ends[0][name] - ends[1][name]) / (2 * h) for name in props}
     initialise(fdm, point)
     return out
+
+
+def closed_loop_derivatives(d: dict, feedback: dict, V_m_s: float, span_m: float) -> dict[str, float]:
+    """The derivatives the manoeuvre's steady responses see with the FCS's static feedback
+    on the surface of the same axis: C_m_alpha + C_m_delta_p d(elevator)/d(alpha),
+    C_l_p + C_l_delta_r d(aileron)/d(p) 2V/b, C_n_beta + C_n_delta_y d(rudder)/d(beta).
+    Without feedback they are the open-loop ones."""
+    return {"Cm_alpha": d["Cm_alpha"] + d["Cm_delta_p"] * feedback.get("alpha", {}).get("pitch", 0.0),
+            "Cl_p": d["Cl_p"] + d["Cl_delta_r"] * feedback.get("p", {}).get("roll", 0.0) * 2.0 * V_m_s / span_m,
+            "Cn_beta": d["Cn_beta"] + d["Cn_delta_y"] * feedback.get("beta", {}).get("yaw", 0.0)}
 
 
 def mode_frequencies(d: dict, base: dict) -> dict[str, float]:
@@ -317,12 +338,23 @@ def _travel(limits: dict, prop: str, value: float) -> float:
 
 
 def manoeuvre_design(d: dict, modes: dict, gains: dict, limits: dict, controls: Controls,
-                     base: dict) -> tuple[dict, float, list[str]]:
+                     base: dict, feedback: dict | None = None) -> tuple[dict, float, list[str]]:
     """Input timing and amplitudes (the keys of jsbsim_flight._schedule), the flight's
-    duration and notes on what limited them."""
+    duration and notes on what limited them.  feedback: :func:`state_feedback`; the
+    amplitudes are sized on the closed loop's steady response (a sideslip feedback that
+    holds beta to a sixth of its open-loop value asks six times the rudder)."""
     notes = []
     V = base["velocities/vt-fps"] * FT
     b = base["metrics/bw-ft"] * FT
+    closed = closed_loop_derivatives(d, feedback or {}, V, b)
+    for name, value in closed.items():
+        if value * d[name] <= 0:  # a feedback that would reverse the response: size on the open loop
+            notes.append(f"FCS feedback would reverse {name} ({d[name]:.4g} -> {value:.4g}); "
+                         "the manoeuvre is sized on the open-loop value")
+            closed[name] = d[name]
+        elif abs(value / d[name] - 1.0) > 0.05:
+            notes.append(f"FCS feedback: the manoeuvre is sized on the closed loop's {name} "
+                         f"{value:.4g} (open loop {d[name]:.4g})")
     w_sp, w_dr = modes["omega_pitch_design_rad_s"], modes["omega_dr_rad_s"]
     unit = _r(np.clip(UNIT_OMEGA / w_sp, 0.1, 1.0))
     half = _r(np.clip(DOUBLET_OMEGA / w_dr, 0.3, 2.0))
@@ -340,14 +372,14 @@ def manoeuvre_design(d: dict, modes: dict, gains: dict, limits: dict, controls: 
 
     # elevator: a step that would change alpha by ALPHA_STEP_DEG in steady state; the first
     # 3-2-1-1 starts nose-up (the surface moves the way that raises C_m)
-    de = ALPHA_STEP_DEG * DEG * abs(d["Cm_alpha"] / d["Cm_delta_p"])
+    de = ALPHA_STEP_DEG * DEG * abs(closed["Cm_alpha"] / d["Cm_delta_p"])
     a_e = command("pitch", controls.pitch, de, math.copysign(1.0, d["Cm_delta_p"]))
     # aileron: a bank change of BANK_STEP_DEG over the first half at the steady roll rate
-    p_per_rad = abs(d["Cl_delta_r"] / d["Cl_p"]) * 2.0 * V / b
+    p_per_rad = abs(d["Cl_delta_r"] / closed["Cl_p"]) * 2.0 * V / b
     da = BANK_STEP_DEG * DEG / (half * p_per_rad)
     a_a = command("roll", controls.roll, da, math.copysign(1.0, d["Cl_delta_r"]))
     # rudder: a steady sideslip of BETA_STEP_DEG, nose left first
-    dr = BETA_STEP_DEG * DEG * abs(d["Cn_beta"] / d["Cn_delta_y"])
+    dr = BETA_STEP_DEG * DEG * abs(closed["Cn_beta"] / d["Cn_delta_y"])
     a_r = command("yaw", controls.yaw, dr, math.copysign(1.0, -d["Cn_delta_y"]) * -1.0)
     rise_e = _r(unit / 2)
     rise_lat = _r(min(0.2, half / 4))
@@ -415,18 +447,20 @@ def _design(jsbsim, aircraft: str) -> FlightDesign:
     except TrimError as exc:
         raise UnsupportedAircraft(str(exc)) from exc
     gains, limits = fcs_statics(fdm, point, controls)
-    feedback = rate_feedback(fdm, point, controls)
+    feedback = state_feedback(fdm, point, controls)
     base = snapshot(fdm, tables, controls)
     notes = []
     if abs(feedback["q"]["pitch"]) > MAX_PITCH_FEEDBACK_S:
         raise UnsupportedAircraft(f"{aircraft}: its FCS moves the elevator with pitch rate "
                                   f"({feedback['q']['pitch']:.3g} rad per rad/s: fly-by-wire or pitch augmentation); "
                                   "the open-loop manoeuvre design does not apply to closed-loop pitch control")
-    for rate, row in feedback.items():
+    for state, row in feedback.items():
+        unit = "rad per rad" if state in ("alpha", "beta") else "rad per rad/s"
         for surface, k in row.items():
             if abs(k) > 1e-3:
-                notes.append(f"FCS feedback: the {surface} surface moves with {rate} ({k:.3g} rad per rad/s; "
-                             "e.g. a yaw damper): its deflection is partly collinear with the rate")
+                notes.append(f"FCS feedback: the {surface} surface moves with {state} ({k:.3g} {unit}; "
+                             f"e.g. a {'yaw damper' if state == 'r' else 'stability augmentation'}): "
+                             f"its deflection is partly collinear with {state}")
     Ixx, Iyy, Izz = (base[f"inertia/i{k}-slugs_ft2"] for k in ("xx", "yy", "zz"))
     if Iyy > Ixx + Izz or Ixx > Iyy + Izz or Izz > Ixx + Iyy:
         raise UnsupportedAircraft(f"{aircraft}: JSBSim's inertias Ixx {Ixx * SLUG_FT2:.6g}, Iyy {Iyy * SLUG_FT2:.6g}, "
@@ -451,7 +485,7 @@ def _design(jsbsim, aircraft: str) -> FlightDesign:
         raise UnsupportedAircraft(f"{aircraft} is statically unstable at its trim point (h {point.h_m:g} m, "
                                   f"V {point.V_m_s:g} m/s; {', '.join(unstable)} about the CG): an open-loop "
                                   "manoeuvre would diverge")
-    m, duration, more = manoeuvre_design(d_cg, modes, gains, limits, controls, base)
+    m, duration, more = manoeuvre_design(d_cg, modes, gains, limits, controls, base, feedback)
     if duration > MAX_DURATION_S:
         raise UnsupportedAircraft(f"{aircraft}: the manoeuvre would last {duration:.0f} s (> {MAX_DURATION_S:g} s; "
                                   f"short period {modes['omega_sp_rad_s']:.3g} rad/s, Dutch roll "
@@ -459,4 +493,4 @@ def _design(jsbsim, aircraft: str) -> FlightDesign:
     return FlightDesign(aircraft=aircraft, xml_path=xml_path, propulsion=propulsion, engines=engines,
                           controls=controls, trim=point, condition_note=why, gains=gains, limits_rad=limits,
                           state=base, derivatives=d_cg, derivatives_rp=d_rp, modes=modes, manoeuvre=m,
-                          duration_s=duration, notes=notes + more)
+                          duration_s=duration, notes=notes + more, feedback=feedback)

@@ -97,14 +97,15 @@ def start_engines(fdm, h_m: float, V_m_s: float) -> None:
 
 def apply(fdm, h_m: float, V_m_s: float, alpha_deg: float, gamma_deg: float, phi_deg: float,
           commands: tuple[float, float, float], throttle: float,
-          rates: tuple[float, float, float] = (0.0, 0.0, 0.0)) -> np.ndarray:
-    """Initialise JSBSim at this point (body rates `rates` [rad/s], else zero) with the
-    FCS in trim mode; the six accelerations (RESIDUALS) it computes there."""
+          rates: tuple[float, float, float] = (0.0, 0.0, 0.0), beta_deg: float = 0.0) -> np.ndarray:
+    """Initialise JSBSim at this point (body rates `rates` [rad/s], else zero; sideslip
+    `beta_deg`, else zero) with the FCS in trim mode; the six accelerations (RESIDUALS) it
+    computes there."""
     fdm["ic/h-sl-ft"] = h_m / FT
     fdm["ic/vt-fps"] = V_m_s / FT
     fdm["ic/gamma-deg"] = gamma_deg
     fdm["ic/alpha-deg"] = alpha_deg
-    fdm["ic/beta-deg"] = 0.0
+    fdm["ic/beta-deg"] = beta_deg
     fdm["ic/phi-deg"] = phi_deg
     fdm["ic/psi-true-deg"] = 0.0
     for axis, rate in zip("pqr", rates):
@@ -173,12 +174,14 @@ def trim(fdm, h_m: float, V_m_s: float, mode: str = "glide", *, gamma_deg: float
 
 
 def initialise(fdm, point: TrimPoint, commands: tuple[float, float, float] | None = None,
-               rates: tuple[float, float, float] = (0.0, 0.0, 0.0)) -> np.ndarray:
-    """Initialise `fdm` at `point` (optionally with other pilot commands or body rates: a
-    static probe of the FCS); the accelerations there."""
+               rates: tuple[float, float, float] = (0.0, 0.0, 0.0), *, alpha_offset_deg: float = 0.0,
+               beta_deg: float = 0.0) -> np.ndarray:
+    """Initialise `fdm` at `point` (optionally with other pilot commands, body rates, an
+    angle of attack offset from the trim's or a sideslip: a static probe of the FCS); the
+    accelerations there."""
     cmd = commands if commands is not None else (point.elevator_cmd, point.aileron_cmd, point.rudder_cmd)
-    return apply(fdm, point.h_m, point.V_m_s, point.alpha_deg, point.gamma_deg, point.phi_deg, cmd, point.throttle,
-                 rates)
+    return apply(fdm, point.h_m, point.V_m_s, point.alpha_deg + alpha_offset_deg, point.gamma_deg, point.phi_deg, cmd,
+                 point.throttle, rates, beta_deg)
 
 
 def sink_rate(point: TrimPoint) -> float:

@@ -14,7 +14,12 @@ pytest.importorskip("jsbsim")
 from aerosid.io import read_parquet_metadata, telemetry_vehicle  # noqa: E402
 from aerosid.vehicles.rigid_body import body_rate_derivatives, inertia_constants  # noqa: E402
 from aerosid.simulation.jsbsim_aircraft import XML_TOLERANCE, simulate_aircraft  # noqa: E402
-from aerosid.simulation.jsbsim_design import UnsupportedAircraft, flight_design  # noqa: E402
+from aerosid.simulation.jsbsim_design import (  # noqa: E402
+    BETA_STEP_DEG,
+    UnsupportedAircraft,
+    closed_loop_derivatives,
+    flight_design,
+)
 from aerosid.simulation.jsbsim_flight import (  # noqa: E402
     TELEMETRY_COLUMNS,
     _import_jsbsim,
@@ -176,6 +181,48 @@ def test_design_rules_by_class():
         assert m["elevator_unit_s"] == pytest.approx(min(max(2.0 / w, 0.1), 1.0), abs=0.006)
         assert m["aileron_start_s"] > m["elevator_starts_s"][1] > m["elevator_starts_s"][0]
         assert m["rudder_start_s"] > m["aileron_start_s"] and d.duration_s > m["rudder_start_s"]
+
+
+def test_fcs_feedback_probe_and_closed_loop_sizing():
+    """A320's FCS adds -5 beta [rad] and 2 r [rad/s] to the normalised rudder (25 deg of travel
+    per unit): the probe must find -5 x 25 deg = -2.18 rad per rad and 0.87 rad per rad/s,
+    and the rudder step is sized for a 1.5 deg sideslip of the CLOSED loop (its Cn_beta
+    stiffened by Cn_delta_y x the feedback), about six times the open-loop step."""
+    jsbsim = _import_jsbsim()
+    a320 = flight_design(jsbsim, "A320")
+    root = ET.parse(a320.xml_path).getroot()
+    gains = {el.get("name"): float(el.find("gain").text) for el in root.iter("pure_gain") if el.find("gain") is not None}
+    per_unit = math.radians(25.0)
+    k_beta = gains["Yaw Damper Beta"] * per_unit
+    k_r = gains["Yaw Damper Rate"] * per_unit
+    fb = a320.feedback
+    assert fb["beta"]["yaw"] == pytest.approx(k_beta, rel=0.02)
+    assert fb["r"]["yaw"] == pytest.approx(k_r, rel=0.02)
+    d = a320.derivatives
+    closed = d["Cn_beta"] + d["Cn_delta_y"] * k_beta
+    assert closed > 3 * d["Cn_beta"] > 0  # the feedback holds the sideslip to a fraction of the open loop's
+    step = a320.manoeuvre["surface_steps_rad"]["rudder"]
+    assert step == pytest.approx(math.radians(BETA_STEP_DEG) * closed / abs(d["Cn_delta_y"]), rel=0.02)
+    assert any("closed loop's Cn_beta" in n for n in a320.notes)
+    # no angle or roll-rate feedback: the closed loop is the open loop, and so is the sizing
+    pa28 = flight_design(jsbsim, "pa28")
+    assert all(abs(v) < 1e-6 for row in ("alpha", "beta", "p") for v in pa28.feedback[row].values())
+    V = pa28.trim.V_m_s
+    same = closed_loop_derivatives(pa28.derivatives, pa28.feedback, V, 10.0)
+    for name in ("Cm_alpha", "Cl_p", "Cn_beta"):
+        assert same[name] == pytest.approx(pa28.derivatives[name], rel=1e-6)
+    assert pa28.manoeuvre["surface_steps_rad"]["rudder"] == pytest.approx(
+        math.radians(BETA_STEP_DEG) * abs(pa28.derivatives["Cn_beta"] / pa28.derivatives["Cn_delta_y"]), rel=1e-9)
+
+
+def test_closed_loop_derivatives_closed_form():
+    d = {"Cm_alpha": -1.0, "Cm_delta_p": -2.0, "Cl_p": -0.5, "Cl_delta_r": 0.2, "Cn_beta": 0.1, "Cn_delta_y": -0.4}
+    fb = {"alpha": {"pitch": 0.25}, "p": {"roll": -0.1}, "beta": {"yaw": -1.5}}
+    c = closed_loop_derivatives(d, fb, 50.0, 10.0)
+    assert c["Cm_alpha"] == pytest.approx(-1.0 - 2.0 * 0.25)
+    assert c["Cl_p"] == pytest.approx(-0.5 + 0.2 * -0.1 * 2 * 50.0 / 10.0)
+    assert c["Cn_beta"] == pytest.approx(0.1 + -0.4 * -1.5)
+    assert closed_loop_derivatives(d, {}, 50.0, 10.0) == {k: d[k] for k in ("Cm_alpha", "Cl_p", "Cn_beta")}
 
 
 def test_aircraft_that_cannot_be_flown_say_why():
