@@ -67,6 +67,7 @@ def open_fdm(jsbsim, model: str, dt: float):
     if not fdm.load_model(model):
         raise TrimError(f"JSBSim could not load the aircraft {model!r}")
     fdm.disable_output()
+    fdm.disable_input()  # 737.xml asks for TCP and UDP input ports: no socket is opened, at any initialisation
     fdm.set_dt(dt)
     catalogue = {p.split(" ")[0] for p in fdm.get_property_catalog()}
     if "propulsion/fuel_freeze" in catalogue:

@@ -286,3 +286,14 @@ def test_an_aircraft_that_reads_engine_zero_by_its_index_is_flown():
     assert "propulsion/engine[0]/thrust-coefficient" in AeroTables(flight_design(_import_jsbsim(), "J3Cub")
                                                                    .xml_path).leaf_properties()
     assert np.all(np.isfinite(flight.truth["Cm"].to_numpy(float)))
+
+
+def test_no_input_socket_is_opened(capfd):
+    """737.xml asks JSBSim for TCP and UDP input ports; aerosid's instances never open them
+    (before: one bind attempt, and an error line, at every initialisation of the trim)."""
+    jsbsim = _import_jsbsim()
+    fdm = open_fdm(jsbsim, "737", 0.01)
+    fdm.run_ic()
+    fdm.run_ic()
+    captured = capfd.readouterr()
+    assert "input socket" not in captured.out + captured.err
