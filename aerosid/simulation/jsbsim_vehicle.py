@@ -42,7 +42,10 @@ def vehicle_toml(design: FlightDesign, jsbsim_version: str, mass: dict, referenc
 
     effect = {"CN": abs(d["CN_alpha"]) * ALPHA_STEP_DEG * DEG, "Cm": cm_step}
     with_mach = [ch for ch in ("CN", "Cm") if abs(mach_slopes[ch]) * 0.01 > MACH_SHARE * effect[ch]]
-    for ch in with_mach:
+    # powered level flight: the thrust and its moment change with speed along the phugoid, in step
+    # with alpha, and C_m,alpha takes that up unless the model has a speed term (docs/jsbsim.md)
+    powered_cm = design.trim.mode == "level" and "Cm" not in with_mach
+    for ch in with_mach + (["Cm"] if powered_cm else []):
         models[ch].append(f"{ch}_mach = mach")
     half_window = round(0.15 * 2.0 / cutoff_hz, 2)
     lim_all = max(abs(v) for pair in limits for v in pair)
@@ -123,6 +126,9 @@ def vehicle_toml(design: FlightDesign, jsbsim_version: str, mass: dict, referenc
     for ch in with_mach:
         lines.append(f"# {ch}_mach: the model's {ch} changes by {_num(mach_slopes[ch])} per unit Mach at the trim point "
                      f"(> {MACH_SHARE:.0%} of the manoeuvre's {ch} per 0.01 Mach)")
+    if powered_cm:
+        lines.append("# Cm_mach: the flight is powered and level: the thrust's moment (and the Mach effects) change "
+                     "with speed along the phugoid, in step with alpha (without it C_m_alpha takes that up)")
     for ch, terms in models.items():
         lines.append(f"{ch} = [{', '.join(chr(34) + t + chr(34) for t in terms)}]")
     if moved:

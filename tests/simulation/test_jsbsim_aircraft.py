@@ -302,3 +302,30 @@ def test_no_input_socket_is_opened(capfd):
     fdm.run_ic()
     captured = capfd.readouterr()
     assert "input socket" not in captured.out + captured.err
+
+
+def test_powered_level_flight_gets_a_speed_term_in_cm(written, tmp_path):
+    """A jet flown level (T37) holds its speed with thrust; along the phugoid the thrust's moment
+    and the Mach effects change with speed in step with alpha, so its default C_m model carries
+    Cm_mach, and with it the default model fitted to the noise-free truth finds the at-trim
+    C_m,alpha closer than without it.  The glider-like idle descent of pa28 gets no such term."""
+    from aerosid.modelling.models import default_models
+
+    assert not any(t.coefficient == "Cm_mach" for t in default_models(load_vehicle(written["vehicle"]))["Cm"].terms)
+    jet = simulate_aircraft("T37", seed=0)
+    out = jet.write(tmp_path / "T37")
+    model = default_models(load_vehicle(out["vehicle"]))["Cm"]
+    assert "Cm_mach" in model.names
+    T = jet.truth
+    sig = {"alpha": T["alpha_rad"], "mach": T["mach"], "delta_p": T["delta_p_rad"], "q_hat": T["q_hat"],
+           "alpha_dot_hat": T["alpha_dot_hat"], "beta": T["beta_rad"]}
+    sig = {k: v.to_numpy(float) for k, v in sig.items()}
+    X = model.regressors(sig)
+    y = (T["Cm"] + T["Cm_prop"]).to_numpy(float)
+    truth = jet.coefficients["Cm_alpha"]
+    errors = {}
+    for with_speed in (True, False):
+        cols = [c for c in X.columns if with_speed or c != "Cm_mach"]
+        sol = dict(zip(cols, np.linalg.lstsq(X[cols].to_numpy(), y, rcond=None)[0]))
+        errors[with_speed] = abs(sol["Cm_alpha"] / truth - 1.0)
+    assert errors[True] < 0.5 * errors[False]
