@@ -36,6 +36,7 @@ def vehicle_toml(design: FlightDesign, jsbsim_version: str, mass: dict, referenc
     cm_step = abs(d["Cm_delta_p"] * design.manoeuvre["surface_steps_rad"]["elevator"])
     with_abs_beta = abs(cm_abs_beta) * 2.0 * DEG > ABS_BETA_SHARE * cm_step
     models = {k: list(v) for k, v in MODELS.items()}
+    tr_mach = st["velocities/mach"]  # the file's mach_reference
     if with_abs_beta:
         models["Cm"].append("Cm_abs_beta = abs(beta)")
     from aerosid.simulation.jsbsim_design import ALPHA_STEP_DEG
@@ -45,8 +46,8 @@ def vehicle_toml(design: FlightDesign, jsbsim_version: str, mass: dict, referenc
     # powered level flight: the thrust and its moment change with speed along the phugoid, in step
     # with alpha, and C_m,alpha takes that up unless the model has a speed term (docs/jsbsim.md)
     powered_cm = design.trim.mode == "level" and "Cm" not in with_mach
-    for ch in with_mach + (["Cm"] if powered_cm else []):
-        models[ch].append(f"{ch}_mach = mach")
+    for ch in with_mach + (["Cm"] if powered_cm else []):  # about the trim Mach: C*_0 stays the trim's value
+        models[ch].append(f"{ch}_mach = (mach - {_num(tr_mach)})")
     half_window = round(0.15 * 2.0 / cutoff_hz, 2)
     lim_all = max(abs(v) for pair in limits for v in pair)
     lines = [
