@@ -37,7 +37,7 @@ from aerosid.simulation.jsbsim_truth import flight_statistics, _truth_check
 from aerosid.simulation.jsbsim_tables import DEG, AeroTables
 from aerosid.simulation.jsbsim_trim import initialise, open_fdm, start_engines
 from aerosid.simulation.jsbsim_truth_avg import generated_flight_average
-from aerosid.simulation.jsbsim_vehicle import vehicle_toml
+from aerosid.simulation.jsbsim_vehicle import powered_level, vehicle_toml
 from aerosid.vehicles.vehicle import DATA_DIR
 
 __all__ = ["simulate_aircraft", "XML_TOLERANCE", "RESERVED"]
@@ -205,8 +205,8 @@ def simulate_aircraft(aircraft: str, seed: int = 0, *, faults: bool = True, prog
     d_mach = mach_slopes(tables, design.state, ctl, design.gains)
     # the tables' Mach slope; on a powered level flight the model's Cm_mach also takes up the thrust's
     # moment changing with speed (jsbsim_vehicle), which this slope leaves out: named apart there
-    powered = design.trim.mode == "level"
-    coefficients.update({f"{k}_mach" + ("_aero" if powered and k == "Cm" else ""): v for k, v in d_mach.items()})
+    coefficients.update({f"{k}_mach" + ("_aero" if powered_level(design) and k == "Cm" else ""): v
+                         for k, v in d_mach.items()})
     check = _truth_check(truth, design.derivatives, float(m["aileron_start_s"]))
     check["xml_vs_jsbsim_max_abs"] = xml_diff
 

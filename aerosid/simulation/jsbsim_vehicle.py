@@ -20,6 +20,12 @@ ABS_BETA_SHARE = 0.01  # Cm_abs_beta joins the model when |dCm/d|beta|| * 2 deg 
 MACH_SHARE = 0.01      # a Mach term joins CN / Cm when 0.01 of Mach moves it by > 1 % of the manoeuvre's effect
 
 
+def powered_level(design: FlightDesign) -> bool:
+    """A flight trimmed level on its thrust (the jets): along the phugoid its thrust's moment and
+    the Mach effects change with speed in step with alpha, so its C_m model carries Cm_mach."""
+    return design.trim.mode == "level"
+
+
 def _num(x: float) -> str:
     return f"{float(x):.6g}"
 
@@ -45,7 +51,7 @@ def vehicle_toml(design: FlightDesign, jsbsim_version: str, mass: dict, referenc
     with_mach = [ch for ch in ("CN", "Cm") if abs(mach_slopes[ch]) * 0.01 > MACH_SHARE * effect[ch]]
     # powered level flight: the thrust and its moment change with speed along the phugoid, in step
     # with alpha, and C_m,alpha takes that up unless the model has a speed term (docs/jsbsim.md)
-    powered_cm = design.trim.mode == "level" and "Cm" not in with_mach
+    powered_cm = powered_level(design) and "Cm" not in with_mach
     for ch in with_mach + (["Cm"] if powered_cm else []):  # about the trim Mach: C*_0 stays the trim's value
         models[ch].append(f"{ch}_mach = (mach - {_num(tr_mach)})")
     half_window = round(0.15 * 2.0 / cutoff_hz, 2)
