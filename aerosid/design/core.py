@@ -32,6 +32,7 @@ from aerosid.design.power import POWER_SETTINGS, power_hint
 from aerosid.design.predict import POWER, Prediction, ResidualModel, predict_covariance
 from aerosid.design.verdict import design_verdict
 from aerosid.design.waveforms import Waveform, candidate_waveforms
+from aerosid.identification.band import segment_keys
 
 G = 9.80665
 
@@ -225,7 +226,7 @@ def design(run_dir: str | Path, effect: str, size: float | None = None, versus: 
     fd = read_flight_data(run_dir).sort_values(["flight", "t_s"], kind="stable").reset_index(drop=True)
     fd = fd.loc[mach_window_mask(fd["mach"].to_numpy(float), vehicle.mach_reference, mach_half_width)]
     fd = fd.reset_index(drop=True)
-    groups = (fd["flight"].astype(str) + "/" + fd["segment"].astype(str)).to_numpy()
+    groups = segment_keys(fd)
     sig = derived_signals(vehicle_signals(fd, vehicle), vehicle.length_pitch_m, vehicle.length_lateral_m)
     X, _ = model.design(sig)
     fit = fit_linear(fd[ch].to_numpy(float), X, names=model.names, channel=ch, groups=groups)
@@ -432,7 +433,7 @@ def _pipeline_residual(telemetry: pd.DataFrame, vehicle, model, ch: str, mach_ha
     fd = run.flight_data.sort_values(["flight", "t_s"], kind="stable").reset_index(drop=True)
     fd = fd.loc[mach_window_mask(fd["mach"].to_numpy(float), vehicle.mach_reference, mach_half_width)]
     fd = fd.reset_index(drop=True)
-    groups = (fd["flight"].astype(str) + "/" + fd["segment"].astype(str)).to_numpy()
+    groups = segment_keys(fd)
     sig = derived_signals(vehicle_signals(fd, vehicle), vehicle.length_pitch_m, vehicle.length_lateral_m)
     X, _ = model.design(sig)
     y = fd[ch].to_numpy(float)

@@ -60,6 +60,7 @@ from aerosid.diagnosis.lookalikes import heldout_sse as _heldout_sse, scaled_lst
 from aerosid.diagnosis.lookalikes import windows_index as _windows_index
 from aerosid.modelling.expressions import evaluate
 from aerosid.identification.identify import angle_cutoff_hz, mach_window_mask
+from aerosid.identification.band import segment_keys
 from aerosid.identification.eiv import with_angle_noise
 from aerosid.modelling.models import ChannelModel, default_models, vehicle_signals
 from aerosid.identification.regression import LinearFit, fit_linear, residual_autocovariance
@@ -190,7 +191,7 @@ def diagnose(flight_data: pd.DataFrame, vehicle, models: dict[str, ChannelModel]
     if n < max(50, 10 * n_windows):
         raise ValueError(f"only {n} samples inside Mach {vehicle.mach_reference} ± {mach_half_width}: "
                          "too few to diagnose the model")
-    groups = (fd["flight"].astype(str) + "/" + fd["segment"].astype(str)).to_numpy()
+    groups = segment_keys(fd)
     signals = derived_signals(vehicle_signals(fd, vehicle), vehicle.length_pitch_m, vehicle.length_lateral_m)
     t = fd["t_s"].to_numpy(float)
     flight = fd["flight"].astype(str).to_numpy()
@@ -316,7 +317,7 @@ def diagnose(flight_data: pd.DataFrame, vehicle, models: dict[str, ChannelModel]
     identities = identity_channels(vehicle, models)  # their residual is numerical: no floor to speak of
     floored = [ch for ch in reports if ch not in identities]
     floor = floors({ch: reports[ch].residual for ch in floored}, fd, angle_floor_rms(fd, vehicle, models, floored),
-                   vehicle, band_nonlinearity_rms(fd, vehicle, models, floored))
+                   vehicle, band_nonlinearity_rms(fd, vehicle, models, floored, signals))
     loc = {}
     if localisation:
         from aerosid.diagnosis.localise import localise

@@ -213,7 +213,8 @@ def angle_floor_rms(fd, vehicle, models: dict, channels, replicates: int = ANGLE
     return {ch: math.sqrt(max(v, 0.0)) if math.isfinite(v) else float("nan") for ch, v in rise.items()}
 
 
-def band_nonlinearity_rms(fd, vehicle, models: dict, channels) -> dict[str, float]:
+def band_nonlinearity_rms(fd, vehicle, models: dict, channels, model_signals: dict | None = None
+                          ) -> dict[str, float]:
     """{channel: RMS of LP(m(x)) - m(LP(x))}: what the band path's order of operations puts
     into the fitted model's residual (module doc).  x: the regressor signals before the
     low-pass (the flight data's wide-band columns, aerosid.identification.flight_data.
@@ -222,7 +223,8 @@ def band_nonlinearity_rms(fd, vehicle, models: dict, channels) -> dict[str, floa
     flight data.  Both sides are formed from the same x, so the band's own attenuation cancels
     and only the model's non-linearity is left.  The first and last band period of every run
     (the filter's transients) are left out of the RMS.  Empty without those columns (the
-    smoother path, older files)."""
+    smoother path, older files).  model_signals: the model signals of fd when the caller has them
+    (the diagnosis' own), else derived here."""
     from aerosid.diagnosis.candidates import derived_signals
     from aerosid.diagnosis.lookalikes import scaled_lstsq
     from aerosid.identification.band import low_pass_runs
@@ -264,7 +266,8 @@ def band_nonlinearity_rms(fd, vehicle, models: dict, channels) -> dict[str, floa
     inner = np.zeros(len(fd), bool)
     for r, _, _, edge in runs:
         inner[r.start + edge:r.stop - edge] = True
-    sig_fd = derived_signals(vehicle_signals(fd, vehicle), vehicle.length_pitch_m, vehicle.length_lateral_m)
+    sig_fd = model_signals if model_signals is not None else derived_signals(
+        vehicle_signals(fd, vehicle), vehicle.length_pitch_m, vehicle.length_lateral_m)
     sig_w, sig_lp = signals(wide), signals({c: low_pass(x) for c, x in wide.items()})
     out = {}
     for ch in channels:

@@ -55,6 +55,7 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
+from aerosid.identification.band import segment_keys
 from aerosid.identification.derivatives import zero_phase_low_pass
 from aerosid.identification.inversion import total_angles
 
@@ -142,7 +143,7 @@ def simex_estimates(fd: pd.DataFrame, y_by_channel: dict[str, np.ndarray], desig
     curvature the quadratic extrapolant would amplify.
     """
     rng = np.random.default_rng(SEED)
-    groups = (fd["flight"].astype(str) + "/" + fd["segment"].astype(str)).to_numpy()
+    groups = segment_keys(fd)
 
     def fit_all(frame: pd.DataFrame) -> dict[str, np.ndarray]:
         X = design(frame)
