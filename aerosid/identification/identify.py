@@ -17,7 +17,8 @@ from aerosid.identification.eiv import simex_estimates
 from aerosid.identification.crb import identification_bounds
 from aerosid.modelling.models import ChannelModel, default_models, signals_from_flight_data, vehicle_signals
 from aerosid.plausibility.estimates import preflight_departure
-from aerosid.identification.regression import LinearFit, fit_linear, with_corrected_estimate
+from aerosid.identification.regression import LinearFit, fit_linear, with_corrected_estimate, with_posterior
+from aerosid.identification.damping_prior import PRIOR_SHARE, PRIOR_SHARE_SIGMA, pure_term_index, split_update
 from aerosid.vehicles.vehicle import Vehicle
 
 #: Coefficients that are slopes per radian (the report prints them per degree); the rest are per unit term.
@@ -278,6 +279,26 @@ def mach_window_mask(mach: np.ndarray, reference: float, half_width: float | Non
 GYRO_EIV_DEFAULT = False
 
 
+def with_pitch_damping_prior(vehicle: Vehicle, models: dict, fits: dict) -> dict:
+    """The fits with the prior on an aircraft's pitch-damping split combined into its C_m fit
+    (aerosid.identification.damping_prior): only when the vehicle is an aircraft, its prior is
+    not off (``[estimation] pitch_damping_split = false``) and the C_m model has a pure q_hat and
+    a pure alpha_dot_hat term."""
+    setting = getattr(vehicle, "pitch_damping_split", True)
+    fit = fits.get("Cm")
+    if vehicle.vehicle_class != "aircraft" or setting is False or fit is None or "Cm" not in models:
+        return fits
+    share, sigma = (PRIOR_SHARE, PRIOR_SHARE_SIGMA) if setting is True else setting
+    exprs = [t.expression for t in models["Cm"].terms]
+    iq, ia = pure_term_index(exprs, "q_hat"), pure_term_index(exprs, "alpha_dot_hat")
+    if iq is None or ia is None:
+        return fits
+    upd = split_update(fit.estimate, fit.cov, iq, ia, share, sigma)
+    if upd is None:
+        return fits
+    return {**fits, "Cm": with_posterior(fit, upd.estimate, upd.cov, upd.summary())}
+
+
 #: Widen the sigma of the coefficients that depend on a term the flight does not determine
 #: (aerosid.identification.structure_uncertainty).
 STRUCTURE_UNCERTAINTY = True
@@ -393,6 +414,7 @@ def identify(flight_data: pd.DataFrame, vehicle: Vehicle, models: dict[str, Chan
     for ch, text in control_noise_warnings(fd, models, skip=identities).items():
         if ch in fits:
             fits[ch] = replace(fits[ch], warnings=tuple(fits[ch].warnings) + (text,))
+    fits = with_pitch_damping_prior(vehicle, models, fits)
     wrong_sign = wrong_sign_terms(models, fits)
     if STRUCTURE_UNCERTAINTY:
         fits = _with_structure_uncertainty(fd, signals, models, fits, wrong_sign)

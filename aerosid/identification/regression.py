@@ -196,13 +196,22 @@ def _identifiability(X: np.ndarray, names: Sequence[str]):
 def with_added_covariance(fit: LinearFit, extra_cov: np.ndarray, note: str) -> LinearFit:
     """The same fit with ``extra_cov`` (k, k) added to the coefficients' covariance (a part the
     residuals do not see, e.g. model-structure uncertainty); sigma, t, p and the intervals follow."""
-    cov = np.asarray(fit.cov, float) + np.asarray(extra_cov, float)
+    return with_posterior(fit, fit.estimate, np.asarray(fit.cov, float) + np.asarray(extra_cov, float), note)
+
+
+def with_posterior(fit: LinearFit, estimate: np.ndarray, cov: np.ndarray, note: str) -> LinearFit:
+    """The same fit with the estimate and covariance of a posterior (the fit combined with prior
+    information, e.g. aerosid.identification.damping_prior); sigma, t, p and the intervals follow;
+    the plain OLS sigma and the residual statistics stay those of the fit."""
+    cov = np.asarray(cov, float)
+    est = np.asarray(estimate, float)
     se = np.sqrt(np.clip(np.diag(cov), 0.0, None))
     with np.errstate(invalid="ignore", divide="ignore"):
-        t = np.asarray(fit.estimate, float) / se
+        t = est / se
     p = 2.0 * scipy.stats.t.sf(np.abs(t), fit.dof_eff)
-    return dataclasses.replace(fit, std_error=_as_readonly(se), cov=_as_readonly(cov), t_values=_as_readonly(t),
-                               p_values=_as_readonly(p), warnings=tuple(fit.warnings) + (note,))
+    return dataclasses.replace(fit, estimate=_as_readonly(est), std_error=_as_readonly(se), cov=_as_readonly(cov),
+                               t_values=_as_readonly(t), p_values=_as_readonly(p),
+                               warnings=tuple(fit.warnings) + (note,))
 
 
 def with_corrected_estimate(fit: LinearFit, estimate: np.ndarray, note: str,

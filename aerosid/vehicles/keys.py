@@ -31,7 +31,8 @@ class Key:
     kind: "number", "int", "bool", "string", "choice", "vector" (``length`` numbers, or
     any length >= 1 when None), "matrix" (``shape`` rows x columns), "range" (two
     numbers lo < hi), "strings" (a list of ``length`` strings), "terms" (a list of model
-    terms, checked by aerosid.modelling.models), "path" (a file name, checked by load_vehicle).
+    terms, checked by aerosid.modelling.models), "path" (a file name, checked by load_vehicle),
+    "switch" (true, false, or a vector as above: a setting that is on by default, off, or given).
     """
 
     kind: str
@@ -49,6 +50,8 @@ class Key:
     def describe(self) -> str:
         if self.kind == "choice":
             return f"one of {', '.join(map(repr, self.choices))}"
+        if self.kind == "switch":
+            return "true, false or " + Key("vector", self.lo, self.hi, self.length, positive=self.positive).describe()
         rng = f" in {self.range_text()}" if self.kind in ("number", "int", "vector", "matrix", "range") else ""
         shape = {"vector": f"{self.length} numbers" if self.length else "a list of numbers",
                  "matrix": f"{self.shape[0]} rows of {self.shape[1]} numbers" if self.shape else "",
@@ -123,7 +126,9 @@ TABLES: dict[str, dict[str, Key] | None] = {
         "mach_breakpoints": vec(None, 0.0, 50.0, positive=True), "slope_factor": vec(None, 0.0, 100.0, positive=True),
     },
     # Smoother defaults: aerosid.estimation.EBMOptions fields (tests/vehicles/test_vehicle_keys.py keeps
-    # the two lists equal), plus band_hz (the regression's low-pass edge, read by load_vehicle).
+    # the two lists equal), plus band_hz (the regression's low-pass edge) and pitch_damping_split
+    # (the prior on an aircraft's C_m,alpha_dot share, aerosid.identification.damping_prior), read by
+    # load_vehicle.
     "estimation": {
         "f_max_hz": pos(1e4), "gate_probability": Key("number", 0.0, 1.0, positive=True),
         "auto_tune": Key("bool"), "tune_r": Key("bool"), "max_tuning_iterations": Key("int", 0, 1000),
@@ -133,6 +138,8 @@ TABLES: dict[str, dict[str, Key] | None] = {
         "divergence_max_fraction": Key("number", 0.0, 1.0, positive=True),
         "q_scale_bounds": vec(2, 0.0, 1e9, positive=True), "q_chain_scale": vec(6, 0.0, 1e9, positive=True),
         "q_scale": pos(1e9), "r_scale": pos(1e9), "band_hz": pos(1e4),
+        "pitch_damping_split": Key("switch", -10.0, 10.0, length=2,
+                                   doc="[centre, 1-sigma] of C_m,alpha_dot / (C_m,q + C_m,alpha_dot); false: no prior"),
     },
     "models": {ch: Key("terms") for ch in ("CN", "Cm", "CY", "Cn", "Cl")},
     # aerosid/plausibility: the flight envelope the unit check compares the telemetry with
@@ -200,6 +207,9 @@ def check_value(where: str, value, spec: Key) -> None:
     elif kind == "choice":
         if value not in spec.choices:
             raise VehicleKeyError(where, f"must be {spec.describe()}, got {value!r}")
+    elif kind == "switch":
+        if not isinstance(value, bool):
+            check_value(where, value, Key("vector", spec.lo, spec.hi, spec.length, positive=spec.positive))
     elif kind in ("vector", "range"):
         n = 2 if kind == "range" else spec.length
         if not isinstance(value, list) or (n is not None and len(value) != n) or not value:

@@ -105,6 +105,10 @@ class Vehicle:
     #: the regression's common low-pass edge [Hz] ([estimation] band_hz; None: from each
     #: segment's gyro spectrum, aerosid.identification.band)
     band_hz: float | None = None
+    #: the prior on the pitch-damping split C_m,alpha_dot / (C_m,q + C_m,alpha_dot) of an aircraft
+    #: ([estimation] pitch_damping_split): True = the default (aerosid.identification.damping_prior),
+    #: False = none, (centre, 1-sigma) = this vehicle's own
+    pitch_damping_split: tuple[float, float] | bool = True
     #: preprocessing thresholds from the [preprocess] table (PreprocessParams keyword
     #: arguments, per-sensor tables under "sensors"; docs/preprocessing.md)
     preprocess: dict = field(default_factory=dict)
@@ -320,8 +324,9 @@ def load_vehicle(name_or_path: str | Path = "seed-rlv") -> Vehicle:
         database_path=database_path,
         preflight=preflight,
         estimation={k: (tuple(v) if isinstance(v, list) else v) for k, v in doc.get("estimation", {}).items()
-                    if k != "band_hz"},
+                    if k not in ("band_hz", "pitch_damping_split")},
         band_hz=positive("estimation", "band_hz") if "band_hz" in doc.get("estimation", {}) else None,
+        pitch_damping_split=_damping_split(doc.get("estimation", {}), src),
         source=src,
         vehicle_class=vclass,
         chord_m=chord,
@@ -340,6 +345,18 @@ def load_vehicle(name_or_path: str | Path = "seed-rlv") -> Vehicle:
         min_segment_s=min_segment_s,
         plausibility=plausibility_for(vclass, doc.get("plausibility")),
     )
+
+
+def _damping_split(estimation: dict, src: str) -> tuple[float, float] | bool:
+    """[estimation] pitch_damping_split: true/absent (the default prior), false (none) or
+    [centre, sigma] (the share of the pitch damping in C_m,alpha_dot and its 1-sigma; the key
+    table has checked the form)."""
+    value = estimation.get("pitch_damping_split", True)
+    if isinstance(value, bool):
+        return value
+    if not value[1] > 0:
+        raise VehicleError(src, "estimation.pitch_damping_split", f"its sigma must be positive, got {value[1]!r}")
+    return (float(value[0]), float(value[1]))
 
 
 def _preprocess_settings(table, src: str) -> tuple[dict, float | None]:

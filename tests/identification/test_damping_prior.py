@@ -1,0 +1,165 @@
+"""The prior on the pitch-damping split (aerosid.identification.damping_prior): the update is the
+exact posterior (closed form against the augmented least squares), it only constrains the split,
+a flight that determines the split keeps its own answer, and the posterior intervals cover a
+truth inside the prior's range on a design where the flight cannot split the damping."""
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from aerosid.identification.damping_prior import PRIOR_SHARE, PRIOR_SHARE_SIGMA, pure_term_index, split_update
+from aerosid.identification.identify import with_pitch_damping_prior
+from aerosid.identification.regression import fit_linear
+from aerosid.modelling.models import default_models
+from aerosid.vehicles.vehicle import VehicleError, load_vehicle
+
+# columns: 1, alpha, q_hat, alpha_dot_hat; truth: C_m,q + C_m,alpha_dot = -20, split f = 0.3
+TRUTH = np.array([0.01, -0.8, -14.0, -6.0])
+IQ, IA, IALPHA = 2, 3, 1
+
+
+def _design(rng, n: int, collinear: float):
+    """alpha_dot_hat = q_hat - k alpha + collinear x independent part (small: the flight cannot split)."""
+    alpha = 0.02 * np.sin(np.linspace(0, 40, n)) + 0.005 * rng.normal(size=n)
+    q_hat = 0.002 * np.cos(np.linspace(0, 40, n) + 0.3) + 0.0005 * rng.normal(size=n)
+    adot_hat = q_hat - 0.01 * alpha + collinear * 0.002 * rng.normal(size=n)
+    return np.column_stack([np.ones(n), alpha, q_hat, adot_hat])
+
+
+def _ols(X, y):
+    theta = np.linalg.lstsq(X, y, rcond=None)[0]
+    e = y - X @ theta
+    s2 = e @ e / (len(y) - X.shape[1])
+    return theta, s2 * np.linalg.inv(X.T @ X)
+
+
+def test_the_update_is_the_least_squares_with_the_prior_as_one_more_weighted_row():
+    rng = np.random.default_rng(0)
+    X = _design(rng, 800, 0.05)
+    y = X @ TRUTH + 2e-3 * rng.normal(size=len(X))
+    theta, P = _ols(X, y)
+    upd = split_update(theta, P, IQ, IA)
+    # the same posterior from the normal equations of the data and the prior row r theta = 0
+    r = np.zeros(4)
+    r[IQ], r[IA] = -PRIOR_SHARE, 1 - PRIOR_SHARE
+    s2 = (PRIOR_SHARE_SIGMA * (theta[IQ] + theta[IA])) ** 2
+    info = np.linalg.inv(P) + np.outer(r, r) / s2
+    post_cov = np.linalg.inv(info)
+    post = post_cov @ (np.linalg.inv(P) @ theta)
+    assert np.allclose(upd.estimate, post, rtol=1e-8, atol=1e-12)
+    assert np.allclose(upd.cov, post_cov, rtol=1e-8, atol=1e-14)
+    # information only added: the posterior covariance is below the flight's (P - P_post >= 0)
+    assert np.linalg.eigvalsh(P - upd.cov).min() > -1e-12 * np.abs(P).max()
+
+
+def test_the_prior_constrains_the_split_not_the_total_damping():
+    rng = np.random.default_rng(1)
+    X = _design(rng, 800, 0.002)
+    y = X @ TRUTH + 5e-3 * rng.normal(size=len(X))
+    theta, P = _ols(X, y)
+    upd = split_update(theta, P, IQ, IA)
+    w = np.zeros(4)
+    w[IQ] = w[IA] = 1.0
+    sd_damping = np.sqrt(w @ P @ w)
+    # the total moves by a small part of its own sigma; the split moves to the prior's share
+    assert abs(w @ upd.estimate - w @ theta) < 0.5 * sd_damping
+    assert upd.share_data_sigma > 2 * PRIOR_SHARE_SIGMA  # this flight cannot split the damping
+    assert abs(upd.share_post - PRIOR_SHARE) < 0.05
+
+
+def test_a_flight_that_splits_the_damping_keeps_its_own_answer():
+    rng = np.random.default_rng(2)
+    X = _design(rng, 20000, 5.0)  # alpha_dot_hat largely independent of q_hat and alpha
+    y = X @ TRUTH + 2e-3 * rng.normal(size=len(X))
+    theta, P = _ols(X, y)
+    upd = split_update(theta, P, IQ, IA)
+    assert upd.share_data_sigma < 0.05 * PRIOR_SHARE_SIGMA
+    assert abs(upd.share_post - upd.share_data) < 0.01
+    assert np.all(np.abs(upd.estimate - theta) < 0.05 * np.sqrt(np.diag(P)))
+
+
+def test_posterior_intervals_cover_a_truth_inside_the_prior_and_are_narrower_where_the_flight_cannot_split():
+    """200 seeded flights that cannot split the damping, truth f = 0.3 (inside the prior): the
+    posterior's 95 % interval of C_m,alpha covers in >= 90 % and is under half the flight's own."""
+    cover, ratio = 0, []
+    n_runs = 200
+    for seed in range(n_runs):
+        rng = np.random.default_rng(100 + seed)
+        X = _design(rng, 600, 0.002)
+        y = X @ TRUTH + 5e-3 * rng.normal(size=len(X))
+        theta, P = _ols(X, y)
+        upd = split_update(theta, P, IQ, IA)
+        sd = np.sqrt(np.diag(upd.cov))
+        cover += abs(upd.estimate[IALPHA] - TRUTH[IALPHA]) <= 1.96 * sd[IALPHA]
+        ratio.append(sd[IALPHA] / np.sqrt(P[IALPHA, IALPHA]))
+    assert cover >= 0.9 * n_runs
+    assert np.median(ratio) < 0.5
+
+
+def test_not_finite_or_no_damping_gives_no_update():
+    P = np.eye(4)
+    assert split_update(np.array([0.0, -1.0, 5.0, -5.0]), P, IQ, IA) is None
+    assert split_update(np.array([0.0, np.nan, -5.0, -5.0]), P, IQ, IA) is None
+
+
+def test_pure_terms_are_found_by_expression():
+    assert pure_term_index(["1", "alpha", "q_hat", "alpha_dot_hat"], "q_hat") == 2
+    assert pure_term_index(["1", "alpha*q_hat", "alpha_dot_hat"], "q_hat") is None
+
+
+@pytest.fixture(scope="module")
+def c172x_fits():
+    """c172x's default models and a C_m fit on a synthetic design with its six terms."""
+    veh = load_vehicle("c172x")
+    models = default_models(veh)
+    rng = np.random.default_rng(7)
+    n = 1500
+    X = _design(rng, n, 0.002)
+    cols = np.column_stack([X[:, 0], X[:, 1], 0.01 * rng.normal(size=n), X[:, 2], X[:, 3],
+                            np.abs(0.01 * rng.normal(size=n))])
+    names = models["Cm"].names
+    truth = np.array([0.01, -0.8, -1.2, -14.0, -6.0, 0.0])
+    y = cols @ truth + 5e-3 * rng.normal(size=n)
+    fit = fit_linear(y, pd.DataFrame(cols, columns=names), names=names, channel="Cm", cov="ols")
+    return veh, models, {"Cm": fit}
+
+
+def test_identify_combines_the_prior_into_an_aircrafts_pitch_fit_and_says_so(c172x_fits):
+    veh, models, fits = c172x_fits
+    out = with_pitch_damping_prior(veh, models, fits)
+    f = out["Cm"]
+    assert not np.allclose(f.estimate, fits["Cm"].estimate)
+    assert any("pitch-damping split" in w for w in f.warnings)
+    assert np.all(f.std_error <= fits["Cm"].std_error * (1 + 1e-12))
+
+
+def test_the_vehicle_file_sets_its_own_prior_or_turns_it_off(c172x_fits):
+    veh, models, fits = c172x_fits
+    assert with_pitch_damping_prior(replace(veh, pitch_damping_split=False), models, fits)["Cm"] is fits["Cm"]
+    own = with_pitch_damping_prior(replace(veh, pitch_damping_split=(0.0, 0.05)), models, fits)["Cm"]
+    names = list(own.names)
+    share = own.estimate[names.index("Cm_alpha_dot")] / (own.estimate[names.index("Cm_q")]
+                                                         + own.estimate[names.index("Cm_alpha_dot")])
+    assert abs(share) < 0.1
+    # a finned vehicle (no downwash lag to speak of) is left alone
+    assert with_pitch_damping_prior(replace(veh, vehicle_class="finned"), models, fits)["Cm"] is fits["Cm"]
+
+
+def test_a_bad_setting_in_the_vehicle_file_names_the_key(tmp_path):
+    text = open(load_vehicle("c172x").source).read()
+    assert "\n[estimation]" not in text
+    p = tmp_path / "vehicle.toml"
+    p.write_text(text + "\n[estimation]\npitch_damping_split = [0.25]\n")
+    with pytest.raises(VehicleError, match="pitch_damping_split"):
+        load_vehicle(p)
+    p.write_text(text + "\n[estimation]\npitch_damping_split = [0.25, 0.0]\n")
+    with pytest.raises(VehicleError, match="pitch_damping_split.*sigma must be positive"):
+        load_vehicle(p)
+    p.write_text(text + "\n[estimation]\npitch_damping_split = false\n")
+    assert load_vehicle(p).pitch_damping_split is False
+    p.write_text(text + "\n[estimation]\npitch_damping_split = [0.1, 0.3]\n")
+    v = load_vehicle(p)
+    assert v.pitch_damping_split == (0.1, 0.3) and "pitch_damping_split" not in v.estimation
