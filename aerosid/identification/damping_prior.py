@@ -25,14 +25,17 @@ eps/d alpha).  With d eps/d alpha ~ 2 C_L,alpha,wing / (pi AR) = 0.6 ... 0.28 fo
 5 ... 12, f = 0.2 ... 0.35: centre PRIOR_SHARE = 0.25.  Its 1-sigma PRIOR_SHARE_SIGMA = 0.2
 widens that range so the 95 % interval (-0.15 ... 0.65) also holds a tailless or canard layout
 (f ~ 0) and a doubled downwash ratio.  The prior is one row r theta = 0 with
-r = (1 - f0) e_alpha_dot - f0 e_q and variance (sigma_f x |C_m,q + C_m,alpha_dot|)^2, so it
-leaves the total damping to the data and constrains only the split; the update is the exact
-Gaussian posterior of the flight's estimate and covariance (a scalar Kalman measurement update).
+r = (1 - f0) e_alpha_dot - f0 e_q and variance sigma_f^2 (D^2 + var D), D = C_m,q + C_m,alpha_dot as
+estimated, so it constrains the split; the total damping moves only through its correlation with
+the split.  The update is the exact Gaussian posterior of the flight's estimate and covariance
+(a scalar Kalman measurement update).
 
 When
 ----
-Only for an aircraft (``vehicle_class = "aircraft"``) whose C_m model has both a pure q_hat and
-a pure alpha_dot_hat term.  A flight that determines the split keeps its own answer (its
+Only for an aircraft (``vehicle_class = "aircraft"``) whose C_m model has one pure q_hat and one
+pure alpha_dot_hat term (``q_hat``, ``(q_hat)``, ``2*q_hat`` ...).  The model-structure mixture
+(aerosid.identification.structure_uncertainty) then leaves these two terms alone: the prior
+already holds the model without C_m,alpha_dot (f = 0, at 1.25 sigma).  A flight that determines the split keeps its own answer (its
 precision outweighs the prior's); one that does not gets the prior's share and an interval that
 says so.  A vehicle file sets its own prior (``[estimation] pitch_damping_split = [f0, sigma]``)
 or turns it off (``pitch_damping_split = false``).  Measured on the generalisation bench and on
@@ -57,9 +60,9 @@ PRIOR_SHARE_SIGMA = 0.2
 class SplitUpdate:
     """The split prior applied to one fit.
 
-    estimate, cov: the posterior (k,), (k, k); share_data, share_data_sigma: the split
-    f = C_m,alpha_dot / (C_m,q + C_m,alpha_dot) the flight alone gives and its 1-sigma (delta
-    method); share_post: the posterior's; prior: (f0, sigma_f)."""
+    estimate, cov: the posterior (k,), (k, k) (NaN where the fit had none); share_data,
+    share_data_sigma: the split f = C_m,alpha_dot / (C_m,q + C_m,alpha_dot) the flight alone
+    gives and its 1-sigma (delta method); share_post: the posterior's; prior: (f0, sigma_f)."""
 
     estimate: np.ndarray
     cov: np.ndarray
@@ -76,47 +79,71 @@ class SplitUpdate:
                 "prior (aerosid.identification.damping_prior)")
 
 
-def _share(theta: np.ndarray, cov: np.ndarray, iq: int, ia: int) -> tuple[float, float]:
-    """f = theta_a / (theta_q + theta_a) and its delta-method 1-sigma."""
-    d = theta[iq] + theta[ia]
+def _share(theta: np.ndarray, cov: np.ndarray, iq: int, ia: int, cq: float, ca: float) -> tuple[float, float]:
+    """f = ca theta_a / (cq theta_q + ca theta_a) and its delta-method 1-sigma."""
+    d = cq * theta[iq] + ca * theta[ia]
     if d == 0 or not math.isfinite(d):
         return float("nan"), float("nan")
-    f = theta[ia] / d
+    f = ca * theta[ia] / d
     g = np.zeros(theta.size)
-    g[iq], g[ia] = -theta[ia] / d**2, theta[iq] / d**2
+    g[iq], g[ia] = -ca * theta[ia] * cq / d**2, ca * cq * theta[iq] / d**2
     return float(f), float(math.sqrt(max(g @ cov @ g, 0.0)))
 
 
 def split_update(estimate, cov, iq: int, ia: int, share: float = PRIOR_SHARE,
-                 share_sigma: float = PRIOR_SHARE_SIGMA) -> SplitUpdate | None:
-    """The posterior of (estimate, cov) given the prior C_m,alpha_dot = share x (C_m,q +
-    C_m,alpha_dot) +- share_sigma x |C_m,q + C_m,alpha_dot| (the damping as estimated).
+                 share_sigma: float = PRIOR_SHARE_SIGMA, factors: tuple[float, float] = (1.0, 1.0)
+                 ) -> SplitUpdate | str:
+    """The posterior of (estimate, cov) given the prior C_m,alpha_dot = share x D +- share_sigma x D,
+    D = C_m,q + C_m,alpha_dot (the damping as estimated; its own variance is added to the
+    prior's, so a damping the flight hardly determines does not turn the prior into a constraint).
 
-    iq, ia: the positions of C_m,q and C_m,alpha_dot.  None when the estimate or covariance
-    is not finite or the damping is zero (nothing to scale the prior by)."""
-    theta = np.asarray(estimate, float)
-    P = np.asarray(cov, float)
-    if not (np.all(np.isfinite(theta)) and np.all(np.isfinite(P))) or share_sigma <= 0:
-        return None
-    damping = theta[iq] + theta[ia]
-    if damping == 0:
-        return None
-    r = np.zeros(theta.size)
-    r[iq], r[ia] = -share, 1.0 - share
-    s2 = (share_sigma * damping) ** 2
-    Pr = P @ r
+    iq, ia: the positions of the q_hat and alpha_dot_hat terms; factors: their expressions'
+    factors (a term ``2*q_hat`` has C_m,q = 2 x its coefficient).  Terms whose estimate is not
+    finite (not identifiable) are left as they are.  A string saying why when the prior cannot
+    be applied (those two not finite, or a damping of exactly zero with no uncertainty)."""
+    theta = np.array(estimate, float)
+    P = np.array(cov, float)
+    cq, ca = (float(c) for c in factors)
+    ok = np.isfinite(theta) & np.isfinite(np.diag(P))
+    if not (ok[iq] and ok[ia]):
+        return "C_m,q or C_m,alpha_dot has no finite estimate"
+    sub = np.flatnonzero(ok)
+    Ps = P[np.ix_(sub, sub)]
+    if not np.all(np.isfinite(Ps)) or share_sigma <= 0:
+        return "the fit's covariance is not finite"
+    jq, ja = int(np.searchsorted(sub, iq)), int(np.searchsorted(sub, ia))
+    th = theta[sub]
+    w = np.zeros(sub.size)
+    w[jq], w[ja] = cq, ca
+    damping = float(w @ th)
+    r = np.zeros(sub.size)
+    r[jq], r[ja] = -share * cq, (1.0 - share) * ca
+    s2 = share_sigma ** 2 * (damping ** 2 + float(w @ Ps @ w))
+    if not s2 > 0:
+        return "the estimated pitch damping is zero with no uncertainty (nothing to scale the prior by)"
+    Pr = Ps @ r
     den = float(r @ Pr) + s2
-    post = theta - Pr * float(r @ theta) / den
-    P_post = P - np.outer(Pr, Pr) / den
+    post = th - Pr * float(r @ th) / den
+    P_post = Ps - np.outer(Pr, Pr) / den
     P_post = 0.5 * (P_post + P_post.T)  # symmetric to rounding
-    f_data, sf_data = _share(theta, P, iq, ia)
-    f_post, _ = _share(post, P_post, iq, ia)
-    return SplitUpdate(post, P_post, f_data, sf_data, f_post, (float(share), float(share_sigma)))
+    est_out, cov_out = theta.copy(), P.copy()
+    est_out[sub] = post
+    cov_out[np.ix_(sub, sub)] = P_post
+    f_data, sf_data = _share(th, Ps, jq, ja, cq, ca)
+    f_post, _ = _share(post, P_post, jq, ja, cq, ca)
+    return SplitUpdate(est_out, cov_out, f_data, sf_data, f_post, (float(share), float(share_sigma)))
 
 
-def pure_term_index(expressions, signal: str) -> int | None:
-    """Position of the term whose expression is the signal alone (e.g. 'q_hat'), or None."""
+def damping_terms(expressions) -> tuple[tuple[int, float], tuple[int, float]] | None:
+    """((position, factor) of the C_m model's pure q_hat term, same of its pure alpha_dot_hat term),
+    or None unless it has exactly one of each (aerosid.identification.term_report.damping_term)."""
+    from aerosid.identification.term_report import damping_term
+
+    found: dict[str, list] = {"q_hat": [], "alpha_dot_hat": []}
     for j, e in enumerate(expressions):
-        if str(e).replace(" ", "") == signal:
-            return j
-    return None
+        t = damping_term("Cm", e)
+        if t is not None:
+            found[t[0]].append((j, t[1]))
+    if len(found["q_hat"]) != 1 or len(found["alpha_dot_hat"]) != 1:
+        return None
+    return found["q_hat"][0], found["alpha_dot_hat"][0]

@@ -18,7 +18,7 @@ from aerosid.identification.crb import identification_bounds
 from aerosid.modelling.models import ChannelModel, default_models, signals_from_flight_data, vehicle_signals
 from aerosid.plausibility.estimates import preflight_departure
 from aerosid.identification.regression import LinearFit, fit_linear, with_corrected_estimate, with_posterior
-from aerosid.identification.damping_prior import PRIOR_SHARE, PRIOR_SHARE_SIGMA, pure_term_index, split_update
+from aerosid.identification.damping_prior import PRIOR_SHARE, PRIOR_SHARE_SIGMA, damping_terms, split_update
 from aerosid.vehicles.vehicle import Vehicle
 
 #: Coefficients that are slopes per radian (the report prints them per degree); the rest are per unit term.
@@ -279,24 +279,28 @@ def mach_window_mask(mach: np.ndarray, reference: float, half_width: float | Non
 GYRO_EIV_DEFAULT = False
 
 
-def with_pitch_damping_prior(vehicle: Vehicle, models: dict, fits: dict) -> dict:
-    """The fits with the prior on an aircraft's pitch-damping split combined into its C_m fit
-    (aerosid.identification.damping_prior): only when the vehicle is an aircraft, its prior is
-    not off (``[estimation] pitch_damping_split = false``) and the C_m model has a pure q_hat and
-    a pure alpha_dot_hat term."""
+def with_pitch_damping_prior(vehicle: Vehicle, models: dict, fits: dict) -> tuple[dict, dict[str, tuple[str, ...]]]:
+    """(fits, covered): the fits with the prior on an aircraft's pitch-damping split combined into
+    its C_m fit (aerosid.identification.damping_prior), and {channel: the two coefficients whose
+    split the prior holds} for the model-structure mixture to leave alone.  Only for an aircraft
+    whose prior is not off (``[estimation] pitch_damping_split = false``) and whose C_m model has
+    one pure q_hat and one pure alpha_dot_hat term; when the prior cannot be applied to such a
+    fit, its warnings say why."""
     setting = getattr(vehicle, "pitch_damping_split", True)
     fit = fits.get("Cm")
     if vehicle.vehicle_class != "aircraft" or setting is False or fit is None or "Cm" not in models:
-        return fits
+        return fits, {}
+    terms = damping_terms([t.expression for t in models["Cm"].terms])
+    if terms is None:
+        return fits, {}
     share, sigma = (PRIOR_SHARE, PRIOR_SHARE_SIGMA) if setting is True else setting
-    exprs = [t.expression for t in models["Cm"].terms]
-    iq, ia = pure_term_index(exprs, "q_hat"), pure_term_index(exprs, "alpha_dot_hat")
-    if iq is None or ia is None:
-        return fits
-    upd = split_update(fit.estimate, fit.cov, iq, ia, share, sigma)
-    if upd is None:
-        return fits
-    return {**fits, "Cm": with_posterior(fit, upd.estimate, upd.cov, upd.summary())}
+    (iq, cq), (ia, ca) = terms
+    upd = split_update(fit.estimate, fit.cov, iq, ia, share, sigma, (cq, ca))
+    if isinstance(upd, str):
+        note = f"pitch-damping split prior not applied: {upd} (aerosid.identification.damping_prior)"
+        return {**fits, "Cm": replace(fit, warnings=tuple(fit.warnings) + (note,))}, {}
+    return ({**fits, "Cm": with_posterior(fit, upd.estimate, upd.cov, upd.summary())},
+            {"Cm": (fit.names[iq], fit.names[ia])})
 
 
 #: Widen the sigma of the coefficients that depend on a term the flight does not determine
@@ -320,14 +324,16 @@ def wrong_sign_terms(models: dict, fits: dict) -> dict[str, float]:
 
 
 def _with_structure_uncertainty(fd: pd.DataFrame, signals: dict, models: dict, fits: dict,
-                                flagged: dict[str, float] | None = None) -> dict:
+                                flagged: dict[str, float] | None = None,
+                                covered: dict[str, tuple[str, ...]] | None = None) -> dict:
     """The fits whose sigma include the model-structure part of a term whose interval holds 0, or
     of a damping term whose whole interval is positive (wrong_sign_terms: the flight says it is
     there, with a sign damping seldom has, so the model without it is taken as likely).  For a
     wrong-sign term the mixture is always applied, so its own interval includes the model without
     it (it then holds 0 unless t > ~9.9); a term whose interval holds 0 changes the fit only where
     a partner's sigma moves by more than 5 %.  flagged: wrong_sign_terms(models, fits) when the
-    caller has it already (None: computed here)."""
+    caller has it already (None: computed here); covered: {channel: coefficients} a prior already
+    holds the model without (with_pitch_damping_prior), left out of the mixture."""
     from aerosid.identification.regression import with_added_covariance
     from aerosid.identification.structure_uncertainty import structure_covariance
     from aerosid.identification.term_report import _is_constant, damping_signal, interval_includes_zero
@@ -343,6 +349,9 @@ def _with_structure_uncertainty(fd: pd.DataFrame, signals: dict, models: dict, f
         exprs = [t.expression for t in models[ch].terms]
         holds0 = np.array([interval_includes_zero(*ci[j]) and not _is_constant(exprs[j]) for j in range(len(est))])
         signs = np.array([fit.names[j] in flagged for j in range(len(est))])
+        skip = np.array([fit.names[j] in (covered or {}).get(ch, ()) for j in range(len(est))])
+        holds0 &= ~skip
+        signs &= ~skip
         weak = holds0 | signs
         if not weak.any():
             out[ch] = fit
@@ -414,10 +423,10 @@ def identify(flight_data: pd.DataFrame, vehicle: Vehicle, models: dict[str, Chan
     for ch, text in control_noise_warnings(fd, models, skip=identities).items():
         if ch in fits:
             fits[ch] = replace(fits[ch], warnings=tuple(fits[ch].warnings) + (text,))
-    fits = with_pitch_damping_prior(vehicle, models, fits)
-    wrong_sign = wrong_sign_terms(models, fits)
+    wrong_sign = wrong_sign_terms(models, fits)  # on the flight's own estimates, before the prior
+    fits, covered = with_pitch_damping_prior(vehicle, models, fits)
     if STRUCTURE_UNCERTAINTY:
-        fits = _with_structure_uncertainty(fd, signals, models, fits, wrong_sign)
+        fits = _with_structure_uncertainty(fd, signals, models, fits, wrong_sign, covered)
     refs = AeroModel.preflight(vehicle).linear_truth() if vehicle.preflight is not None else {}
     window = (float(fd["mach"].min()), float(fd["mach"].max()))
     crb = identification_bounds(fd, vehicle, models, fits, identities)

@@ -110,10 +110,11 @@ WRONG_SIGN_NOTE = ("came out positive at 95 %, a sign damping seldom has (suspec
                    "its collinearity; see the channel's warnings)")
 
 
-def damping_signal(channel: str, expression: str) -> str | None:
-    """The rate signal of a pure damping term of `channel` (DAMPING_TERMS): an expression that
-    reads that signal alone, proportional to it with a positive factor (``q_hat``, ``(q_hat)``,
-    ``2*q_hat``); None for anything else."""
+def damping_term(channel: str, expression: str) -> tuple[str, float] | None:
+    """(rate signal, factor) of a pure damping term of `channel` (DAMPING_TERMS): an expression
+    that reads that signal alone, proportional to it with a positive factor (``q_hat`` -> 1,
+    ``(q_hat)`` -> 1, ``2*q_hat`` -> 2: the derivative is the coefficient times the factor);
+    None for anything else."""
     x = np.array([-2.0, -0.5, 1.0, 3.0])
     for rate in DAMPING_TERMS.get(str(channel), ()):
         try:
@@ -122,8 +123,14 @@ def damping_signal(channel: str, expression: str) -> str | None:
             continue
         ratio = np.asarray(y, float) / x
         if np.all(np.isfinite(ratio)) and ratio[0] > 0 and np.ptp(ratio) <= 1e-12 * abs(ratio[0]):
-            return rate
+            return rate, float(ratio[0])
     return None
+
+
+def damping_signal(channel: str, expression: str) -> str | None:
+    """The rate signal of a pure damping term of `channel` (:func:`damping_term`), or None."""
+    found = damping_term(channel, expression)
+    return None if found is None else found[0]
 
 
 def wrong_sign_damping(channel: str, expression: str, ci_low) -> bool:

@@ -209,6 +209,8 @@ def check_value(where: str, value, spec: Key) -> None:
             raise VehicleKeyError(where, f"must be {spec.describe()}, got {value!r}")
     elif kind == "switch":
         if not isinstance(value, bool):
+            if not isinstance(value, list) or (spec.length is not None and len(value) != spec.length):
+                raise VehicleKeyError(where, f"must be {spec.describe()}, got {str(value)[:80]}")
             check_value(where, value, Key("vector", spec.lo, spec.hi, spec.length, positive=spec.positive))
     elif kind in ("vector", "range"):
         n = 2 if kind == "range" else spec.length

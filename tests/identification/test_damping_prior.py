@@ -10,8 +10,8 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from aerosid.identification.damping_prior import PRIOR_SHARE, PRIOR_SHARE_SIGMA, pure_term_index, split_update
-from aerosid.identification.identify import with_pitch_damping_prior
+from aerosid.identification.damping_prior import PRIOR_SHARE, PRIOR_SHARE_SIGMA, damping_terms, split_update
+from aerosid.identification.identify import _with_structure_uncertainty, with_pitch_damping_prior
 from aerosid.identification.regression import fit_linear
 from aerosid.modelling.models import default_models
 from aerosid.vehicles.vehicle import VehicleError, load_vehicle
@@ -45,7 +45,9 @@ def test_the_update_is_the_least_squares_with_the_prior_as_one_more_weighted_row
     # the same posterior from the normal equations of the data and the prior row r theta = 0
     r = np.zeros(4)
     r[IQ], r[IA] = -PRIOR_SHARE, 1 - PRIOR_SHARE
-    s2 = (PRIOR_SHARE_SIGMA * (theta[IQ] + theta[IA])) ** 2
+    w = np.zeros(4)
+    w[IQ] = w[IA] = 1.0
+    s2 = PRIOR_SHARE_SIGMA ** 2 * ((theta[IQ] + theta[IA]) ** 2 + w @ P @ w)
     info = np.linalg.inv(P) + np.outer(r, r) / s2
     post_cov = np.linalg.inv(info)
     post = post_cov @ (np.linalg.inv(P) @ theta)
@@ -99,15 +101,80 @@ def test_posterior_intervals_cover_a_truth_inside_the_prior_and_are_narrower_whe
     assert np.median(ratio) < 0.5
 
 
-def test_not_finite_or_no_damping_gives_no_update():
+def test_the_share_sigma_is_the_delta_method_of_the_fit_covariance():
+    """Against a Monte-Carlo of the share over draws from the fit's own Gaussian."""
+    rng = np.random.default_rng(4)
+    X = _design(rng, 4000, 2.0)
+    y = X @ TRUTH + 2e-3 * rng.normal(size=len(X))
+    theta, P = _ols(X, y)
+    upd = split_update(theta, P, IQ, IA)
+    draws = rng.multivariate_normal(theta, P, size=20000)
+    shares = draws[:, IA] / (draws[:, IQ] + draws[:, IA])
+    assert abs(upd.share_data - theta[IA] / (theta[IQ] + theta[IA])) < 1e-12
+    assert abs(upd.share_data_sigma / np.std(shares) - 1) < 0.05
+
+
+def test_a_term_written_with_a_factor_takes_the_prior_on_the_derivative_not_the_coefficient():
+    """A model term 2*q_hat has C_m,q = 2 x its coefficient: the posterior share is the same as
+    with q_hat."""
+    rng = np.random.default_rng(5)
+    X = _design(rng, 800, 0.002)
+    y = X @ TRUTH + 5e-3 * rng.normal(size=len(X))
+    theta, P = _ols(X, y)
+    X2 = X.copy()
+    X2[:, IQ] *= 2.0
+    theta2, P2 = _ols(X2, y)
+    a = split_update(theta, P, IQ, IA)
+    b = split_update(theta2, P2, IQ, IA, factors=(2.0, 1.0))
+    assert abs(a.share_post - b.share_post) < 1e-9
+    assert np.allclose(b.estimate[IQ] * 2.0, a.estimate[IQ]) and np.allclose(b.estimate[IA], a.estimate[IA])
+
+
+def test_a_term_without_an_estimate_is_kept_and_the_others_take_the_prior():
+    rng = np.random.default_rng(6)
+    X = _design(rng, 800, 0.002)
+    y = X @ TRUTH + 5e-3 * rng.normal(size=len(X))
+    theta, P = _ols(X, y)
+    th5 = np.append(theta, np.nan)
+    P5 = np.full((5, 5), np.nan)
+    P5[:4, :4] = P
+    full = split_update(theta, P, IQ, IA)
+    part = split_update(th5, P5, IQ, IA)
+    assert np.allclose(part.estimate[:4], full.estimate) and np.isnan(part.estimate[4])
+    assert np.allclose(part.cov[:4, :4], full.cov) and np.isnan(part.cov[4, 4])
+
+
+def test_a_damping_estimated_as_zero_still_gets_a_prior_as_wide_as_its_own_uncertainty():
+    """The prior's variance is sigma_f^2 (D^2 + var D): at D = 0 the split is held to +- sigma_f x
+    sigma_D, not pinned (the posterior variance of r theta is the harmonic combination)."""
+    rng = np.random.default_rng(8)
+    X = _design(rng, 800, 0.002)
+    y = X @ TRUTH + 5e-3 * rng.normal(size=len(X))
+    theta, P = _ols(X, y)
+    theta = theta.copy()
+    theta[IA] = -theta[IQ]  # an estimated damping of exactly zero
+    upd = split_update(theta, P, IQ, IA)
+    w = np.zeros(4)
+    w[IQ] = w[IA] = 1.0
+    r = np.zeros(4)
+    r[IQ], r[IA] = -PRIOR_SHARE, 1 - PRIOR_SHARE
+    s2 = PRIOR_SHARE_SIGMA ** 2 * (w @ P @ w)
+    v = r @ P @ r
+    assert np.isclose(r @ upd.cov @ r, v * s2 / (v + s2), rtol=1e-8)
+    assert r @ upd.cov @ r > 0.5 * s2
+
+
+def test_why_the_prior_cannot_be_applied_is_said():
     P = np.eye(4)
-    assert split_update(np.array([0.0, -1.0, 5.0, -5.0]), P, IQ, IA) is None
-    assert split_update(np.array([0.0, np.nan, -5.0, -5.0]), P, IQ, IA) is None
+    assert "zero" in split_update(np.array([0.0, -1.0, 5.0, -5.0]), np.diag([1.0, 1.0, 0.0, 0.0]), IQ, IA)
+    assert "finite" in split_update(np.array([0.0, -1.0, np.nan, -5.0]), P, IQ, IA)
 
 
-def test_pure_terms_are_found_by_expression():
-    assert pure_term_index(["1", "alpha", "q_hat", "alpha_dot_hat"], "q_hat") == 2
-    assert pure_term_index(["1", "alpha*q_hat", "alpha_dot_hat"], "q_hat") is None
+def test_the_damping_terms_are_found_in_any_spelling_and_only_when_pure():
+    assert damping_terms(["1", "alpha", "q_hat", "alpha_dot_hat"]) == ((2, 1.0), (3, 1.0))
+    assert damping_terms(["1", "(q_hat)", "2*alpha_dot_hat"]) == ((1, 1.0), (2, 2.0))
+    assert damping_terms(["1", "alpha*q_hat", "alpha_dot_hat"]) is None
+    assert damping_terms(["1", "q_hat", "q_hat/2", "alpha_dot_hat"]) is None  # two q_hat terms: which?
 
 
 @pytest.fixture(scope="module")
@@ -129,7 +196,8 @@ def c172x_fits():
 
 def test_identify_combines_the_prior_into_an_aircrafts_pitch_fit_and_says_so(c172x_fits):
     veh, models, fits = c172x_fits
-    out = with_pitch_damping_prior(veh, models, fits)
+    out, covered = with_pitch_damping_prior(veh, models, fits)
+    assert covered == {"Cm": ("Cm_q", "Cm_alpha_dot")}
     f = out["Cm"]
     assert not np.allclose(f.estimate, fits["Cm"].estimate)
     assert any("pitch-damping split" in w for w in f.warnings)
@@ -138,14 +206,45 @@ def test_identify_combines_the_prior_into_an_aircrafts_pitch_fit_and_says_so(c17
 
 def test_the_vehicle_file_sets_its_own_prior_or_turns_it_off(c172x_fits):
     veh, models, fits = c172x_fits
-    assert with_pitch_damping_prior(replace(veh, pitch_damping_split=False), models, fits)["Cm"] is fits["Cm"]
-    own = with_pitch_damping_prior(replace(veh, pitch_damping_split=(0.0, 0.05)), models, fits)["Cm"]
+    assert with_pitch_damping_prior(replace(veh, pitch_damping_split=False), models, fits) == (fits, {})
+    own = with_pitch_damping_prior(replace(veh, pitch_damping_split=(0.0, 0.05)), models, fits)[0]["Cm"]
     names = list(own.names)
     share = own.estimate[names.index("Cm_alpha_dot")] / (own.estimate[names.index("Cm_q")]
                                                          + own.estimate[names.index("Cm_alpha_dot")])
     assert abs(share) < 0.1
     # a finned vehicle (no downwash lag to speak of) is left alone
-    assert with_pitch_damping_prior(replace(veh, vehicle_class="finned"), models, fits)["Cm"] is fits["Cm"]
+    assert with_pitch_damping_prior(replace(veh, vehicle_class="finned"), models, fits) == (fits, {})
+
+
+def test_the_structure_mixture_leaves_the_split_to_the_prior(c172x_fits):
+    """C_m,alpha_dot's posterior interval holds 0 here; the mixture would add the model without it
+    (f = 0), which the prior already holds: covered terms are left out, so C_m,alpha keeps the
+    posterior's sigma."""
+    veh, models, fits = c172x_fits
+    post, covered = with_pitch_damping_prior(veh, models, fits)
+    f = post["Cm"]
+    ia, jalpha = f.names.index("Cm_alpha_dot"), f.names.index("Cm_alpha")
+    lo, hi = f.conf_int()[ia]
+    assert lo < 0 < hi
+    rng = np.random.default_rng(7)  # the fixture's regressors again, as the mixture refits them
+    n = 1500
+    X = _design(rng, n, 0.002)
+    cols = np.column_stack([X[:, 0], X[:, 1], 0.01 * rng.normal(size=n), X[:, 2], X[:, 3],
+                            np.abs(0.01 * rng.normal(size=n))])
+    y = cols @ np.array([0.01, -0.8, -1.2, -14.0, -6.0, 0.0]) + 5e-3 * rng.normal(size=n)
+    fd = pd.DataFrame({"Cm": y})
+
+    class _Model:  # regressors() of the fixture's design
+        terms = models["Cm"].terms
+
+        @staticmethod
+        def regressors(_signals):
+            return pd.DataFrame(cols, columns=models["Cm"].names)
+
+    mixed = _with_structure_uncertainty(fd, {}, {"Cm": _Model}, post, {}, None)["Cm"]
+    kept = _with_structure_uncertainty(fd, {}, {"Cm": _Model}, post, {}, covered)["Cm"]
+    assert mixed.std_error[jalpha] > 1.5 * f.std_error[jalpha]  # what double counting would do
+    assert kept.std_error[jalpha] == f.std_error[jalpha]
 
 
 def test_a_bad_setting_in_the_vehicle_file_names_the_key(tmp_path):
