@@ -35,10 +35,11 @@ When
 Only for an aircraft (``vehicle_class = "aircraft"``) whose C_m model has one pure q_hat and one
 pure alpha_dot_hat term (``q_hat``, ``(q_hat)``, ``2*q_hat`` ...).  The model-structure mixture
 (aerosid.identification.structure_uncertainty) then leaves these two terms alone: the prior
-already holds the model without C_m,alpha_dot (f = 0, at 1.25 sigma).  A flight that determines the split keeps its own answer (its
-precision outweighs the prior's); one that does not gets the prior's share and an interval that
-says so.  A vehicle file sets its own prior (``[estimation] pitch_damping_split = [f0, sigma]``)
-or turns it off (``pitch_damping_split = false``).  Measured on the generalisation bench and on
+already holds the model without C_m,alpha_dot (f = 0, at 1.25 sigma).  A flight that determines
+the split keeps its own answer (its precision outweighs the prior's); one that does not gets the
+prior's share and an interval that says so.  A vehicle file sets its own prior
+(``[estimation] pitch_damping_split = [f0, sigma]``) or turns it off (``pitch_damping_split =
+false``).  Measured on the generalisation bench and on
 aircraft the project had never flown: docs/estimation.md.
 
 numpy only.
