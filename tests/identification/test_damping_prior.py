@@ -36,17 +36,28 @@ def _ols(X, y):
     return theta, s2 * np.linalg.inv(X.T @ X)
 
 
-def test_the_update_is_the_least_squares_with_the_prior_as_one_more_weighted_row():
-    rng = np.random.default_rng(0)
-    X = _design(rng, 800, 0.05)
-    y = X @ TRUTH + 2e-3 * rng.normal(size=len(X))
-    theta, P = _ols(X, y)
-    upd = split_update(theta, P, IQ, IA)
-    # the same posterior from the normal equations of the data and the prior row r theta = 0
-    r = np.zeros(4)
-    r[IQ], r[IA] = -PRIOR_SHARE, 1 - PRIOR_SHARE
+def _flight(seed: int, n: int, collinear: float, noise: float, truth=TRUTH):
+    """(X, theta, P): a seeded design, the response with white noise, its least-squares fit."""
+    rng = np.random.default_rng(seed)
+    X = _design(rng, n, collinear)
+    theta, P = _ols(X, X @ truth + noise * rng.normal(size=n))
+    return X, theta, P
+
+
+def _damping_and_split_rows():
+    """(w, r): the total damping C_m,q + C_m,alpha_dot and the prior's row, on the 4 columns."""
     w = np.zeros(4)
     w[IQ] = w[IA] = 1.0
+    r = np.zeros(4)
+    r[IQ], r[IA] = -PRIOR_SHARE, 1 - PRIOR_SHARE
+    return w, r
+
+
+def test_the_update_is_the_least_squares_with_the_prior_as_one_more_weighted_row():
+    X, theta, P = _flight(0, 800, 0.05, 2e-3)
+    upd = split_update(theta, P, IQ, IA)
+    # the same posterior from the normal equations of the data and the prior row r theta = 0
+    w, r = _damping_and_split_rows()
     s2 = PRIOR_SHARE_SIGMA ** 2 * ((theta[IQ] + theta[IA]) ** 2 + w @ P @ w)
     info = np.linalg.inv(P) + np.outer(r, r) / s2
     post_cov = np.linalg.inv(info)
@@ -58,13 +69,9 @@ def test_the_update_is_the_least_squares_with_the_prior_as_one_more_weighted_row
 
 
 def test_the_prior_constrains_the_split_not_the_total_damping():
-    rng = np.random.default_rng(1)
-    X = _design(rng, 800, 0.002)
-    y = X @ TRUTH + 5e-3 * rng.normal(size=len(X))
-    theta, P = _ols(X, y)
+    X, theta, P = _flight(1, 800, 0.002, 5e-3)
     upd = split_update(theta, P, IQ, IA)
-    w = np.zeros(4)
-    w[IQ] = w[IA] = 1.0
+    w, _ = _damping_and_split_rows()
     sd_damping = np.sqrt(w @ P @ w)
     # the total moves by a small part of its own sigma; the split moves to the prior's share
     assert abs(w @ upd.estimate - w @ theta) < 0.5 * sd_damping
@@ -103,12 +110,9 @@ def test_posterior_intervals_cover_a_truth_inside_the_prior_and_are_narrower_whe
 
 def test_the_share_sigma_is_the_delta_method_of_the_fit_covariance():
     """Against a Monte-Carlo of the share over draws from the fit's own Gaussian."""
-    rng = np.random.default_rng(4)
-    X = _design(rng, 4000, 2.0)
-    y = X @ TRUTH + 2e-3 * rng.normal(size=len(X))
-    theta, P = _ols(X, y)
+    X, theta, P = _flight(4, 4000, 2.0, 2e-3)
     upd = split_update(theta, P, IQ, IA)
-    draws = rng.multivariate_normal(theta, P, size=20000)
+    draws = np.random.default_rng(40).multivariate_normal(theta, P, size=20000)
     shares = draws[:, IA] / (draws[:, IQ] + draws[:, IA])
     assert abs(upd.share_data - theta[IA] / (theta[IQ] + theta[IA])) < 1e-12
     assert abs(upd.share_data_sigma / np.std(shares) - 1) < 0.05
@@ -117,12 +121,11 @@ def test_the_share_sigma_is_the_delta_method_of_the_fit_covariance():
 def test_a_term_written_with_a_factor_takes_the_prior_on_the_derivative_not_the_coefficient():
     """A model term 2*q_hat has C_m,q = 2 x its coefficient: the posterior share is the same as
     with q_hat."""
-    rng = np.random.default_rng(5)
-    X = _design(rng, 800, 0.002)
-    y = X @ TRUTH + 5e-3 * rng.normal(size=len(X))
+    X, _, _ = _flight(5, 800, 0.002, 5e-3)
+    y = X @ TRUTH + 5e-3 * np.random.default_rng(50).normal(size=len(X))
     theta, P = _ols(X, y)
     X2 = X.copy()
-    X2[:, IQ] *= 2.0
+    X2[:, IQ] *= 2.0  # the same flight, its q column written as 2*q_hat
     theta2, P2 = _ols(X2, y)
     a = split_update(theta, P, IQ, IA)
     b = split_update(theta2, P2, IQ, IA, factors=(2.0, 1.0))
@@ -131,10 +134,7 @@ def test_a_term_written_with_a_factor_takes_the_prior_on_the_derivative_not_the_
 
 
 def test_a_term_without_an_estimate_is_kept_and_the_others_take_the_prior():
-    rng = np.random.default_rng(6)
-    X = _design(rng, 800, 0.002)
-    y = X @ TRUTH + 5e-3 * rng.normal(size=len(X))
-    theta, P = _ols(X, y)
+    X, theta, P = _flight(6, 800, 0.002, 5e-3)
     th5 = np.append(theta, np.nan)
     P5 = np.full((5, 5), np.nan)
     P5[:4, :4] = P
@@ -147,17 +147,11 @@ def test_a_term_without_an_estimate_is_kept_and_the_others_take_the_prior():
 def test_a_damping_estimated_as_zero_still_gets_a_prior_as_wide_as_its_own_uncertainty():
     """The prior's variance is sigma_f^2 (D^2 + var D): at D = 0 the split is held to +- sigma_f x
     sigma_D, not pinned (the posterior variance of r theta is the harmonic combination)."""
-    rng = np.random.default_rng(8)
-    X = _design(rng, 800, 0.002)
-    y = X @ TRUTH + 5e-3 * rng.normal(size=len(X))
-    theta, P = _ols(X, y)
+    X, theta, P = _flight(8, 800, 0.002, 5e-3)
     theta = theta.copy()
     theta[IA] = -theta[IQ]  # an estimated damping of exactly zero
     upd = split_update(theta, P, IQ, IA)
-    w = np.zeros(4)
-    w[IQ] = w[IA] = 1.0
-    r = np.zeros(4)
-    r[IQ], r[IA] = -PRIOR_SHARE, 1 - PRIOR_SHARE
+    w, r = _damping_and_split_rows()
     s2 = PRIOR_SHARE_SIGMA ** 2 * (w @ P @ w)
     v = r @ P @ r
     assert np.isclose(r @ upd.cov @ r, v * s2 / (v + s2), rtol=1e-8)
