@@ -34,8 +34,9 @@ When
 ----
 Only for an aircraft (``vehicle_class = "aircraft"``) whose C_m model has one pure q_hat and one
 pure alpha_dot_hat term (``q_hat``, ``(q_hat)``, ``2*q_hat`` ...).  The model-structure mixture
-(aerosid.identification.structure_uncertainty) then leaves these two terms alone: the prior
-already holds the model without C_m,alpha_dot (f = 0, at 1.25 sigma).  A flight that determines
+(aerosid.identification.structure_uncertainty) then leaves their "interval holds 0" to the prior,
+which already holds the model without C_m,alpha_dot (f = 0, at 1.25 sigma); a C_m,alpha_dot of the
+wrong sign that the flight pins down still takes the mixture.  A flight that determines
 the split keeps its own answer (its precision outweighs the prior's); one that does not gets the
 prior's share and an interval that says so.  A vehicle file sets its own prior
 (``[estimation] pitch_damping_split = [f0, sigma]``) or turns it off (``pitch_damping_split =
@@ -110,8 +111,10 @@ def split_update(estimate, cov, iq: int, ia: int, share: float = PRIOR_SHARE,
         return "C_m,q or C_m,alpha_dot has no finite estimate"
     sub = np.flatnonzero(ok)
     Ps = P[np.ix_(sub, sub)]
-    if not np.all(np.isfinite(Ps)) or share_sigma <= 0:
+    if not np.all(np.isfinite(Ps)):
         return "the fit's covariance is not finite"
+    if not share_sigma > 0:
+        return f"the prior's sigma {share_sigma!r} is not positive"
     jq, ja = int(np.searchsorted(sub, iq)), int(np.searchsorted(sub, ia))
     th = theta[sub]
     w = np.zeros(sub.size)

@@ -333,7 +333,8 @@ def _with_structure_uncertainty(fd: pd.DataFrame, signals: dict, models: dict, f
     it (it then holds 0 unless t > ~9.9); a term whose interval holds 0 changes the fit only where
     a partner's sigma moves by more than 5 %.  flagged: wrong_sign_terms(models, fits) when the
     caller has it already (None: computed here); covered: {channel: coefficients} a prior already
-    holds the model without (with_pitch_damping_prior), left out of the mixture."""
+    holds the model without (with_pitch_damping_prior): their "interval holds 0" is left to it (a
+    wrong-sign mark still takes the mixture)."""
     from aerosid.identification.regression import with_added_covariance
     from aerosid.identification.structure_uncertainty import structure_covariance
     from aerosid.identification.term_report import _is_constant, damping_signal, interval_includes_zero
@@ -349,9 +350,9 @@ def _with_structure_uncertainty(fd: pd.DataFrame, signals: dict, models: dict, f
         exprs = [t.expression for t in models[ch].terms]
         holds0 = np.array([interval_includes_zero(*ci[j]) and not _is_constant(exprs[j]) for j in range(len(est))])
         signs = np.array([fit.names[j] in flagged for j in range(len(est))])
-        skip = np.array([fit.names[j] in (covered or {}).get(ch, ()) for j in range(len(est))])
-        holds0 &= ~skip
-        signs &= ~skip
+        # a prior that holds the model without the term covers "its interval holds 0"; a damping of
+        # the wrong sign the flight pins down is the data's, and keeps its mixture
+        holds0 &= ~np.array([fit.names[j] in (covered or {}).get(ch, ()) for j in range(len(est))])
         weak = holds0 | signs
         if not weak.any():
             out[ch] = fit

@@ -130,18 +130,22 @@ def test_a_term_written_with_a_factor_takes_the_prior_on_the_derivative_not_the_
     a = split_update(theta, P, IQ, IA)
     b = split_update(theta2, P2, IQ, IA, factors=(2.0, 1.0))
     assert abs(a.share_post - b.share_post) < 1e-9
+    assert np.isclose(a.share_data_sigma, b.share_data_sigma, rtol=1e-9)
     assert np.allclose(b.estimate[IQ] * 2.0, a.estimate[IQ]) and np.allclose(b.estimate[IA], a.estimate[IA])
 
 
 def test_a_term_without_an_estimate_is_kept_and_the_others_take_the_prior():
+    """The term without an estimate comes first, so the damping terms' places in the finite block
+    differ from their places in the fit."""
     X, theta, P = _flight(6, 800, 0.002, 5e-3)
-    th5 = np.append(theta, np.nan)
+    th5 = np.insert(theta, 0, np.nan)
     P5 = np.full((5, 5), np.nan)
-    P5[:4, :4] = P
+    P5[1:, 1:] = P
     full = split_update(theta, P, IQ, IA)
-    part = split_update(th5, P5, IQ, IA)
-    assert np.allclose(part.estimate[:4], full.estimate) and np.isnan(part.estimate[4])
-    assert np.allclose(part.cov[:4, :4], full.cov) and np.isnan(part.cov[4, 4])
+    part = split_update(th5, P5, IQ + 1, IA + 1)
+    assert np.allclose(part.estimate[1:], full.estimate) and np.isnan(part.estimate[0])
+    assert np.allclose(part.cov[1:, 1:], full.cov) and np.isnan(part.cov[0, 0])
+    assert np.isclose(part.share_post, full.share_post)
 
 
 def test_a_damping_estimated_as_zero_still_gets_a_prior_as_wide_as_its_own_uncertainty():
@@ -171,21 +175,36 @@ def test_the_damping_terms_are_found_in_any_spelling_and_only_when_pure():
     assert damping_terms(["1", "q_hat", "q_hat/2", "alpha_dot_hat"]) is None  # two q_hat terms: which?
 
 
-@pytest.fixture(scope="module")
-def c172x_fits():
-    """c172x's default models and a C_m fit on a synthetic design with its six terms."""
+def _c172x_flight(alpha_dot_truth: float = -6.0, seed: int = 7, collinear: float = 0.002):
+    """(vehicle, models, fits, regressors, response): c172x's default models and a C_m fit on a
+    synthetic design with its six terms (C_m,alpha_dot's truth and independence as given)."""
     veh = load_vehicle("c172x")
     models = default_models(veh)
-    rng = np.random.default_rng(7)
+    rng = np.random.default_rng(seed)
     n = 1500
-    X = _design(rng, n, 0.002)
+    X = _design(rng, n, collinear)
     cols = np.column_stack([X[:, 0], X[:, 1], 0.01 * rng.normal(size=n), X[:, 2], X[:, 3],
                             np.abs(0.01 * rng.normal(size=n))])
     names = models["Cm"].names
-    truth = np.array([0.01, -0.8, -1.2, -14.0, -6.0, 0.0])
+    truth = np.array([0.01, -0.8, -1.2, -14.0, alpha_dot_truth, 0.0])
     y = cols @ truth + 5e-3 * rng.normal(size=n)
     fit = fit_linear(y, pd.DataFrame(cols, columns=names), names=names, channel="Cm", cov="ols")
-    return veh, models, {"Cm": fit}
+    return veh, models, {"Cm": fit}, cols, y
+
+
+class _Fixed:
+    """A channel model whose regressors() are given columns (what the mixture refits)."""
+
+    def __init__(self, model, cols):
+        self.terms, self._frame = model.terms, pd.DataFrame(cols, columns=model.names)
+
+    def regressors(self, _signals):
+        return self._frame
+
+
+@pytest.fixture(scope="module")
+def c172x_fits():
+    return _c172x_flight()[:3]
 
 
 def test_identify_combines_the_prior_into_an_aircrafts_pitch_fit_and_says_so(c172x_fits):
@@ -210,35 +229,37 @@ def test_the_vehicle_file_sets_its_own_prior_or_turns_it_off(c172x_fits):
     assert with_pitch_damping_prior(replace(veh, vehicle_class="finned"), models, fits) == (fits, {})
 
 
-def test_the_structure_mixture_leaves_the_split_to_the_prior(c172x_fits):
+def test_the_structure_mixture_leaves_the_split_to_the_prior():
     """C_m,alpha_dot's posterior interval holds 0 here; the mixture would add the model without it
     (f = 0), which the prior already holds: covered terms are left out, so C_m,alpha keeps the
     posterior's sigma."""
-    veh, models, fits = c172x_fits
+    veh, models, fits, cols, y = _c172x_flight()
     post, covered = with_pitch_damping_prior(veh, models, fits)
     f = post["Cm"]
     ia, jalpha = f.names.index("Cm_alpha_dot"), f.names.index("Cm_alpha")
     lo, hi = f.conf_int()[ia]
     assert lo < 0 < hi
-    rng = np.random.default_rng(7)  # the fixture's regressors again, as the mixture refits them
-    n = 1500
-    X = _design(rng, n, 0.002)
-    cols = np.column_stack([X[:, 0], X[:, 1], 0.01 * rng.normal(size=n), X[:, 2], X[:, 3],
-                            np.abs(0.01 * rng.normal(size=n))])
-    y = cols @ np.array([0.01, -0.8, -1.2, -14.0, -6.0, 0.0]) + 5e-3 * rng.normal(size=n)
-    fd = pd.DataFrame({"Cm": y})
-
-    class _Model:  # regressors() of the fixture's design
-        terms = models["Cm"].terms
-
-        @staticmethod
-        def regressors(_signals):
-            return pd.DataFrame(cols, columns=models["Cm"].names)
-
-    mixed = _with_structure_uncertainty(fd, {}, {"Cm": _Model}, post, {}, None)["Cm"]
-    kept = _with_structure_uncertainty(fd, {}, {"Cm": _Model}, post, {}, covered)["Cm"]
+    fd, fixed = pd.DataFrame({"Cm": y}), {"Cm": _Fixed(models["Cm"], cols)}
+    mixed = _with_structure_uncertainty(fd, {}, fixed, post, {}, None)["Cm"]
+    kept = _with_structure_uncertainty(fd, {}, fixed, post, {}, covered)["Cm"]
     assert mixed.std_error[jalpha] > 1.5 * f.std_error[jalpha]  # what double counting would do
     assert kept.std_error[jalpha] == f.std_error[jalpha]
+
+
+def test_a_wrong_sign_alpha_dot_the_flight_pins_down_still_takes_the_mixture():
+    """A positive C_m,alpha_dot the flight determines (the vane-noise case of pa28) is the data's,
+    not the prior's: its wrong-sign mark (taken before the prior) still widens its partners."""
+    from aerosid.identification.identify import wrong_sign_terms
+
+    veh, models, fits, cols, y = _c172x_flight(alpha_dot_truth=+5.0, seed=9, collinear=0.1)
+    flagged = wrong_sign_terms(models, fits)
+    assert "Cm_alpha_dot" in flagged
+    post, covered = with_pitch_damping_prior(veh, models, fits)
+    fd, fixed = pd.DataFrame({"Cm": y}), {"Cm": _Fixed(models["Cm"], cols)}
+    out = _with_structure_uncertainty(fd, {}, fixed, post, flagged, covered)["Cm"]
+    j = out.names.index("Cm_alpha")
+    assert out.std_error[j] > 1.5 * post["Cm"].std_error[j]
+    assert any("positive at 95 %" in w for w in out.warnings)
 
 
 def test_a_bad_setting_in_the_vehicle_file_names_the_key(tmp_path):
@@ -246,7 +267,7 @@ def test_a_bad_setting_in_the_vehicle_file_names_the_key(tmp_path):
     assert "\n[estimation]" not in text
     p = tmp_path / "vehicle.toml"
     p.write_text(text + "\n[estimation]\npitch_damping_split = [0.25]\n")
-    with pytest.raises(VehicleError, match="pitch_damping_split"):
+    with pytest.raises(VehicleError, match="pitch_damping_split.*true, false or 2 numbers"):
         load_vehicle(p)
     p.write_text(text + "\n[estimation]\npitch_damping_split = [0.25, 0.0]\n")
     with pytest.raises(VehicleError, match="pitch_damping_split.*sigma must be positive"):
