@@ -35,9 +35,6 @@ from aerosid.identification.band import low_pass_runs, signal_band_edge_hz  # no
 from aerosid.identification.derivatives import smooth_derivative  # noqa: E402
 from aerosid.modelling.models import BAND_DERIVATIVE_CYCLES, ChannelModel, default_models  # noqa: E402
 
-SIGNALS = dict(alpha="alpha_rad", beta="beta_rad", mach="mach", V="V_m_s", qbar="qbar_pa", delta_p="delta_p_rad",
-               delta_r="delta_r_rad", delta_y="delta_y_rad", p="p_rad_s", q="q_rad_s", r="r_rad_s", p_hat="p_hat",
-               q_hat="q_hat", r_hat="r_hat", alpha_dot_hat="alpha_dot_hat", t="t_s")
 VARIANTS = ("jsbsim", "central", "savgol", "none")
 
 
@@ -53,8 +50,7 @@ def one(vehicle_name: str, seed: int = 0) -> dict:
     def lp(x):
         return low_pass_runs(np.asarray(x, float), 1.0 / dt, band, [slice(0, len(x))])
 
-    sig = {k: (T[c].to_numpy() if k == "t" else lp(T[c].to_numpy())) for k, c in SIGNALS.items()}
-    sig["beta_dot_hat"] = np.zeros(len(t))
+    sig = {k: (x if k == "t" else lp(x)) for k, x in B.truth_signals(T).items()}
     y = lp((T["Cm"] + T["Cm_prop"]).to_numpy())
     model = default_models(vehicle)["Cm"]
     half = 1.0 / dt  # the filter's start and end transients left out (1 s)

@@ -141,6 +141,18 @@ def estimate_of(ident, name: str) -> tuple[float, float]:
     return float(tab.loc[key, "estimate"]), float(tab.loc[key, "std_error"])
 
 
+#: The model signals of a JSBSim truth frame: signal name -> truth column (beta_dot_hat is zero).
+TRUTH_SIGNALS = dict(alpha="alpha_rad", beta="beta_rad", mach="mach", V="V_m_s", qbar="qbar_pa",
+                     delta_p="delta_p_rad", delta_r="delta_r_rad", delta_y="delta_y_rad", p="p_rad_s", q="q_rad_s",
+                     r="r_rad_s", p_hat="p_hat", q_hat="q_hat", r_hat="r_hat", alpha_dot_hat="alpha_dot_hat",
+                     t="t_s")
+
+
+def truth_signals(T) -> dict[str, np.ndarray]:
+    """The model signals (aerosid.modelling.models.SIGNALS names) of a JSBSim truth frame."""
+    return {**{k: T[c].to_numpy() for k, c in TRUTH_SIGNALS.items()}, "beta_dot_hat": np.zeros(len(T))}
+
+
 def oracle(flight, vehicle) -> dict[str, float]:
     """The vehicle's default models fitted to the noise-free truth (what the sensors see:
     aerodynamic + propulsive coefficients) with the true regressors (aircraft only)."""
@@ -149,12 +161,7 @@ def oracle(flight, vehicle) -> dict[str, float]:
     T = flight.truth
     if vehicle.vehicle_class != "aircraft" or "q_hat" not in T:
         return {}
-    sig = {"alpha": T["alpha_rad"].to_numpy(), "beta": T["beta_rad"].to_numpy(), "mach": T["mach"].to_numpy(),
-           "V": T["V_m_s"].to_numpy(), "qbar": T["qbar_pa"].to_numpy(), "delta_p": T["delta_p_rad"].to_numpy(),
-           "delta_r": T["delta_r_rad"].to_numpy(), "delta_y": T["delta_y_rad"].to_numpy(),
-           "p": T["p_rad_s"].to_numpy(), "q": T["q_rad_s"].to_numpy(), "r": T["r_rad_s"].to_numpy(),
-           "p_hat": T["p_hat"].to_numpy(), "q_hat": T["q_hat"].to_numpy(), "r_hat": T["r_hat"].to_numpy(),
-           "alpha_dot_hat": T["alpha_dot_hat"].to_numpy(), "beta_dot_hat": np.zeros(len(T)), "t": T["t_s"].to_numpy()}
+    sig = truth_signals(T)
     target = {"Cm": T["Cm"] + T["Cm_prop"], "CN": T["CN"] - T["CZ_prop"], "Cl": T["Cl"] + T["Cl_prop"],
               "Cn": T["Cn"] + T["Cn_prop"]}
     out = {}

@@ -52,6 +52,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from aerosid.identification.term_report import damping_term
+
 #: Prior share of the pitch damping carried by C_m,alpha_dot (the tail's downwash lag), f0.
 PRIOR_SHARE = 0.25
 #: Its 1-sigma: 95 % interval -0.15 ... 0.65 (tailless/canard layouts to a doubled downwash ratio).
@@ -141,8 +143,6 @@ def split_update(estimate, cov, iq: int, ia: int, share: float = PRIOR_SHARE,
 def damping_terms(expressions) -> tuple[tuple[int, float], tuple[int, float]] | None:
     """((position, factor) of the C_m model's pure q_hat term, same of its pure alpha_dot_hat term),
     or None unless it has exactly one of each (aerosid.identification.term_report.damping_term)."""
-    from aerosid.identification.term_report import damping_term
-
     found: dict[str, list] = {"q_hat": [], "alpha_dot_hat": []}
     for j, e in enumerate(expressions):
         t = damping_term("Cm", e)

@@ -286,7 +286,7 @@ def with_pitch_damping_prior(vehicle: Vehicle, models: dict, fits: dict) -> tupl
     whose prior is not off (``[estimation] pitch_damping_split = false``) and whose C_m model has
     one pure q_hat and one pure alpha_dot_hat term; when the prior cannot be applied to such a
     fit, its warnings say why."""
-    setting = getattr(vehicle, "pitch_damping_split", True)
+    setting = vehicle.pitch_damping_split
     fit = fits.get("Cm")
     if vehicle.vehicle_class != "aircraft" or setting is False or fit is None or "Cm" not in models:
         return fits, {}
