@@ -7,6 +7,7 @@ plain least squares) vs F, printed per degree as the seed does.
 from __future__ import annotations
 
 import math
+import os
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -278,6 +279,26 @@ def mach_window_mask(mach: np.ndarray, reference: float, half_width: float | Non
 #: T37 -1.4 -> -5.2 %, F4N -4.6 -> -6.1 %, pa28 -4.0 -> -4.6 %; docs/estimation.md).
 GYRO_EIV_DEFAULT = False
 
+#: Antithetic pairs of re-draws of the parametric check of the estimator's own bias
+#: (aerosid.identification.bias_check): the flight's regressors taken as the truth, the sensors'
+#: known noise drawn again (+ and -), the whole fit repeated; the mean change is the estimator's
+#: bias at this flight's noise, counted in sigma.  It costs 2 x BIAS_PAIRS fits more.
+BIAS_PAIRS = 3
+#: Environment variable that overrides BIAS_PAIRS (0: no check, e.g. a quick look at a flight;
+#: the test suite sets it outside the check's own tests).
+BIAS_PAIRS_ENV = "AEROSID_BIAS_PAIRS"
+
+
+def default_bias_pairs() -> int:
+    """BIAS_PAIRS, or the environment's AEROSID_BIAS_PAIRS (a non-negative integer)."""
+    text = os.environ.get(BIAS_PAIRS_ENV, "").strip()
+    if not text:
+        return BIAS_PAIRS
+    if not text.isdigit():
+        raise ValueError(f"{BIAS_PAIRS_ENV}={text!r}: give a non-negative integer (0 turns the estimator-bias "
+                         "check off; aerosid.identification.bias_check)")
+    return int(text)
+
 
 def with_pitch_damping_prior(vehicle: Vehicle, models: dict, fits: dict) -> tuple[dict, dict[str, tuple[str, ...]]]:
     """(fits, covered): the fits with the prior on an aircraft's pitch-damping split combined into
@@ -383,13 +404,16 @@ def _with_structure_uncertainty(fd: pd.DataFrame, signals: dict, models: dict, f
 
 def identify(flight_data: pd.DataFrame, vehicle: Vehicle, models: dict[str, ChannelModel] | None = None,
              mach_half_width: float | None = 0.5, cov: str = "morelli_klein",
-             gyro_eiv: bool = GYRO_EIV_DEFAULT) -> Identification:
+             gyro_eiv: bool = GYRO_EIV_DEFAULT, bias_pairs: int | None = None) -> Identification:
     """Fit every channel's model on the samples with |M - M_ref| <= mach_half_width.
     Pooled flights (several values of ``flight``: manoeuvres of one aircraft) are fitted
     together; the coloured-residual correction treats each flight as its own record
     (``fit_linear(groups=...)``).  The estimates are corrected for the noise in the angles
     and (gyro_eiv, the flight data's eiv_sigma_p/q/r columns) in the rates by SIMEX
-    (aerosid.identification.eiv); gyro_eiv=False (the default, GYRO_EIV_DEFAULT): the angles only."""
+    (aerosid.identification.eiv); gyro_eiv=False (the default, GYRO_EIV_DEFAULT): the angles only.
+    bias_pairs: +/- pairs of re-draws of the parametric check of the estimator's own bias at this
+    flight's noise, counted in the sigma (aerosid.identification.bias_check); 0: no check; None:
+    default_bias_pairs()."""
     models = models or default_models(vehicle)
     fd = flight_data.sort_values(["flight", "t_s"], kind="stable").reset_index(drop=True)
     mask = mach_window_mask(fd["mach"].to_numpy(), vehicle.mach_reference, mach_half_width)
@@ -403,6 +427,27 @@ def identify(flight_data: pd.DataFrame, vehicle: Vehicle, models: dict[str, Chan
                   "run, fit or diagnose)")
         raise ValueError(f"only {len(fd)} samples inside {window}: too few to fit the models, at least "
                          f"{MIN_FIT_SAMPLES} are needed ({span})")
+    identities = tuple(ch for ch in INVERSION_CHANNELS if ch in models) if vehicle.air_data_source != "vanes" else ()
+    fits, wrong_sign = _fit_window(fd, vehicle, models, cov, gyro_eiv)
+    bias_pairs = default_bias_pairs() if bias_pairs is None else bias_pairs
+    if bias_pairs > 0:
+        from aerosid.identification.bias_check import with_estimator_bias
+
+        fits = with_estimator_bias(fd, vehicle, models, fits,
+                                   lambda f: _fit_window(f, vehicle, models, cov, gyro_eiv)[0], bias_pairs,
+                                   skip=identities)
+    refs = AeroModel.preflight(vehicle).linear_truth() if vehicle.preflight is not None else {}
+    window = (float(fd["mach"].min()), float(fd["mach"].max()))
+    crb = identification_bounds(fd, vehicle, models, fits, identities)
+    return Identification(fits, dict(models), refs, len(fd), window, identities, vehicle.envelope.preflight_factor,
+                          crb.std, wrong_sign)
+
+
+def _fit_window(fd: pd.DataFrame, vehicle: Vehicle, models: dict, cov: str,
+                gyro_eiv: bool) -> tuple[dict[str, LinearFit], dict[str, float]]:
+    """(fits, wrong-sign damping terms) of every channel on the window's flight data ``fd``
+    (sorted, inside the Mach window): least squares with the coloured-residual sigma, the
+    errors-in-variables correction, the pitch-damping prior and the model-structure mixture."""
     signals = vehicle_signals(fd, vehicle)
     flights = fd["flight"].astype(str).to_numpy()
     fits: dict[str, LinearFit] = {}
@@ -428,8 +473,4 @@ def identify(flight_data: pd.DataFrame, vehicle: Vehicle, models: dict[str, Chan
     fits, covered = with_pitch_damping_prior(vehicle, models, fits)
     if STRUCTURE_UNCERTAINTY:
         fits = _with_structure_uncertainty(fd, signals, models, fits, wrong_sign, covered)
-    refs = AeroModel.preflight(vehicle).linear_truth() if vehicle.preflight is not None else {}
-    window = (float(fd["mach"].min()), float(fd["mach"].max()))
-    crb = identification_bounds(fd, vehicle, models, fits, identities)
-    return Identification(fits, dict(models), refs, len(fd), window, identities, vehicle.envelope.preflight_factor,
-                          crb.std, wrong_sign)
+    return fits, wrong_sign
