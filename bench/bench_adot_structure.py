@@ -32,7 +32,7 @@ def one(job):
         ms = dict(base)
         if tag == "no_adot":
             ms["Cm"] = ChannelModel("Cm", tuple(t for t in base["Cm"].terms if t.coefficient != "Cm_alpha_dot"))
-        ident = identify(fd, v, ms)
+        ident = identify(fd, v, ms, bias_pairs=0)  # as recorded
         row = {"vehicle": veh, "seed": seed, "variant": tag}
         tab = ident.table().set_index("coefficient")
         if "Cm_alpha_dot" in tab.index:

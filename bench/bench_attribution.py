@@ -139,7 +139,7 @@ def simex_cm(fd: pd.DataFrame, vehicle) -> dict:
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        ident = identify(fd, vehicle, {"Cm": default_models(vehicle)["Cm"]})
+        ident = identify(fd, vehicle, {"Cm": default_models(vehicle)["Cm"]}, bias_pairs=0)  # as recorded
     fit = ident.fits["Cm"]
     return dict(zip(fit.names, np.asarray(fit.estimate, float)))
 

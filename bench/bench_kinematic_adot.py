@@ -46,7 +46,7 @@ def estimates(fd: pd.DataFrame, vehicle) -> dict:
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        ident = identify(fd, vehicle, {"Cm": default_models(vehicle)["Cm"]})
+        ident = identify(fd, vehicle, {"Cm": default_models(vehicle)["Cm"]}, bias_pairs=0)  # as recorded
     fit = ident.fits["Cm"]
     est = dict(zip(fit.names, np.asarray(fit.estimate, float)))
     se = dict(zip(fit.names, np.asarray(fit.std_error, float)))

@@ -15,7 +15,7 @@ from prefect import task
 
 from aerosid.identification.flight_data import (build_flight_data_segments, build_pooled_flight_data, flight_air_data_sources,
                                  load_database)
-from aerosid.identification.identify import identify
+from aerosid.identification.identify import default_bias_pairs, identify
 from aerosid.modelling.models import default_models, load_models
 from aerosid.preprocess import PreprocessParams, preprocess
 from aerosid.preprocess.segments import plan_segments
@@ -162,14 +162,17 @@ def regression_task(flight_data_paths: list[str], run_dir: str, ctx: StageContex
                     model_spec: str | None, mach_half_width: float | None) -> dict:
     out = Path(run_dir) / "coefficients.parquet"
     inputs = list(flight_data_paths) + ([model_spec] if model_spec else []) + vehicle_files(vehicle)
-    params = {"vehicle": vehicle, "mach_half_width": mach_half_width, "model_spec": bool(model_spec)}
+    # the estimator-bias check's setting changes the sigma: part of the cache key and the lineage
+    pairs = default_bias_pairs()
+    params = {"vehicle": vehicle, "mach_half_width": mach_half_width, "model_spec": bool(model_spec),
+              "bias_pairs": pairs}
 
     def produce() -> Produced:
         veh = load_vehicle(vehicle)
         fd = pd.concat([read_validated(p, FlightData) for p in flight_data_paths], ignore_index=True)
         models = load_models(model_spec, base=default_models(veh), mach_reference=veh.mach_reference) \
             if model_spec else None
-        ident = identify(fd, veh, models, mach_half_width)
+        ident = identify(fd, veh, models, mach_half_width, bias_pairs=pairs)
         return Produced(ident.table(), {"aerosid.summary": ident.summary()}, rows_in=len(fd), note=ident.summary())
 
     return execute("regression", ctx, inputs, out, params, Coefficients, produce)

@@ -3,37 +3,41 @@
 Why.  The regressors carry the sensors' noise: the vanes' in alpha and beta (and in alpha-dot,
 their derivative), the gyros' in p, q, r and the surfaces' in the controls.  SIMEX
 (aerosid.identification.eiv) corrects the angles' part by extrapolating to no noise.  Where the
-noise is a large share of a regressor it under-corrects (its quadratic extrapolant saturates), and
-the rates' and surfaces' parts are not corrected at all.  The reported sigma know none of this.
-Measured on seven JSBSim aircraft the project had never flown (five seeds each,
+noise is a large share of a regressor it under-corrects (its quadratic extrapolant saturates), the
+rates' part is corrected only on request (gyro_eiv) and the surfaces' not at all.  The reported
+sigma know none of this.  Measured on seven JSBSim aircraft the project had never flown (five seeds each,
 bench/results/generalisation_unseen3.md): Boeing314 C_m,delta -13 % with 40 % coverage, the
 minisgs model glider C_l,p -11 % with 0 % (its roll mode is so fast that p follows the aileron,
 VIF 114, and the surfaces' 0.05 deg of noise alone moves C_l,p by 7 %).
 
 What.  A parametric bootstrap of the whole fit, on the flight itself:
 
-1. the bootstrap world's truth is this flight's own regressors and the reported estimates: its
-   response is X theta + (y - X theta_OLS), the model's part with the reported coefficients plus
+1. the bootstrap world's truth is this flight's own regressors and the SIMEX-corrected estimates:
+   its response is X theta + (y - X theta_OLS), the model's part with those coefficients plus
    the flight's own least-squares residual (orthogonal to X);
-2. every noise the flight data know is drawn again and added through the low-pass the measured
-   signal went through (sensor_noise): the angles' (as SIMEX takes them), the gyros'
-   (eiv_sigma_p/q/r_rad_s) and the surfaces' (eiv_sigma_delta_*_rad, the mixed controls');
-3. the same estimator is run on it (least squares, SIMEX with the same draws, the pitch-damping
-   prior, the model-structure mixture), once with +noise and once with -noise: the change that is
-   odd in the noise (the draw's own scatter) cancels in the pair's mean, the bias is even in it;
+2. every regressor noise the flight data carry a sigma for is drawn again and added through the
+   low-pass the measured signal went through (sensor_noise): the angles' (as SIMEX takes them),
+   the gyros' (eiv_sigma_p/q/r_rad_s) and the surfaces' (eiv_sigma_delta_*_rad, the mixed
+   controls'); the response keeps the flight's own residual (its noise is not drawn again);
+3. the same estimator is run on it (least squares and SIMEX with the same draws), once with +noise
+   and once with -noise: the change that is odd in the noise (the draw's own scatter) cancels in
+   the pair's mean, the bias is even in it.  The pitch-damping prior and the model-structure
+   mixture are left out: the world's coefficients are the estimator's before them, and a prior
+   applied again to a world that holds it would count as bias;
 4. over PAIRS pairs the mean change b of every estimate is the estimator's bias in that world,
    and the spread s of the pairs' means its Monte-Carlo error.
 
 The bias is NOT subtracted: the bootstrap world's regressors are noisier than the real ones (they
 carry the real noise as if it were signal), and on pogo-jsbsim, whose estimates are accurate, the
-correction added +6 % to C_m,alpha.  It is counted in the sigma as a possible systematic error:
-the covariance takes b_s b_s^T, b_s = b sqrt(max(1 - s^2 / (PAIRS b^2), 0)) (b^2 less its own
+correction added +6 % to C_m,alpha.  It is counted in the reported (posterior) sigma as a possible
+systematic error: the covariance takes b_s b_s^T, b_s = b sqrt(max(1 - s^2 / (PAIRS b^2), 0)) (b^2 less its own
 Monte-Carlo variance, so a bias that is only noise adds little).  A flight whose noise is small
 next to its excitation gets almost nothing; the warnings name the estimates whose sigma it moves by
-more than 5 %.
+more than NAMED_GROWTH (5 %).
 """
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -73,15 +77,15 @@ class EstimatorBias:
         return b * keep
 
     def summary(self, estimate: np.ndarray | None = None) -> str:
-        """'Cm_alpha -0.012 (+- 0.003), ...': the bias and its Monte-Carlo sigma (in % of the
-        estimate when given)."""
+        """'Cm_alpha -0.012 (+- 0.003), ...': the measured bias b (before its Monte-Carlo variance
+        is taken off) and its Monte-Carlo sigma, in % of the estimate when given."""
         parts = []
         for j, name in enumerate(self.names):
             b, s = float(self.bias[j]), float(self.spread[j]) / np.sqrt(max(self.pairs, 1))
             if estimate is not None and np.isfinite(estimate[j]) and estimate[j] != 0:
-                parts.append(f"{name} {100 * b / abs(estimate[j]):+.1f} % (+- {100 * s / abs(estimate[j]):.1f})")
+                parts.append(f"{name} {100 * b / abs(estimate[j]):+.1f} % +- {100 * s / abs(estimate[j]):.1f} %")
             else:
-                parts.append(f"{name} {b:+.3g} (+- {s:.2g})")
+                parts.append(f"{name} {b:+.3g} +- {s:.2g}")
         return ", ".join(parts)
 
 
@@ -126,12 +130,14 @@ def estimator_bias(fd: pd.DataFrame, regressors: Callable[[pd.DataFrame], dict[s
     are all finite (a fit that left rows out is not checked).
 
     fd: the fit's flight data (sorted and windowed as fitted); regressors: frame -> {channel: (n, k)
-    regressor matrix}; fits: the reported fits; refit: frame -> {channel: LinearFit}, the same
-    estimator with the same SIMEX draws (common random numbers: SIMEX's own Monte-Carlo error then
+    regressor matrix}; fits: the estimator's fits, whose estimates are the world's coefficients;
+    refit: frame -> {channel: LinearFit}, the same estimator with the same SIMEX draws (common random numbers: SIMEX's own Monte-Carlo error then
     cancels in the change); angle_sigma, angle_cutoff_hz: the angles' noise as SIMEX takes it
     (None: exact).  Each of the ``pairs`` draws is used twice, as +noise and -noise (antithetic: the
     change that is odd in the noise, the draw's own scatter, cancels in the pair's mean; the bias is
     even in it)."""
+    if pairs < 2:
+        raise ValueError(f"pairs = {pairs}: at least 2 (the bias's Monte-Carlo error is their spread)")
     X = regressors(fd)
     world = fd.copy()
     chans = [ch for ch, fit in fits.items() if ch in X and np.all(np.isfinite(fit.estimate))
@@ -150,44 +156,49 @@ def estimator_bias(fd: pd.DataFrame, regressors: Callable[[pd.DataFrame], dict[s
     out = {}
     for ch in chans:
         D = np.array(changes[ch])
-        spread = D.std(axis=0, ddof=1) if pairs > 1 else np.full(D.shape[1], np.inf)
+        spread = D.std(axis=0, ddof=1)
         out[ch] = EstimatorBias(tuple(fits[ch].names), D.mean(axis=0), spread, pairs)
     return out
 
 
 def with_bias_counted(fit: LinearFit, check: EstimatorBias) -> LinearFit:
     """The fit with the check's counted bias added to its covariance (outer product: a combination
-    such as C_m,q + C_m,alpha_dot takes the bias of the sum), and a warning naming the estimates
-    whose sigma it moves by more than NAMED_GROWTH (none named: the note still says the check ran)."""
+    such as C_m,q + C_m,alpha_dot takes the bias of the sum) and, where it moves a sigma by more
+    than NAMED_GROWTH, a warning naming those estimates with the measured bias (no warning else:
+    the run's parameters record that the check ran)."""
     b = check.counted
     extra = np.outer(b, b)
     se_new = np.sqrt(np.clip(np.diag(np.asarray(fit.cov, float) + extra), 0.0, None))
     with np.errstate(divide="ignore", invalid="ignore"):
         grown = [j for j in range(len(b)) if se_new[j] > NAMED_GROWTH * fit.std_error[j]]
-    head = (f"the estimator's own bias at this flight's noise (aerosid.identification.bias_check: the flight's "
-            f"regressors taken as the truth, the sensors' known noise drawn again as {check.pairs} +/- pairs, "
-            "the fit repeated)")
-    if grown:
-        sub = EstimatorBias(tuple(check.names[j] for j in grown), check.bias[grown], check.spread[grown], check.pairs)
-        note = (f"{head}: {sub.summary(np.asarray(fit.estimate)[grown])} of the estimate; counted in sigma (a "
-                "systematic error the residuals do not show: a larger manoeuvre, or less noisy sensors, shrink it)")
-    else:
-        note = f"{head}: below 5 % of every sigma"
+    if not grown:
+        out = with_added_covariance(fit, extra, "")
+        return dataclasses.replace(out, warnings=tuple(fit.warnings))
+    sub = EstimatorBias(tuple(check.names[j] for j in grown), check.bias[grown], check.spread[grown], check.pairs)
+    note = (f"the estimator's own bias at this flight's noise (aerosid.identification.bias_check: the flight's "
+            f"regressors taken as the truth, the sensors' known noise drawn again in {check.pairs} +/- pairs, "
+            f"the fit repeated): {sub.summary(np.asarray(fit.estimate)[grown])}; counted in sigma, less its "
+            "Monte-Carlo variance (a systematic error the residuals do not show: a larger manoeuvre, or less "
+            "noisy sensors, shrink it)")
     return with_added_covariance(fit, extra, note)
 
 
-def with_estimator_bias(fd: pd.DataFrame, vehicle, models: dict, fits: dict[str, LinearFit],
-                        refit: Callable[[pd.DataFrame], dict[str, LinearFit]], pairs: int,
-                        skip: tuple[str, ...] = ()) -> dict[str, LinearFit]:
-    """The fits with the check counted (with_bias_counted), channels in ``skip`` (identities by
-    construction) and channels with a non-finite estimate left as they are."""
+def with_estimator_bias(fd: pd.DataFrame, vehicle, models: dict, corrected: dict[str, LinearFit],
+                        fits: dict[str, LinearFit], refit: Callable[[pd.DataFrame], dict[str, LinearFit]],
+                        pairs: int, skip: tuple[str, ...] = ()) -> dict[str, LinearFit]:
+    """``fits`` with the check counted (with_bias_counted).  The check runs on the estimator that
+    gave ``corrected`` (refit: frame -> the same fits), whose estimates are the world's
+    coefficients; ``fits`` are the reported fits built on them (the prior and the model-structure
+    mixture, which the check leaves out: a prior applied to a world whose coefficients already hold
+    it would count as bias).  Channels in ``skip`` (identities by construction) and channels the
+    check cannot run on (estimator_bias) are left as they are."""
     from aerosid.identification.identify import angle_cutoff_hz, angle_eiv_sigma
     from aerosid.modelling.models import vehicle_signals
 
     def regressors(frame: pd.DataFrame) -> dict[str, np.ndarray]:
         sig = vehicle_signals(frame, vehicle)
-        return {ch: models[ch].regressors(sig).to_numpy(float) for ch in fits if ch not in skip}
+        return {ch: models[ch].regressors(sig).to_numpy(float) for ch in corrected if ch not in skip}
 
-    checks = estimator_bias(fd, regressors, {ch: f for ch, f in fits.items() if ch not in skip}, refit,
+    checks = estimator_bias(fd, regressors, {ch: f for ch, f in corrected.items() if ch not in skip}, refit,
                             angle_eiv_sigma(fd, vehicle), angle_cutoff_hz(fd, vehicle), pairs)
     return {ch: with_bias_counted(f, checks[ch]) if ch in checks else f for ch, f in fits.items()}

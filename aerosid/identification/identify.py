@@ -44,6 +44,8 @@ class Identification:
     #: coefficient -> its t before the model-structure mixture, for the damping terms whose whole 95 %
     #: interval was positive (term_report.wrong_sign_damping); the table's ``wrong_sign`` column
     wrong_sign: dict = field(default_factory=dict)
+    #: +/- pairs of the estimator-bias check counted in the sigma (aerosid.identification.bias_check); 0: none
+    bias_pairs: int = 0
 
     def table(self, alpha: float = 0.05) -> pd.DataFrame:
         """The coefficients.parquet rows.  A channel in ``identities`` is reported without
@@ -427,27 +429,32 @@ def identify(flight_data: pd.DataFrame, vehicle: Vehicle, models: dict[str, Chan
                   "run, fit or diagnose)")
         raise ValueError(f"only {len(fd)} samples inside {window}: too few to fit the models, at least "
                          f"{MIN_FIT_SAMPLES} are needed ({span})")
-    identities = tuple(ch for ch in INVERSION_CHANNELS if ch in models) if vehicle.air_data_source != "vanes" else ()
-    fits, wrong_sign = _fit_window(fd, vehicle, models, cov, gyro_eiv)
     bias_pairs = default_bias_pairs() if bias_pairs is None else bias_pairs
-    if bias_pairs > 0:
+    if bias_pairs == 1 or bias_pairs < 0:
+        raise ValueError(f"bias_pairs = {bias_pairs}: 0 (no check) or at least 2 (the check's Monte-Carlo error "
+                         "needs the spread of two pairs; aerosid.identification.bias_check)")
+    identities = tuple(ch for ch in INVERSION_CHANNELS if ch in models) if vehicle.air_data_source != "vanes" else ()
+    corrected = _corrected_fits(fd, vehicle, models, cov, gyro_eiv)
+    fits, wrong_sign = _with_prior_and_structure(fd, vehicle, models, corrected)
+    if bias_pairs:
         from aerosid.identification.bias_check import with_estimator_bias
 
-        fits = with_estimator_bias(fd, vehicle, models, fits,
-                                   lambda f: _fit_window(f, vehicle, models, cov, gyro_eiv)[0], bias_pairs,
+        # the check runs on the estimator before the prior: the world's coefficients are the flight's
+        # own, so a prior applied again would count as bias (its own spread is in the posterior)
+        fits = with_estimator_bias(fd, vehicle, models, corrected, fits,
+                                   lambda f: _corrected_fits(f, vehicle, models, cov, gyro_eiv), bias_pairs,
                                    skip=identities)
     refs = AeroModel.preflight(vehicle).linear_truth() if vehicle.preflight is not None else {}
     window = (float(fd["mach"].min()), float(fd["mach"].max()))
     crb = identification_bounds(fd, vehicle, models, fits, identities)
     return Identification(fits, dict(models), refs, len(fd), window, identities, vehicle.envelope.preflight_factor,
-                          crb.std, wrong_sign)
+                          crb.std, wrong_sign, bias_pairs)
 
 
-def _fit_window(fd: pd.DataFrame, vehicle: Vehicle, models: dict, cov: str,
-                gyro_eiv: bool) -> tuple[dict[str, LinearFit], dict[str, float]]:
-    """(fits, wrong-sign damping terms) of every channel on the window's flight data ``fd``
-    (sorted, inside the Mach window): least squares with the coloured-residual sigma, the
-    errors-in-variables correction, the pitch-damping prior and the model-structure mixture."""
+def _corrected_fits(fd: pd.DataFrame, vehicle: Vehicle, models: dict, cov: str,
+                    gyro_eiv: bool) -> dict[str, LinearFit]:
+    """Every channel's fit on the window's flight data ``fd`` (sorted, inside the Mach window):
+    least squares with the coloured-residual sigma and the errors-in-variables correction."""
     signals = vehicle_signals(fd, vehicle)
     flights = fd["flight"].astype(str).to_numpy()
     fits: dict[str, LinearFit] = {}
@@ -465,12 +472,19 @@ def _fit_window(fd: pd.DataFrame, vehicle: Vehicle, models: dict, cov: str,
     rate_sigma = _rate_eiv_sigma(fd) if gyro_eiv and band_limited else None
     if sigma is not None or rate_sigma is not None:
         fits = _eiv_corrected(fd, vehicle, models, fits, sigma, rate_sigma)
+    return fits
+
+
+def _with_prior_and_structure(fd: pd.DataFrame, vehicle: Vehicle, models: dict,
+                              fits: dict[str, LinearFit]) -> tuple[dict[str, LinearFit], dict[str, float]]:
+    """(fits, wrong-sign damping terms): the corrected fits with the controls' noise warnings, the
+    pitch-damping prior and the model-structure mixture."""
     identities = tuple(ch for ch in INVERSION_CHANNELS if ch in fits) if vehicle.air_data_source != "vanes" else ()
     for ch, text in control_noise_warnings(fd, models, skip=identities).items():
         if ch in fits:
-            fits[ch] = replace(fits[ch], warnings=tuple(fits[ch].warnings) + (text,))
+            fits = {**fits, ch: replace(fits[ch], warnings=tuple(fits[ch].warnings) + (text,))}
     wrong_sign = wrong_sign_terms(models, fits)  # on the flight's own estimates, before the prior
     fits, covered = with_pitch_damping_prior(vehicle, models, fits)
     if STRUCTURE_UNCERTAINTY:
-        fits = _with_structure_uncertainty(fd, signals, models, fits, wrong_sign, covered)
+        fits = _with_structure_uncertainty(fd, vehicle_signals(fd, vehicle), models, fits, wrong_sign, covered)
     return fits, wrong_sign

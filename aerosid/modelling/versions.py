@@ -354,6 +354,8 @@ def _metrics(ident, vehicle: str, note: str, parent: str | None, version: str, m
         }
     return {"version": version, "parent": parent, "note": note,
             "created_utc": datetime.now(timezone.utc).isoformat(timespec="seconds"), "vehicle": vehicle,
+            # +/- pairs of the estimator-bias check in the sigma (aerosid.identification.bias_check; 0: none)
+            "bias_check_pairs": int(getattr(ident, "bias_pairs", 0)),
             "n_samples": int(ident.n_samples), "mach_window": list(ident.mach_window),
             "mach_half_width": mach_half_width, "channels": chans}
 
