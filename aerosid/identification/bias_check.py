@@ -77,8 +77,8 @@ class EstimatorBias:
         return b * keep
 
     def summary(self, estimate: np.ndarray | None = None) -> str:
-        """'Cm_alpha -0.012 (+- 0.003), ...': the measured bias b (before its Monte-Carlo variance
-        is taken off) and its Monte-Carlo sigma, in % of the estimate when given."""
+        """'Cm_alpha +2.1 % +- 0.4 %, ...': the measured bias b (before its Monte-Carlo variance
+        is taken off) and its Monte-Carlo sigma, in % of the estimate when given (else as numbers)."""
         parts = []
         for j, name in enumerate(self.names):
             b, s = float(self.bias[j]), float(self.spread[j]) / np.sqrt(max(self.pairs, 1))
