@@ -142,7 +142,7 @@ def analyse(name: str, seed: int, cache: str) -> dict:
     true_term[ch] = models[ch].with_term(parse_term(f"{h['coefficient']} = {h['term']}", ch))
     variants["true_term"] = true_term
     for tag, ms in variants.items():
-        ident = identify(fd, vehicle, ms)
+        ident = identify(fd, vehicle, ms, bias_pairs=0)  # as recorded
         fit = ident.fits[ch]
         X = ident.models[ch].regressors(true_signals).to_numpy(float)
         ok = np.all(np.isfinite(X), axis=1)

@@ -89,10 +89,10 @@ def one(job: tuple[str, float, int, float]) -> dict:
     row["size_ratio_rms"] = _rms(contribution) / _rms(true_c)
     row["floor"] = _rms(measured - true_c)
 
-    base = identify(fd, vehicle, default_models())
+    base = identify(fd, vehicle, default_models(), bias_pairs=0)  # as recorded
     models = dict(default_models())
     models[ch] = models[ch].with_term(parse_term(eff.name, ch))
-    aug = identify(fd, vehicle, models)
+    aug = identify(fd, vehicle, models, bias_pairs=0)  # as recorded
     true_signals = signals_from_flight_data(flight_data_from_truth(truth.reset_index(drop=True), NO_NOISE),
                                             vehicle.d_m)
     for tag, ident in (("before", base), ("after", aug)):

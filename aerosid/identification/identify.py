@@ -292,13 +292,16 @@ BIAS_PAIRS_ENV = "AEROSID_BIAS_PAIRS"
 
 
 def default_bias_pairs() -> int:
-    """BIAS_PAIRS, or the environment's AEROSID_BIAS_PAIRS (a non-negative integer)."""
+    """BIAS_PAIRS, or the environment's AEROSID_BIAS_PAIRS (0, or an integer >= 2)."""
     text = os.environ.get(BIAS_PAIRS_ENV, "").strip()
     if not text:
         return BIAS_PAIRS
     if not text.isdigit():
         raise ValueError(f"{BIAS_PAIRS_ENV}={text!r}: give a non-negative integer (0 turns the estimator-bias "
                          "check off; aerosid.identification.bias_check)")
+    if int(text) == 1:
+        raise ValueError(f"{BIAS_PAIRS_ENV}=1: 0 (no check) or at least 2 (the check's Monte-Carlo error is the "
+                         "spread of its pairs; aerosid.identification.bias_check)")
     return int(text)
 
 
