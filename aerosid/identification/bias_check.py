@@ -33,7 +33,8 @@ correction added +6 % to C_m,alpha.  It is counted in the reported (posterior) s
 systematic error: the covariance takes b_s b_s^T, b_s = b sqrt(max(1 - s^2 / (PAIRS b^2), 0)) (b^2 less its own
 Monte-Carlo variance, so a bias that is only noise adds little).  A flight whose noise is small
 next to its excitation gets almost nothing; the warnings name the estimates whose sigma it moves by
-more than NAMED_GROWTH (5 %).
+more than NAMED_GROWTH (5 %).  Where a prior follows (C_m of an aircraft), counting b in full is
+conservative: the prior passes only part of the pre-prior estimator's bias into its posterior.
 """
 from __future__ import annotations
 
