@@ -38,7 +38,6 @@ conservative: the prior passes only part of the pre-prior estimator's bias into 
 """
 from __future__ import annotations
 
-import dataclasses
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -173,8 +172,7 @@ def with_bias_counted(fit: LinearFit, check: EstimatorBias) -> LinearFit:
     with np.errstate(divide="ignore", invalid="ignore"):
         grown = [j for j in range(len(b)) if se_new[j] > NAMED_GROWTH * fit.std_error[j]]
     if not grown:
-        out = with_added_covariance(fit, extra, "")
-        return dataclasses.replace(out, warnings=tuple(fit.warnings))
+        return with_added_covariance(fit, extra, "")
     sub = EstimatorBias(tuple(check.names[j] for j in grown), check.bias[grown], check.spread[grown], check.pairs)
     note = (f"the estimator's own bias at this flight's noise (aerosid.identification.bias_check: the flight's "
             f"regressors taken as the truth, the sensors' known noise drawn again in {check.pairs} +/- pairs, "

@@ -299,10 +299,15 @@ def default_bias_pairs() -> int:
     if not text.isdigit():
         raise ValueError(f"{BIAS_PAIRS_ENV}={text!r}: give a non-negative integer (0 turns the estimator-bias "
                          "check off; aerosid.identification.bias_check)")
-    if int(text) == 1:
-        raise ValueError(f"{BIAS_PAIRS_ENV}=1: 0 (no check) or at least 2 (the check's Monte-Carlo error is the "
+    return _checked_bias_pairs(int(text), f"{BIAS_PAIRS_ENV}=")
+
+
+def _checked_bias_pairs(pairs: int, where: str = "bias_pairs = ") -> int:
+    """pairs if it is 0 (no check) or >= 2, else a ValueError naming ``where`` it came from."""
+    if pairs == 1 or pairs < 0:
+        raise ValueError(f"{where}{pairs}: 0 (no check) or at least 2 (the check's Monte-Carlo error is the "
                          "spread of its pairs; aerosid.identification.bias_check)")
-    return int(text)
+    return pairs
 
 
 def with_pitch_damping_prior(vehicle: Vehicle, models: dict, fits: dict) -> tuple[dict, dict[str, tuple[str, ...]]]:
@@ -432,13 +437,11 @@ def identify(flight_data: pd.DataFrame, vehicle: Vehicle, models: dict[str, Chan
                   "run, fit or diagnose)")
         raise ValueError(f"only {len(fd)} samples inside {window}: too few to fit the models, at least "
                          f"{MIN_FIT_SAMPLES} are needed ({span})")
-    bias_pairs = default_bias_pairs() if bias_pairs is None else bias_pairs
-    if bias_pairs == 1 or bias_pairs < 0:
-        raise ValueError(f"bias_pairs = {bias_pairs}: 0 (no check) or at least 2 (the check's Monte-Carlo error "
-                         "needs the spread of two pairs; aerosid.identification.bias_check)")
+    bias_pairs = default_bias_pairs() if bias_pairs is None else _checked_bias_pairs(bias_pairs)
     identities = tuple(ch for ch in INVERSION_CHANNELS if ch in models) if vehicle.air_data_source != "vanes" else ()
-    corrected = _corrected_fits(fd, vehicle, models, cov, gyro_eiv)
-    fits, wrong_sign = _with_prior_and_structure(fd, vehicle, models, corrected)
+    signals = vehicle_signals(fd, vehicle)
+    corrected = _corrected_fits(fd, vehicle, models, cov, gyro_eiv, signals)
+    fits, wrong_sign = _with_prior_and_structure(fd, signals, vehicle, models, corrected, identities)
     if bias_pairs:
         from aerosid.identification.bias_check import with_estimator_bias
 
@@ -454,11 +457,12 @@ def identify(flight_data: pd.DataFrame, vehicle: Vehicle, models: dict[str, Chan
                           crb.std, wrong_sign, bias_pairs)
 
 
-def _corrected_fits(fd: pd.DataFrame, vehicle: Vehicle, models: dict, cov: str,
-                    gyro_eiv: bool) -> dict[str, LinearFit]:
+def _corrected_fits(fd: pd.DataFrame, vehicle: Vehicle, models: dict, cov: str, gyro_eiv: bool,
+                    signals: dict | None = None) -> dict[str, LinearFit]:
     """Every channel's fit on the window's flight data ``fd`` (sorted, inside the Mach window):
-    least squares with the coloured-residual sigma and the errors-in-variables correction."""
-    signals = vehicle_signals(fd, vehicle)
+    least squares with the coloured-residual sigma and the errors-in-variables correction.
+    signals: vehicle_signals(fd, vehicle) when the caller has them (None: computed here)."""
+    signals = vehicle_signals(fd, vehicle) if signals is None else signals
     flights = fd["flight"].astype(str).to_numpy()
     fits: dict[str, LinearFit] = {}
     for channel, model in models.items():
@@ -478,16 +482,16 @@ def _corrected_fits(fd: pd.DataFrame, vehicle: Vehicle, models: dict, cov: str,
     return fits
 
 
-def _with_prior_and_structure(fd: pd.DataFrame, vehicle: Vehicle, models: dict,
-                              fits: dict[str, LinearFit]) -> tuple[dict[str, LinearFit], dict[str, float]]:
-    """(fits, wrong-sign damping terms): the corrected fits with the controls' noise warnings, the
-    pitch-damping prior and the model-structure mixture."""
-    identities = tuple(ch for ch in INVERSION_CHANNELS if ch in fits) if vehicle.air_data_source != "vanes" else ()
+def _with_prior_and_structure(fd: pd.DataFrame, signals: dict, vehicle: Vehicle, models: dict,
+                              fits: dict[str, LinearFit], identities: tuple[str, ...]
+                              ) -> tuple[dict[str, LinearFit], dict[str, float]]:
+    """(fits, wrong-sign damping terms): the corrected fits with the controls' noise warnings (not on
+    the ``identities``), the pitch-damping prior and the model-structure mixture."""
     for ch, text in control_noise_warnings(fd, models, skip=identities).items():
         if ch in fits:
             fits = {**fits, ch: replace(fits[ch], warnings=tuple(fits[ch].warnings) + (text,))}
     wrong_sign = wrong_sign_terms(models, fits)  # on the flight's own estimates, before the prior
     fits, covered = with_pitch_damping_prior(vehicle, models, fits)
     if STRUCTURE_UNCERTAINTY:
-        fits = _with_structure_uncertainty(fd, vehicle_signals(fd, vehicle), models, fits, wrong_sign, covered)
+        fits = _with_structure_uncertainty(fd, signals, models, fits, wrong_sign, covered)
     return fits, wrong_sign

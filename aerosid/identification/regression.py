@@ -202,7 +202,8 @@ def with_added_covariance(fit: LinearFit, extra_cov: np.ndarray, note: str) -> L
 def with_posterior(fit: LinearFit, estimate: np.ndarray, cov: np.ndarray, note: str) -> LinearFit:
     """The same fit with the estimate and covariance of a posterior (the fit combined with prior
     information, e.g. aerosid.identification.damping_prior); sigma, t, p and the intervals follow;
-    the plain OLS sigma and the residual statistics stay those of the fit."""
+    the plain OLS sigma and the residual statistics stay those of the fit.  An empty note adds no
+    warning."""
     cov = np.asarray(cov, float)
     est = np.asarray(estimate, float)
     se = np.sqrt(np.clip(np.diag(cov), 0.0, None))
@@ -211,7 +212,7 @@ def with_posterior(fit: LinearFit, estimate: np.ndarray, cov: np.ndarray, note: 
     p = 2.0 * scipy.stats.t.sf(np.abs(t), fit.dof_eff)
     return dataclasses.replace(fit, estimate=_as_readonly(est), std_error=_as_readonly(se), cov=_as_readonly(cov),
                                t_values=_as_readonly(t), p_values=_as_readonly(p),
-                               warnings=tuple(fit.warnings) + (note,))
+                               warnings=tuple(fit.warnings) + ((note,) if note else ()))
 
 
 def with_corrected_estimate(fit: LinearFit, estimate: np.ndarray, note: str,
