@@ -45,8 +45,7 @@ import numpy as np
 import pandas as pd
 
 from aerosid.identification.band import segment_keys
-from aerosid.identification.eiv import filtered_noise
-from aerosid.identification.inversion import total_angles
+from aerosid.identification.eiv import angle_noise, filtered_noise, with_angles_moved
 from aerosid.identification.regression import LinearFit, with_added_covariance
 
 #: Seed of the re-draws (the check is reproducible).
@@ -98,9 +97,7 @@ def sensor_noise(fd: pd.DataFrame, rng: np.random.Generator, angle_sigma, angle_
     t = fd["t_s"].to_numpy(float)
     out = {}
     if angle_sigma is not None:
-        for col, sig in zip(("alpha_rad", "beta_rad"), angle_sigma):
-            out[col] = (filtered_noise(rng, groups, t, sig, angle_cutoff_hz) if angle_cutoff_hz is not None
-                        else np.asarray(sig, float) * rng.standard_normal(len(fd)))
+        out["alpha_rad"], out["beta_rad"] = angle_noise(rng, groups, t, tuple(angle_sigma), angle_cutoff_hz)
     band = fd["band_hz"].to_numpy(float) if "band_hz" in fd.columns else None
     if band is None or not np.all(np.isfinite(band)):
         return out
@@ -115,11 +112,12 @@ def sensor_noise(fd: pd.DataFrame, rng: np.random.Generator, angle_sigma, angle_
 
 def with_noise(fd: pd.DataFrame, noise: dict[str, np.ndarray], sign: float = 1.0) -> pd.DataFrame:
     """A copy of the flight data with sign * noise added (alpha_r, phi_r follow the angles)."""
-    f = fd.copy()
+    angles = "alpha_rad" in noise or "beta_rad" in noise
+    f = (with_angles_moved(fd, sign * noise.get("alpha_rad", 0.0), sign * noise.get("beta_rad", 0.0)) if angles
+         else fd.copy())
     for col, n in noise.items():
-        f[col] = f[col].to_numpy(float) + sign * n
-    if "alpha_rad" in noise or "beta_rad" in noise:
-        f["alpha_r_rad"], f["phi_r_rad"] = total_angles(f["alpha_rad"].to_numpy(float), f["beta_rad"].to_numpy(float))
+        if col not in ("alpha_rad", "beta_rad"):
+            f[col] = f[col].to_numpy(float) + sign * n
     return f
 
 

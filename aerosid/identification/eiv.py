@@ -82,26 +82,41 @@ def filtered_noise(rng: np.random.Generator, groups: np.ndarray, t_s: np.ndarray
     return out
 
 
-def with_angle_noise(fd: pd.DataFrame, rng: np.random.Generator, groups: np.ndarray, sigma: float,
-                     cutoff_hz: float | None) -> pd.DataFrame:
-    """A copy of the flight data with extra noise of 1-sigma `sigma` on alpha and beta
-    (a number, arrays per sample, or a tuple (sigma_alpha, sigma_beta) of either;
-    alpha_r, phi_r recomputed): white when cutoff_hz is None (angles inverted from the
-    database), else through the vanes' low-pass (the vanes' own noise)."""
-    f = fd.copy()
-    t = f["t_s"].to_numpy(float)
+def angle_noise(rng: np.random.Generator, groups: np.ndarray, t_s: np.ndarray, sigma,
+                cutoff_hz: float | None) -> tuple[np.ndarray, np.ndarray]:
+    """One draw of noise for (alpha, beta) [rad]: sigma a number, arrays per sample, or a
+    tuple (sigma_alpha, sigma_beta) of either; white when cutoff_hz is None (angles inverted
+    from the database), else through the vanes' low-pass [Hz] (the vanes' own noise).  alpha's
+    noise is drawn first (SIMEX and the estimator-bias check rely on the order)."""
     sig_a, sig_b = sigma if isinstance(sigma, tuple) else (sigma, sigma)
 
     def draw(sig) -> np.ndarray:
         if cutoff_hz is None:
-            return np.asarray(sig) * rng.standard_normal(len(f))
-        return filtered_noise(rng, groups, t, sig, cutoff_hz)
+            return np.asarray(sig, float) * rng.standard_normal(len(t_s))
+        return filtered_noise(rng, groups, t_s, sig, cutoff_hz)
 
-    a = f["alpha_rad"].to_numpy(float) + draw(sig_a)
-    b = f["beta_rad"].to_numpy(float) + draw(sig_b)
+    da = draw(sig_a)
+    return da, draw(sig_b)
+
+
+def with_angles_moved(fd: pd.DataFrame, d_alpha, d_beta) -> pd.DataFrame:
+    """A copy of the flight data with alpha and beta moved by d_alpha, d_beta [rad] (numbers or
+    arrays per sample) and alpha_r, phi_r recomputed from them."""
+    f = fd.copy()
+    a = f["alpha_rad"].to_numpy(float) + d_alpha
+    b = f["beta_rad"].to_numpy(float) + d_beta
     f["alpha_rad"], f["beta_rad"] = a, b
     f["alpha_r_rad"], f["phi_r_rad"] = total_angles(a, b)
     return f
+
+
+def with_angle_noise(fd: pd.DataFrame, rng: np.random.Generator, groups: np.ndarray, sigma: float,
+                     cutoff_hz: float | None) -> pd.DataFrame:
+    """A copy of the flight data with extra noise of 1-sigma `sigma` on alpha and beta
+    (angle_noise: a number, arrays per sample, or a tuple (sigma_alpha, sigma_beta) of either;
+    alpha_r, phi_r recomputed): white when cutoff_hz is None (angles inverted from the
+    database), else through the vanes' low-pass (the vanes' own noise)."""
+    return with_angles_moved(fd, *angle_noise(rng, groups, fd["t_s"].to_numpy(float), sigma, cutoff_hz))
 
 
 def rate_noise(rng: np.random.Generator, groups: np.ndarray, t_s: np.ndarray, sigma: tuple,
