@@ -35,13 +35,17 @@ Examples:
               help="Fly AIRCRAFT in JSBSim instead of the built-in simulator: c172x (hand-written flight) or "
                    "any aircraft of the jsbsim package that trims (e.g. pa28, OV10, T37, F4N; flight "
                    "design and DIR/vehicle.toml generated). Needs the extra: pip install 'aerosid[jsbsim]'.")
+@click.option("--turbulence", type=click.Choice(["none", "light", "moderate"]), default="none", show_default=True,
+              help="With --jsbsim: fly in JSBSim's MIL-F-8785C (Tustin) turbulence, rotational gusts included "
+                   "(light: vertical gust ~0.55 m/s rms; moderate ~1.4 m/s). Analyse such a flight with "
+                   "[estimation] turbulent_air = true in its vehicle file.")
 @click.option("--manoeuvre", default="3211", show_default=True,
               help="JSBSim input sequence: 3211 = elevator 3-2-1-1, then aileron and rudder doublets.")
 @click.option("--input", "input_file", type=click.Path(exists=True, dir_okay=False, path_type=Path), default=None,
               help="Fly a designed input (DIR/input.parquet or .csv of `aerosid design`): t_s plus control "
                    "columns in radians; it replaces the manoeuvres of its axes.")
 def simulate(case_name, effects, hidden, seed, out_dir, duration, rate, no_faults, list_effects, jsbsim_aircraft,
-             manoeuvre, input_file):
+             turbulence, manoeuvre, input_file):
     """Simulate a flight whose truth is known and write its telemetry.
 
     Writes DIR/telemetry.parquet (raw, as a flight delivers it: dropouts as
@@ -73,7 +77,7 @@ def simulate(case_name, effects, hidden, seed, out_dir, duration, rate, no_fault
         try:
             with stage_progress("simulate") as progress:
                 flight = simulate_jsbsim(jsbsim_aircraft, manoeuvre, seed=seed, faults=not no_faults,
-                                         progress=progress, input_table=table)
+                                         progress=progress, input_table=table, turbulence=turbulence)
                 progress("write", 0.0)
                 paths = flight.write(out_dir)
         except JSBSimUnavailable as exc:
@@ -85,6 +89,8 @@ def simulate(case_name, effects, hidden, seed, out_dir, duration, rate, no_fault
             click.echo(f"  wrote {path}")
         return
 
+    if turbulence != "none":
+        raise click.UsageError("--turbulence applies to --jsbsim flights (the built-in simulator flies in calm air)")
     from aerosid.simulation import load_case, simulate as run_simulation
 
     try:

@@ -414,7 +414,8 @@ def _with_structure_uncertainty(fd: pd.DataFrame, signals: dict, models: dict, f
 
 def identify(flight_data: pd.DataFrame, vehicle: Vehicle, models: dict[str, ChannelModel] | None = None,
              mach_half_width: float | None = 0.5, cov: str = "morelli_klein",
-             gyro_eiv: bool = GYRO_EIV_DEFAULT, bias_pairs: int | None = None) -> Identification:
+             gyro_eiv: bool = GYRO_EIV_DEFAULT, bias_pairs: int | None = None,
+             instrumental: bool | None = None) -> Identification:
     """Fit every channel's model on the samples with |M - M_ref| <= mach_half_width.
     Pooled flights (several values of ``flight``: manoeuvres of one aircraft) are fitted
     together; the coloured-residual correction treats each flight as its own record
@@ -423,7 +424,10 @@ def identify(flight_data: pd.DataFrame, vehicle: Vehicle, models: dict[str, Chan
     (aerosid.identification.eiv); gyro_eiv=False (the default, GYRO_EIV_DEFAULT): the angles only.
     bias_pairs: +/- pairs of re-draws of the parametric check of the estimator's own bias at this
     flight's noise, counted in the sigma (aerosid.identification.bias_check); 0: no check; None:
-    default_bias_pairs()."""
+    default_bias_pairs().  instrumental: the flight was flown in turbulent air: every channel but the
+    identities is fitted by instrumental variables, the controls as instruments, in place of least
+    squares and SIMEX (aerosid.identification.instrumental); None: the vehicle file's
+    ``[estimation] turbulent_air`` (default false)."""
     models = models or default_models(vehicle)
     fd = flight_data.sort_values(["flight", "t_s"], kind="stable").reset_index(drop=True)
     mask = mach_window_mask(fd["mach"].to_numpy(), vehicle.mach_reference, mach_half_width)
@@ -438,9 +442,10 @@ def identify(flight_data: pd.DataFrame, vehicle: Vehicle, models: dict[str, Chan
         raise ValueError(f"only {len(fd)} samples inside {window}: too few to fit the models, at least "
                          f"{MIN_FIT_SAMPLES} are needed ({span})")
     bias_pairs = default_bias_pairs() if bias_pairs is None else _checked_bias_pairs(bias_pairs)
+    instrumental = vehicle.turbulent_air if instrumental is None else bool(instrumental)
     identities = tuple(ch for ch in INVERSION_CHANNELS if ch in models) if vehicle.air_data_source != "vanes" else ()
     signals = vehicle_signals(fd, vehicle)
-    corrected = _corrected_fits(fd, vehicle, models, cov, gyro_eiv, signals)
+    corrected = _corrected_fits(fd, vehicle, models, cov, gyro_eiv, signals, instrumental)
     fits, wrong_sign = _with_prior_and_structure(fd, signals, vehicle, models, corrected, identities)
     if bias_pairs:
         from aerosid.identification.bias_check import with_estimator_bias
@@ -448,7 +453,8 @@ def identify(flight_data: pd.DataFrame, vehicle: Vehicle, models: dict[str, Chan
         # the check runs on the estimator before the prior: the world's coefficients are the flight's
         # own, so a prior applied again would count as bias (its own spread is in the posterior)
         fits = with_estimator_bias(fd, vehicle, models, corrected, fits,
-                                   lambda f: _corrected_fits(f, vehicle, models, cov, gyro_eiv), bias_pairs,
+                                   lambda f: _corrected_fits(f, vehicle, models, cov, gyro_eiv,
+                                                             instrumental=instrumental), bias_pairs,
                                    skip=identities)
     refs = AeroModel.preflight(vehicle).linear_truth() if vehicle.preflight is not None else {}
     window = (float(fd["mach"].min()), float(fd["mach"].max()))
@@ -458,15 +464,18 @@ def identify(flight_data: pd.DataFrame, vehicle: Vehicle, models: dict[str, Chan
 
 
 def _corrected_fits(fd: pd.DataFrame, vehicle: Vehicle, models: dict, cov: str, gyro_eiv: bool,
-                    signals: dict | None = None) -> dict[str, LinearFit]:
+                    signals: dict | None = None, instrumental: bool = False) -> dict[str, LinearFit]:
     """Every channel's fit on the window's flight data ``fd`` (sorted, inside the Mach window):
-    least squares with the coloured-residual sigma and the errors-in-variables correction.
+    least squares with the coloured-residual sigma and the errors-in-variables correction, or,
+    with ``instrumental``, the instrumental-variable fit (aerosid.identification.instrumental,
+    consistent under the regressors' noise too: no SIMEX) of every channel but the identities.
     signals: vehicle_signals(fd, vehicle) when the caller has them (None: computed here)."""
     signals = vehicle_signals(fd, vehicle) if signals is None else signals
     flights = fd["flight"].astype(str).to_numpy()
     fits: dict[str, LinearFit] = {}
+    designs: dict[str, tuple] = {}  # channel -> (regressors, notes)
     for channel, model in models.items():
-        X, notes = model.design(signals)
+        X, notes = designs[channel] = model.design(signals)
         try:
             fit = fit_linear(fd[channel].to_numpy(float), X, names=model.names, channel=channel, cov=cov,
                              groups=flights)
@@ -474,6 +483,14 @@ def _corrected_fits(fd: pd.DataFrame, vehicle: Vehicle, models: dict, cov: str, 
             raise ValueError(f"[{channel}] the fit of {', '.join(model.names)} on {len(fd)} samples failed: {exc}"
                              + (f" ({'; '.join(notes)})" if notes else "")) from None
         fits[channel] = replace(fit, warnings=tuple(fit.warnings) + notes) if notes else fit
+    if instrumental:
+        from aerosid.identification.instrumental import control_instruments, instrumental_fit
+
+        Z = control_instruments(fd)
+        skip = INVERSION_CHANNELS if vehicle.air_data_source != "vanes" else ()
+        return {ch: fit if ch in skip else
+                instrumental_fit(fit, fd[ch].to_numpy(float), designs[ch][0].to_numpy(float), Z, flights)
+                for ch, fit in fits.items()}
     sigma = angle_eiv_sigma(fd, vehicle)
     band_limited = "band_hz" in fd.columns and bool(np.all(np.isfinite(fd["band_hz"].to_numpy(float))))
     rate_sigma = _rate_eiv_sigma(fd) if gyro_eiv and band_limited else None

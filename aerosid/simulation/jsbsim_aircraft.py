@@ -31,7 +31,8 @@ from aerosid.simulation import SimulatedFlight
 from aerosid.simulation.jsbsim_design import (DT_S, FT, INCH, LBF, PSF, SLUG, SLUG_FT2, FlightDesign, in_catalogue,
                                               UnsupportedAircraft, flight_design, symmetric_loading)
 from aerosid.simulation.jsbsim_linear import abs_beta_slope, mach_slopes, model_coefficients
-from aerosid.simulation.jsbsim_flight import COMMON_PROPERTIES, _fly, _import_jsbsim, _schedule, _takeup_steps
+from aerosid.simulation.jsbsim_flight import (COMMON_PROPERTIES, TURBULENCE_SEVERITY, _fly, _import_jsbsim, _schedule,
+                                              _takeup_steps, start_turbulence)
 from aerosid.simulation.jsbsim_columns import coefficient_columns, make_telemetry, state_columns
 from aerosid.simulation.jsbsim_truth import flight_statistics, _truth_check
 from aerosid.simulation.jsbsim_tables import DEG, AeroTables
@@ -110,10 +111,13 @@ def _xml_check(tables: AeroTables, rec: dict, truth: pd.DataFrame) -> dict:
 
 
 def simulate_aircraft(aircraft: str, seed: int = 0, *, faults: bool = True, progress=None,
-                      input_table: pd.DataFrame | None = None) -> SimulatedFlight:
+                      input_table: pd.DataFrame | None = None, turbulence: str = "none") -> SimulatedFlight:
     """Fly JSBSim's `aircraft` through the generated flight design (or a designed input,
-    ``input_table``: aerosid.simulation.jsbsim_input); noise and faults from `seed`.
+    ``input_table``: aerosid.simulation.jsbsim_input); noise, faults and the turbulence
+    (aerosid.simulation.jsbsim_flight.TURBULENCE_SEVERITY) from `seed`.
     progress: an optional callback progress(stage, fraction)."""
+    if turbulence not in TURBULENCE_SEVERITY:
+        raise ValueError(f"unknown turbulence level {turbulence!r}; choices: {', '.join(TURBULENCE_SEVERITY)}")
     if input_table is not None and "throttle_cmd_norm" in input_table.columns:
         raise ValueError(f"{aircraft}: a designed input's throttle_cmd_norm (a fixed-throttle glide) is flown for "
                          "c172x only; the generated flight design trims its own throttle")
@@ -155,6 +159,7 @@ def simulate_aircraft(aircraft: str, seed: int = 0, *, faults: bool = True, prog
         from aerosid.simulation.jsbsim_input import gain_inputs
 
         inputs, windows = gain_inputs(input_table, t, design.gains), {"designed_input": [0.0, float(t[-1])]}
+    start_turbulence(fdm, turbulence, seed)
     rec = _fly(fdm, t, inputs, record, progress=progress)
     for prop in _STANDARD:  # an aircraft without propulsion (a glider) has no forces/*-prop-* properties
         if prop not in rec and "-prop-" in prop:

@@ -126,9 +126,9 @@ TABLES: dict[str, dict[str, Key] | None] = {
         "mach_breakpoints": vec(None, 0.0, 50.0, positive=True), "slope_factor": vec(None, 0.0, 100.0, positive=True),
     },
     # Smoother defaults: aerosid.estimation.EBMOptions fields (tests/vehicles/test_vehicle_keys.py keeps
-    # the two lists equal), plus band_hz (the regression's low-pass edge) and pitch_damping_split
-    # (the prior on an aircraft's C_m,alpha_dot share, aerosid.identification.damping_prior), read by
-    # load_vehicle.
+    # the two lists equal), plus band_hz (the regression's low-pass edge), pitch_damping_split
+    # (the prior on an aircraft's C_m,alpha_dot share, aerosid.identification.damping_prior) and
+    # turbulent_air (aerosid.identification.instrumental), read by load_vehicle.
     "estimation": {
         "f_max_hz": pos(1e4), "gate_probability": Key("number", 0.0, 1.0, positive=True),
         "auto_tune": Key("bool"), "tune_r": Key("bool"), "max_tuning_iterations": Key("int", 0, 1000),
@@ -140,6 +140,8 @@ TABLES: dict[str, dict[str, Key] | None] = {
         "q_scale": pos(1e9), "r_scale": pos(1e9), "band_hz": pos(1e4),
         "pitch_damping_split": Key("switch", -10.0, 10.0, length=2,
                                    doc="[centre, 1-sigma] of C_m,alpha_dot / (C_m,q + C_m,alpha_dot); false: no prior"),
+        "turbulent_air": Key("bool", doc="the flight was flown in turbulent air: instrumental-variable fit, the "
+                                         "controls as instruments (aerosid.identification.instrumental)"),
     },
     "models": {ch: Key("terms") for ch in ("CN", "Cm", "CY", "Cn", "Cl")},
     # aerosid/plausibility: the flight envelope the unit check compares the telemetry with

@@ -109,6 +109,9 @@ class Vehicle:
     #: ([estimation] pitch_damping_split): True = the default (aerosid.identification.damping_prior),
     #: False = none, (centre, 1-sigma) = this vehicle's own
     pitch_damping_split: tuple[float, float] | bool = True
+    #: the flight was flown in turbulent air ([estimation] turbulent_air): the regression fits by
+    #: instrumental variables, the controls as instruments (aerosid.identification.instrumental)
+    turbulent_air: bool = False
     #: preprocessing thresholds from the [preprocess] table (PreprocessParams keyword
     #: arguments, per-sensor tables under "sensors"; docs/preprocessing.md)
     preprocess: dict = field(default_factory=dict)
@@ -324,9 +327,10 @@ def load_vehicle(name_or_path: str | Path = "seed-rlv") -> Vehicle:
         database_path=database_path,
         preflight=preflight,
         estimation={k: (tuple(v) if isinstance(v, list) else v) for k, v in doc.get("estimation", {}).items()
-                    if k not in ("band_hz", "pitch_damping_split")},
+                    if k not in ("band_hz", "pitch_damping_split", "turbulent_air")},
         band_hz=positive("estimation", "band_hz") if "band_hz" in doc.get("estimation", {}) else None,
         pitch_damping_split=_damping_split(doc.get("estimation", {}), src),
+        turbulent_air=bool(doc.get("estimation", {}).get("turbulent_air", False)),
         source=src,
         vehicle_class=vclass,
         chord_m=chord,

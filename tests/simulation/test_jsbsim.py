@@ -266,3 +266,33 @@ def test_bad_names_and_missing_jsbsim(monkeypatch):
     with pytest.raises(JSBSimUnavailable, match=r'pip install "aerosid\[jsbsim\]"'):
         simulate_jsbsim()
     assert issubclass(JSBSimUnavailable, ImportError)
+
+
+def test_turbulence_levels_seeds_and_rotational_gusts():
+    """start_turbulence: calm air stays calm; a level turns JSBSim's gusts on (the rates relative to
+    the air part from the gyros' rates), moderate is stronger than light, the seed sets the sequence,
+    and an unknown level is refused by name."""
+    from aerosid.simulation.jsbsim_flight import _import_jsbsim, _trimmed_fdm, start_turbulence
+
+    jsbsim = _import_jsbsim()
+    cfg, _ = load_jsbsim_config("c172x")
+
+    def fly(level: str, seed: int) -> np.ndarray:
+        fdm = _trimmed_fdm(jsbsim, cfg)
+        start_turbulence(fdm, level, seed)
+        out = []
+        for _ in range(400):
+            fdm.run()
+            out.append((fdm["atmosphere/total-wind-down-fps"], fdm["velocities/p-rad_sec"] - fdm["velocities/p-aero-rad_sec"]))
+        return np.array(out)
+
+    calm = fly("none", 0)
+    np.testing.assert_allclose(calm, 0.0, atol=1e-12)
+    light, other, moderate = fly("light", 0), fly("light", 1), fly("moderate", 0)
+    assert light[:, 0].std() > 0.1 and light[:, 1].std() > 1e-3  # ft/s of vertical gust, rad/s of rolling gust
+    assert not np.allclose(light, other)
+    assert moderate[:, 0].std() > 1.5 * light[:, 0].std()
+    with pytest.raises(ValueError, match="turbulence level 'severe'"):
+        start_turbulence(_trimmed_fdm(jsbsim, cfg), "severe", 0)
+    with pytest.raises(ValueError, match="turbulence level"):
+        simulate_jsbsim("c172x", "3211", seed=0, turbulence="gusty")

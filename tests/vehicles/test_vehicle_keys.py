@@ -80,7 +80,7 @@ def test_the_estimation_keys_are_the_smoother_options():
     from aerosid.estimation import EBMOptions
 
     fields = {f.name for f in dataclasses.fields(EBMOptions)}
-    assert set(TABLES["estimation"]) - {"band_hz", "pitch_damping_split"} == fields
+    assert set(TABLES["estimation"]) - {"band_hz", "pitch_damping_split", "turbulent_air"} == fields
 
 
 def test_a_new_table_is_one_entry(tmp_path, monkeypatch):
