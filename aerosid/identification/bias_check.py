@@ -14,7 +14,8 @@ What.  A parametric bootstrap of the whole fit, on the flight itself:
 
 1. the bootstrap world's truth is this flight's own regressors and the SIMEX-corrected estimates:
    its response is X theta + (y - X theta_OLS), the model's part with those coefficients plus
-   the flight's own least-squares residual (orthogonal to X);
+   the flight's own least-squares residual (orthogonal to X); for an instrumental-variable fit
+   (turbulent air, aerosid.identification.instrumental) its own residual, i.e. the flight's y;
 2. every regressor noise the flight data carry a sigma for is drawn again and added through the
    low-pass the measured signal went through (sensor_noise): the angles' (as SIMEX takes them),
    the gyros' (eiv_sigma_p/q/r_rad_s) and the surfaces' (eiv_sigma_delta_*_rad, the mixed
@@ -46,6 +47,7 @@ import pandas as pd
 
 from aerosid.identification.band import segment_keys
 from aerosid.identification.eiv import angle_noise, filtered_noise, with_angles_moved
+from aerosid.identification.instrumental import METHOD as INSTRUMENTAL
 from aerosid.identification.regression import LinearFit, with_added_covariance
 
 #: Seed of the re-draws (the check is reproducible).
@@ -142,6 +144,8 @@ def estimator_bias(fd: pd.DataFrame, regressors: Callable[[pd.DataFrame], dict[s
              and np.all(np.isfinite(X[ch])) and np.all(np.isfinite(fd[ch].to_numpy(float)))]
     for ch in chans:
         y = fd[ch].to_numpy(float)
+        if getattr(fits[ch], "method", "") == INSTRUMENTAL:  # its own residual: the world is the flight's response itself
+            continue
         ols = np.linalg.lstsq(X[ch], y, rcond=None)[0]
         world[ch] = X[ch] @ np.asarray(fits[ch].estimate, float) + (y - X[ch] @ ols)
     changes = {ch: [] for ch in chans}

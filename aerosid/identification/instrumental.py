@@ -25,11 +25,14 @@ Not the default.  A check that would switch to it on its own was measured and re
 difference between the least-squares and the instrumental estimates is as large on calm-air
 flights (model structure, the controls' own noise) as on a turbulent one, so the data cannot
 decide.  The engineer knows whether the air was turbulent (pilot's notes, the vane against the
-kinematics): ``aerosid run --turbulent-air``.  With a feedback control system that moves a surface
-with the rates it damps (a yaw damper) that surface is not a clean instrument: the warning says
-so, and such a flight is better flown with the damper off.
+kinematics) and says so in the vehicle file: ``[estimation] turbulent_air = true``.  With a feedback
+control system that moves a surface with the rates it damps (a yaw damper) that surface is not a
+clean instrument: such a flight is better flown with the damper off.  The diagnosis, the
+stepwise structure search and the experiment design still use least squares.
 """
 from __future__ import annotations
+
+import dataclasses
 
 import numpy as np
 import pandas as pd
@@ -46,14 +49,35 @@ from aerosid.identification.residual_covariance import _group_slices, _morelli_k
 INSTRUMENT_LAGS_S = (0.2, 0.6, 2.0)
 #: The flight data's control columns used as instruments (those present).
 CONTROL_COLUMNS = ("delta_p_rad", "delta_r_rad", "delta_y_rad")
+#: Singular values of the instruments below this share of the largest are not instruments.
+RANK_TOL = 1e-10
+#: LinearFit.method of an instrumental-variable fit (the estimator-bias check builds its world on it).
+METHOD = "instrumental"
+
+
+def _stretches(fd: pd.DataFrame) -> np.ndarray:
+    """A label per row of the flight data's contiguous stretches: its segments (its flights when it
+    has no segment column), split again where a step is more than 1.5 x the stretch's median step
+    (rows a Mach window or a cut left out)."""
+    keys = segment_keys(fd) if "segment" in fd.columns else fd["flight"].astype(str).to_numpy() \
+        if "flight" in fd.columns else np.zeros(len(fd))
+    t = fd["t_s"].to_numpy(float)
+    out = np.empty(len(fd), dtype=object)
+    for g in pd.unique(keys):
+        idx = np.flatnonzero(keys == g)
+        steps = np.diff(t[idx])
+        dt = float(np.median(steps)) if steps.size else 0.0
+        part = np.concatenate([[0], np.cumsum(steps > 1.5 * dt)]) if steps.size else np.zeros(idx.size, int)
+        out[idx] = [f"{g}#{k}" for k in part]
+    return out
 
 
 def control_instruments(fd: pd.DataFrame, lags_s=INSTRUMENT_LAGS_S) -> np.ndarray:
     """(n, m) instruments of the flight data ``fd`` (sorted by segment and time): a constant, each
-    control column, and each control minus its segment's first value through first-order lags of
-    time constants ``lags_s`` [s] (per segment, on the segment's own median step)."""
+    control column, and each control minus its stretch's first value through first-order lags of
+    time constants ``lags_s`` [s] (per contiguous stretch, _stretches, on its own median step)."""
     t = fd["t_s"].to_numpy(float)
-    groups = segment_keys(fd)
+    groups = _stretches(fd)
     cols = [np.ones(len(fd))]
     for c in CONTROL_COLUMNS:
         if c not in fd.columns:
@@ -78,9 +102,13 @@ def iv_estimate(y: np.ndarray, X: np.ndarray, Z: np.ndarray, groups=None):
     squares of y (n,) on X (n, k) with instruments Z (n, m), m >= k; the covariance is the
     Morelli-Klein coloured-residual sandwich (within each group of ``groups`` when given)."""
     y, X, Z = np.asarray(y, float), np.asarray(X, float), np.asarray(Z, float)
-    if Z.shape[1] < X.shape[1]:
-        raise ValueError(f"{Z.shape[1]} instruments for {X.shape[1]} regressors: at least as many are needed")
-    Q, _ = np.linalg.qr(Z)
+    # an orthonormal basis of the instruments' span, rank-revealing (a held control repeats the
+    # constant and its lags are zero): directions below RANK_TOL of the largest are not instruments
+    U, sv, _ = np.linalg.svd(Z, full_matrices=False)
+    Q = U[:, sv > RANK_TOL * sv.max()] if sv.size and sv.max() > 0 else U[:, :0]
+    if Q.shape[1] < X.shape[1]:
+        raise ValueError(f"the instruments span {Q.shape[1]} directions for {X.shape[1]} regressors: at least as "
+                         "many are needed (controls that move)")
     Xh = Q @ (Q.T @ X)
     A = Xh.T @ Xh
     A_inv = np.linalg.inv(A)
@@ -95,19 +123,28 @@ def iv_estimate(y: np.ndarray, X: np.ndarray, Z: np.ndarray, groups=None):
 
 
 def instrumental_fit(fit: LinearFit, y: np.ndarray, X: np.ndarray, Z: np.ndarray, groups=None) -> LinearFit:
-    """The fit with the instrumental estimate and covariance in place of its own (the residual
-    statistics stay the least-squares fit's), and a warning that says so, with the least-squares
-    estimates for comparison and the regressors the controls explain least (first-stage R^2).
-    A fit that dropped rows or columns is returned with a warning only."""
+    """The fit with the instrumental estimate and covariance in place of its own and ``method``
+    METHOD, and a warning that says so, with the least-squares estimates for comparison and the
+    regressors the controls explain least (first-stage R^2).  Its residual statistics and its
+    "sigma OLS" stay the least-squares fit's (the warning says so).  A fit that dropped rows or
+    columns, or whose instruments do not span its regressors, is returned as least squares
+    (without the errors-in-variables correction) with a warning saying why."""
     est = np.asarray(fit.estimate, float)
-    if fit.n_dropped or not np.all(np.isfinite(est)):
-        return with_posterior(fit, est, fit.cov, "instrumental-variable fit not applied: the least-squares fit "
-                              "dropped rows or columns (aerosid.identification.instrumental)")
-    theta, cov, r2 = iv_estimate(y, X, Z, groups)
+    why = ("the least-squares fit dropped rows or columns" if fit.n_dropped or not np.all(np.isfinite(est))
+           else None)
+    if why is None:
+        try:
+            theta, cov, r2 = iv_estimate(y, X, Z, groups)
+        except ValueError as exc:
+            why = str(exc)
+    if why is not None:
+        return with_posterior(fit, est, fit.cov, f"turbulent air: instrumental-variable fit not possible ({why}); "
+                              "plain least squares reported, without the errors-in-variables correction "
+                              "(aerosid.identification.instrumental)")
     weak = [f"{n} {r:.2f}" for n, r in zip(fit.names, r2) if r < 0.5]
     ls = ", ".join(f"{n} {v:.4g}" for n, v in zip(fit.names, est))
     note = ("turbulent air: estimates and sigma from instrumental variables (the controls and their lags as "
             f"instruments, aerosid.identification.instrumental); least squares gave {ls}"
             + (f"; regressors the controls explain little (first-stage R^2): {', '.join(weak)}" if weak else "")
-            + "; a surface a control system moves with the rates (a yaw damper) is not a clean instrument")
-    return with_posterior(fit, theta, cov, note)
+            + "; sigma OLS and the residual statistics are the least-squares fit's")
+    return dataclasses.replace(with_posterior(fit, theta, cov, note), method=METHOD)

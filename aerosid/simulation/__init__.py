@@ -69,6 +69,10 @@ class SimulatedFlight:
             f"  pitch-plane SNR{at} (std of true manoeuvre signal / noise sigma): "
             + ", ".join(f"{k} {v:.2f}" for k, v in i["snr"].items()),
         ]
+        air = i.get("turbulence", {})
+        if air.get("level", "none") != "none":
+            lines.append(f"  turbulence: {air['level']} ({air.get('model', '')}, severity index "
+                         f"{air.get('severity_index')}): analyse with [estimation] turbulent_air = true in the vehicle file")
         return "\n".join(lines)
 
     def write(self, out_dir: str | Path) -> dict[str, Path]:

@@ -159,7 +159,7 @@ def simulate_aircraft(aircraft: str, seed: int = 0, *, faults: bool = True, prog
         from aerosid.simulation.jsbsim_input import gain_inputs
 
         inputs, windows = gain_inputs(input_table, t, design.gains), {"designed_input": [0.0, float(t[-1])]}
-    start_turbulence(fdm, turbulence, seed)
+    air = start_turbulence(fdm, turbulence, seed)
     rec = _fly(fdm, t, inputs, record, progress=progress)
     for prop in _STANDARD:  # an aircraft without propulsion (a glider) has no forces/*-prop-* properties
         if prop not in rec and "-prop-" in prop:
@@ -250,7 +250,7 @@ def simulate_aircraft(aircraft: str, seed: int = 0, *, faults: bool = True, prog
     tr = design.trim
     info = {
         "simulator": f"JSBSim {jsbsim.__version__}", "aircraft": aircraft, "manoeuvre": "3211",
-        "aircraft_xml": str(design.xml_path), "generated": True,
+        "aircraft_xml": str(design.xml_path), "generated": True, "turbulence": air,
         **flight_statistics(truth, telemetry, masks, spec, sigma, t, dt, qbar_pa, alpha, beta, V),
         "propulsion": design.propulsion, "engines": list(design.engines),
         "trim": {**tr.as_dict(), "condition": design.condition_note, "mach": trim["velocities/mach"],

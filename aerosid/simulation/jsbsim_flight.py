@@ -256,17 +256,21 @@ TURBULENCE_SEVERITY = {"none": 0, "light": 2, "moderate": 3}
 TURBULENCE_WIND_20FT_FPS = 25.3
 
 
-def start_turbulence(fdm, level: str, seed: int) -> None:
+def start_turbulence(fdm, level: str, seed: int) -> dict:
     """Turn JSBSim's turbulence on at ``level`` (a TURBULENCE_SEVERITY key; "none": nothing is set),
-    its random sequence from ``seed``; after the trim, before the flight."""
+    its random sequence from ``seed``; after the trim, before the flight.  Returns what was set
+    (the flight's ``info["turbulence"]``)."""
     if level not in TURBULENCE_SEVERITY:
         raise ValueError(f"unknown turbulence level {level!r}; choices: {', '.join(TURBULENCE_SEVERITY)}")
     if TURBULENCE_SEVERITY[level] == 0:
-        return
+        return {"level": level}
     fdm["atmosphere/randomseed"] = int(seed) + 1  # JSBSim treats 0 as its default sequence
     fdm["atmosphere/turb-type"] = 4
     fdm["atmosphere/turbulence/milspec/windspeed_at_20ft_fps"] = TURBULENCE_WIND_20FT_FPS
     fdm["atmosphere/turbulence/milspec/severity"] = TURBULENCE_SEVERITY[level]
+    return {"level": level, "model": "JSBSim MIL-F-8785C, Tustin form (atmosphere/turb-type 4)",
+            "severity_index": TURBULENCE_SEVERITY[level], "wind_20ft_fps": TURBULENCE_WIND_20FT_FPS,
+            "randomseed": int(seed) + 1}
 
 
 def _fly(fdm, t: np.ndarray, inputs: dict[str, np.ndarray], record: list[str] = _RECORD,
@@ -367,7 +371,7 @@ def simulate_jsbsim(aircraft: str = "c172x", manoeuvre: str = "3211", seed: int 
 
         inputs, windows = c172x_inputs(input_table, t, xml_root, trim), {"designed_input": [0.0, float(t[-1])]}
 
-    start_turbulence(fdm, turbulence, seed)
+    air = start_turbulence(fdm, turbulence, seed)
     rec = _fly(fdm, t, inputs, progress=progress)
 
     # ---- geometry and mass (SI) ----
@@ -457,7 +461,7 @@ def simulate_jsbsim(aircraft: str = "c172x", manoeuvre: str = "3211", seed: int 
     trim_alpha = trim["aero/alpha-rad"]
     info = {
         "simulator": f"JSBSim {jsbsim.__version__}", "aircraft": model, "manoeuvre": manoeuvre,
-        "aircraft_xml": str(xml_path),
+        "aircraft_xml": str(xml_path), "turbulence": air,
         **flight_statistics(truth, telemetry, masks, spec, sigma, t, dt, qbar_pa, alpha, beta, V),
         "trim": {
             "h_m": trim["position/h-sl-ft"] * FT, "V_m_s": trim["velocities/vt-fps"] * FT,

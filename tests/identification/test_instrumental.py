@@ -23,7 +23,7 @@ def _gusty_flight(seed: int, n: int = 6000, dt: float = 0.02, gust: float = 1.0)
     the rate relative to the air, p - g, so the equation error -C_p g correlates with p."""
     rng = np.random.default_rng(seed)
     t = np.arange(n) * dt
-    delta = 0.05 * np.sign(np.sin(2 * np.pi * t / 4.0)) * (rng.random(n) < 2)  # doublets
+    delta = 0.05 * np.sign(np.sin(2 * np.pi * t / 4.0))  # a square wave of 4 s period on the aileron
     b, a = scipy.signal.butter(1, 0.5, fs=1 / dt)
     g = scipy.signal.lfilter(b, a, rng.standard_normal(n))
     g *= gust * 0.08 / g.std()  # the rolling gust [rad/s]: a third of p's spread
@@ -66,6 +66,39 @@ def test_recovers_the_slope_least_squares_gets_wrong_in_a_gust():
     assert ls_off >= 6 and np.mean(ls_err) > 0.1 * abs(THETA[1])
     assert covered >= 7
     assert abs(np.mean(iv_err)) < 2 * np.mean(iv_se) / np.sqrt(8)  # no bias left at the runs' precision
+    assert 0.5 < np.std(iv_err, ddof=1) / np.mean(iv_se) < 2.0  # the sigma is the scatter's, not a multiple
+
+
+def test_the_bias_check_finds_no_bias_in_an_instrumental_fit_without_sensor_noise():
+    """The check's world for an instrumental fit is the flight's own response: with no sensor noise
+    to draw, every refit returns the reported estimate (a world built on the least-squares residual
+    would count the instrumental-minus-least-squares difference as bias)."""
+    from aerosid.identification.bias_check import estimator_bias
+
+    fd = _gusty_flight(0)
+    Z = control_instruments(fd)
+
+    def regressors(frame):
+        return {"Cl": _design(frame)}
+
+    def refit(frame):
+        X, y = _design(frame), frame["Cl"].to_numpy()
+        return {"Cl": instrumental_fit(fit_linear(y, X, names=["C_0", "C_p", "C_delta"]), y, X, Z)}
+
+    fits = refit(fd)
+    check = estimator_bias(fd, regressors, fits, refit, None, None, pairs=2)["Cl"]
+    np.testing.assert_allclose(check.bias, 0.0, atol=1e-12)
+
+
+def test_instruments_that_do_not_span_the_regressors_keep_least_squares_with_a_warning():
+    fd = _gusty_flight(1, n=800)
+    fd["delta_r_rad"] = 0.02  # a held aileron: the instruments are the constant alone
+    X = np.column_stack([np.ones(len(fd)), fd["p"].to_numpy()])
+    y = fd["Cl"].to_numpy()
+    ls = fit_linear(y, X, names=["C_0", "C_p"])
+    out = instrumental_fit(ls, y, X, control_instruments(fd))
+    np.testing.assert_array_equal(out.estimate, ls.estimate)
+    assert out.method == ls.method and "not possible" in out.warnings[-1] and "span 1 directions" in out.warnings[-1]
 
 
 def test_instruments_restart_in_every_segment():
@@ -81,8 +114,17 @@ def test_instruments_restart_in_every_segment():
 
 
 def test_too_few_instruments_is_refused():
-    with pytest.raises(ValueError, match="instruments"):
-        iv_estimate(np.zeros(10), np.ones((10, 3)), np.ones((10, 2)))
+    with pytest.raises(ValueError, match="instruments span 2 directions for 3"):
+        iv_estimate(np.zeros(10), np.ones((10, 3)), np.random.default_rng(0).standard_normal((10, 2)))
+    with pytest.raises(ValueError, match="instruments span 1 directions"):  # rank, not the column count
+        iv_estimate(np.zeros(10), np.ones((10, 2)), np.ones((10, 4)))
+
+
+def test_instruments_restart_after_a_gap_in_time():
+    t = np.r_[np.arange(100), np.arange(150, 250)] * 0.02
+    fd = pd.DataFrame({"t_s": t, "flight": "f", "segment": 0, "delta_y_rad": np.r_[np.zeros(100), np.full(100, 0.1)]})
+    lagged = control_instruments(fd)[:, 2:]
+    np.testing.assert_allclose(lagged, 0.0, atol=1e-15)  # the step is the second stretch's start, not a step
 
 
 def test_the_vehicle_file_switches_identify_to_it(tmp_path, reference_run):

@@ -288,11 +288,21 @@ def test_turbulence_levels_seeds_and_rotational_gusts():
 
     calm = fly("none", 0)
     np.testing.assert_allclose(calm, 0.0, atol=1e-12)
-    light, other, moderate = fly("light", 0), fly("light", 1), fly("moderate", 0)
+    light, again, other, moderate = fly("light", 0), fly("light", 0), fly("light", 1), fly("moderate", 0)
     assert light[:, 0].std() > 0.1 and light[:, 1].std() > 1e-3  # ft/s of vertical gust, rad/s of rolling gust
+    np.testing.assert_array_equal(light, again)
     assert not np.allclose(light, other)
     assert moderate[:, 0].std() > 1.5 * light[:, 0].std()
     with pytest.raises(ValueError, match="turbulence level 'severe'"):
         start_turbulence(_trimmed_fdm(jsbsim, cfg), "severe", 0)
     with pytest.raises(ValueError, match="turbulence level"):
         simulate_jsbsim("c172x", "3211", seed=0, turbulence="gusty")
+
+
+def test_turbulence_is_for_jsbsim_flights(tmp_path):
+    from click.testing import CliRunner
+
+    from aerosid.cli.simulate import simulate
+
+    res = CliRunner().invoke(simulate, ["--case", "seed-rlv", "--turbulence", "light", "--out", str(tmp_path)])
+    assert res.exit_code != 0 and "--turbulence applies to --jsbsim flights" in res.output
