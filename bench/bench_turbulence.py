@@ -111,11 +111,20 @@ def main() -> None:
     seeds = list(range(int(a), int(b or a) + 1))
     jobs = [(v, s, lev) for v in args.vehicles.split(",") for lev in args.levels.split(",") for s in seeds]
     load0, t0 = loadavg(), time.perf_counter()
+    rows = []
+
+    def done(job, rs) -> None:  # progress on stdout, a line per flight
+        rows.extend(rs)
+        print(f"[{time.perf_counter() - t0:6.0f} s] {job}: " + "; ".join(
+            f"{r['estimator']} C_l,p {r.get('Cl_p_err_pct', math.nan):+.0f} %" for r in rs), flush=True)
+
     if args.jobs > 1:
         with ProcessPoolExecutor(args.jobs) as ex:
-            rows = [r for rs in ex.map(one, jobs) for r in rs]
+            for job, rs in zip(jobs, ex.map(one, jobs)):
+                done(job, rs)
     else:
-        rows = [r for job in jobs for r in one(job)]
+        for job in jobs:
+            done(job, one(job))
     wall = time.perf_counter() - t0
     df = pd.DataFrame(rows)
     out = ROOT / "bench" / "results"

@@ -19,7 +19,11 @@ controls explain); stage two regresses the response on those projections.  The e
 consistent under rotational gusts and under the regressors' own sensor noise alike; its
 covariance is the coloured-residual (Morelli-Klein) sandwich with the residual of the original
 regressors.  It costs precision where the controls explain little of a regressor (C_m,alpha's
-sigma grows 2-5 x in calm air: the short period's alpha and q follow the elevator together).
+sigma grows 3-10 x in calm air: the short period's alpha and q follow the elevator together).
+Measured in light turbulence on five aircraft (bench/results/turbulence.md): it halves the
+gusts' bias (c172x C_l,p -60 -> -25 %, coverage 0 -> 50 %) but does not remove it; with
+instruments that explain little of p, beta and r outside the doublets 2SLS leans toward least
+squares.
 
 Not the default.  A check that would switch to it on its own was measured and rejected: the
 difference between the least-squares and the instrumental estimates is as large on calm-air
