@@ -19,11 +19,12 @@ controls explain); stage two regresses the response on those projections.  The e
 consistent under rotational gusts and under the regressors' own sensor noise alike; its
 covariance is the coloured-residual (Morelli-Klein) sandwich with the residual of the original
 regressors.  It costs precision where the controls explain little of a regressor (C_m,alpha's
-sigma grows 3-10 x in calm air: the short period's alpha and q follow the elevator together).
-Measured in light turbulence on five aircraft (bench/results/turbulence.md): it halves the
-gusts' bias (c172x C_l,p -60 -> -25 %, coverage 0 -> 50 %) but does not remove it; with
-instruments that explain little of p, beta and r outside the doublets 2SLS leans toward least
-squares.
+sigma in calm air: pa28 3.6 -> 4.1 %, c172x 3.7 -> 10.8 %, OV10 2.9 -> 27.7 %: the short period's
+alpha and q follow the elevator together).  Measured in light turbulence on five aircraft, 4 seeds
+each (bench/results/turbulence.md): it cuts the gusts' bias of the seed means to 0.2-0.5 of least
+squares' (c172x C_l,p -60 -> -25 %, coverage 0 -> 50 %; single flights 0.2-0.8) but does not
+remove it: with instruments that explain little of p, beta and r outside the doublets 2SLS leans
+toward least squares.
 
 Not the default.  A check that would switch to it on its own was measured and rejected: the
 difference between the least-squares and the instrumental estimates is as large on calm-air
@@ -63,15 +64,20 @@ def _stretches(fd: pd.DataFrame) -> np.ndarray:
     """A label per row of the flight data's contiguous stretches: its segments (its flights when it
     has no segment column), split again where a step is more than 1.5 x the stretch's median step
     (rows a Mach window or a cut left out)."""
-    keys = segment_keys(fd) if "segment" in fd.columns else fd["flight"].astype(str).to_numpy() \
-        if "flight" in fd.columns else np.zeros(len(fd))
+    if {"flight", "segment"} <= set(fd.columns):
+        keys = segment_keys(fd)
+    elif "segment" in fd.columns or "flight" in fd.columns:
+        keys = fd["segment" if "segment" in fd.columns else "flight"].astype(str).to_numpy()
+    else:
+        keys = np.zeros(len(fd))
     t = fd["t_s"].to_numpy(float)
     out = np.empty(len(fd), dtype=object)
     for g in pd.unique(keys):
         idx = np.flatnonzero(keys == g)
         steps = np.diff(t[idx])
         dt = float(np.median(steps)) if steps.size else 0.0
-        part = np.concatenate([[0], np.cumsum(steps > 1.5 * dt)]) if steps.size else np.zeros(idx.size, int)
+        cut = (steps > 1.5 * dt) | (steps <= 0)  # a gap, or time not moving forward
+        part = np.concatenate([[0], np.cumsum(cut)]) if steps.size else np.zeros(idx.size, int)
         out[idx] = [f"{g}#{k}" for k in part]
     return out
 
@@ -101,11 +107,29 @@ def control_instruments(fd: pd.DataFrame, lags_s=INSTRUMENT_LAGS_S) -> np.ndarra
     return np.column_stack(cols)
 
 
-def iv_estimate(y: np.ndarray, X: np.ndarray, Z: np.ndarray, groups=None):
+def _unexplained(X: np.ndarray, Xh: np.ndarray) -> int | None:
+    """Index of a regressor the instruments' projection leaves (nearly) collinear with the others,
+    or None: the projected columns, each scaled to unit norm, must have full rank."""
+    norms = np.linalg.norm(Xh, axis=0)
+    if np.any(norms <= RANK_TOL * max(float(np.linalg.norm(X)), 1e-300)):
+        return int(np.argmin(norms))
+    sv = np.linalg.svd(Xh / norms, compute_uv=False)
+    if sv.min() > RANK_TOL ** 0.5 * sv.max():
+        return None
+    r2 = norms ** 2 / np.maximum(np.linalg.norm(X - X.mean(axis=0), axis=0) ** 2, 1e-300)
+    return int(np.argmin(r2))
+
+
+def iv_estimate(y: np.ndarray, X: np.ndarray, Z: np.ndarray, groups=None, names=None):
     """(estimate (k,), covariance (k, k), first-stage R^2 per column (k,)) of the two-stage least
     squares of y (n,) on X (n, k) with instruments Z (n, m), m >= k; the covariance is the
-    Morelli-Klein coloured-residual sandwich (within each group of ``groups`` when given)."""
+    Morelli-Klein coloured-residual sandwich (within each group of ``groups`` when given).  A
+    ValueError when the instruments are not finite, span fewer directions than X has columns, or
+    leave a regressor (named from ``names`` when given) collinear with the others."""
     y, X, Z = np.asarray(y, float), np.asarray(X, float), np.asarray(Z, float)
+    if not np.all(np.isfinite(Z)):
+        bad = np.flatnonzero(~np.all(np.isfinite(Z), axis=0))
+        raise ValueError(f"instrument column(s) {bad.tolist()} are not finite (a control with NaN)")
     # an orthonormal basis of the instruments' span, rank-revealing (a held control repeats the
     # constant and its lags are zero): directions below RANK_TOL of the largest are not instruments
     U, sv, _ = np.linalg.svd(Z, full_matrices=False)
@@ -114,6 +138,11 @@ def iv_estimate(y: np.ndarray, X: np.ndarray, Z: np.ndarray, groups=None):
         raise ValueError(f"the instruments span {Q.shape[1]} directions for {X.shape[1]} regressors: at least as "
                          "many are needed (controls that move)")
     Xh = Q @ (Q.T @ X)
+    j = _unexplained(X, Xh)
+    if j is not None:
+        name = names[j] if names is not None else f"column {j}"
+        raise ValueError(f"the instruments do not explain the regressor of {name} apart from the others (its "
+                         "projection on them is collinear with theirs)")
     A = Xh.T @ Xh
     A_inv = np.linalg.inv(A)
     theta = A_inv @ (Xh.T @ y)
@@ -138,7 +167,7 @@ def instrumental_fit(fit: LinearFit, y: np.ndarray, X: np.ndarray, Z: np.ndarray
            else None)
     if why is None:
         try:
-            theta, cov, r2 = iv_estimate(y, X, Z, groups)
+            theta, cov, r2 = iv_estimate(y, X, Z, groups, fit.names)
         except ValueError as exc:
             why = str(exc)
     if why is not None:

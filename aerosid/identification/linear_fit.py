@@ -211,7 +211,8 @@ class LinearFit:
             "morelli_klein": f"Morelli-Klein, Parzen L={self.max_lag}",
             "hac": f"HAC Newey-West, L={self.max_lag}",
             "ols": "OLS (white residuals)",
-        }[self.method]
+            "instrumental": "2SLS, Morelli-Klein sandwich",  # aerosid.identification.instrumental
+        }.get(self.method, self.method)
         left = [
             ("Channel:", self.channel or "-"),
             ("Cov. type:", method_txt),
