@@ -184,6 +184,16 @@ def test_no_hidden_effect_nothing_significant(reference_flight, vehicle, seed):
     assert doc["nothing_significant"] is True and not any(e["significant"] for e in doc["effects"])
 
 
+def test_a_turbulent_flight_says_first_that_its_diagnosis_is_least_squares(reference_flight, vehicle):
+    from aerosid.cli.run_summary import first_sentence
+    from aerosid.diagnosis.result import TURBULENT_AIR_CAVEAT
+
+    d = diagnose(_fd(reference_flight, 0), replace(vehicle, turbulent_air=True), localisation=False)
+    assert d.turbulent_air
+    assert d.message == TURBULENT_AIR_CAVEAT + " " + replace(d, turbulent_air=False).message
+    assert first_sentence(d.to_json()["message"]) == TURBULENT_AIR_CAVEAT  # the run's one-line verdict
+
+
 def test_a_constant_candidate_is_reported_as_not_separable(reference_flight, vehicle):
     """A constant roll bias (a rigging offset) is the intercept Cl_0 itself: no flight can separate
     them, and the diagnosis says so instead of testing it."""

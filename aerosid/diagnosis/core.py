@@ -325,7 +325,8 @@ def diagnose(flight_data: pd.DataFrame, vehicle, models: dict[str, ChannelModel]
         loc = localise(signals, {ch: fd[ch].to_numpy(float) for ch in models}, models, t, groups, win,
                        vehicle.mach_reference, float(angle_sigma_rad))
     return Diagnosis(tuple(ranked), reports, models, n, window, int(win.max()) + 1,
-                     identities, looks, recommended, floor, loc, n_flights)
+                     identities, looks, recommended, floor, loc, n_flights,
+                     bool(getattr(vehicle, "turbulent_air", False)))
 
 
 def identity_channels(vehicle, channels) -> tuple[str, ...]:

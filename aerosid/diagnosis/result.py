@@ -195,6 +195,12 @@ class ChannelReport:
                              "model": self.model, "residual": self.residual})
 
 
+#: The first sentence of a diagnosis of a flight its vehicle file marks as turbulent.
+TURBULENT_AIR_CAVEAT = ("Turbulent air ([estimation] turbulent_air = true): the coefficients come from instrumental "
+                        "variables, but this diagnosis still fits by least squares, which the gusts' rotation "
+                        "biases, so read its verdict below as a hint only.")
+
+
 def pooled_wording(text: str, n_flights: int) -> str:
     """A diagnosis text about one flight, reworded for `n_flights` pooled flights (unchanged
     for one): what was or was not separable is a property of the data as pooled."""
@@ -237,6 +243,9 @@ class Diagnosis:
     #: flights pooled in the diagnosed data (`aerosid run A B`): the message speaks of "these N
     #: pooled flights" instead of "this flight"
     n_flights: int = 1
+    #: the vehicle file says the flight was turbulent ([estimation] turbulent_air): the diagnosis
+    #: still fits by least squares, which the gusts bias, and its message says so first
+    turbulent_air: bool = False
 
     @property
     def significant(self) -> tuple[EffectEvidence, ...]:
@@ -276,7 +285,8 @@ class Diagnosis:
     def message(self) -> str:
         from aerosid.diagnosis.lookalikes import lookalike_message
 
-        return pooled_wording(lookalike_message(self, self._base_message()), self.n_flights)
+        text = pooled_wording(lookalike_message(self, self._base_message()), self.n_flights)
+        return TURBULENT_AIR_CAVEAT + " " + text if self.turbulent_air else text
 
     def _base_message(self) -> str:
         sig = self.significant

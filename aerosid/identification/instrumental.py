@@ -33,7 +33,8 @@ decide.  The engineer knows whether the air was turbulent (pilot's notes, the va
 kinematics) and says so in the vehicle file: ``[estimation] turbulent_air = true``.  With a feedback
 control system that moves a surface with the rates it damps (a yaw damper) that surface is not a
 clean instrument: such a flight is better flown with the damper off.  The diagnosis, the
-stepwise structure search and the experiment design still use least squares.
+stepwise structure search and the experiment design still use least squares (the diagnosis's
+message says so first on such a flight).
 """
 from __future__ import annotations
 
