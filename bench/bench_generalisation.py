@@ -95,13 +95,16 @@ def default_vehicles() -> list[str]:
     return ["seed-rlv", "c172x", *GENERATED_AIRCRAFT]
 
 
-def simulate(vehicle: str, seed: int, workdir: Path):
-    """(flight, Vehicle) as a user would have them."""
+def simulate(vehicle: str, seed: int, workdir: Path, turbulence: str = "none"):
+    """(flight, Vehicle) as a user would have them; turbulence: a JSBSim flight's level
+    (aerosid.simulation.jsbsim_flight.TURBULENCE_SEVERITY; seed-rlv flies in calm air only)."""
     from aerosid.vehicles.vehicle import load_vehicle
 
     if vehicle == "seed-rlv":
         from aerosid.simulation import load_case, simulate as sim
 
+        if turbulence != "none":
+            raise ValueError("seed-rlv's simulator flies in calm air only")
         case = load_case("seed-rlv")
         return sim(case, seed=seed), case.vehicle
     from aerosid.simulation.jsbsim_aircraft import RESERVED
@@ -109,7 +112,7 @@ def simulate(vehicle: str, seed: int, workdir: Path):
 
     if vehicle in RESERVED:
         raise ValueError(f"{vehicle} is reserved for an independent check")
-    flight = simulate_jsbsim(vehicle, "3211", seed)
+    flight = simulate_jsbsim(vehicle, "3211", seed, turbulence=turbulence)
     if "vehicle.toml" in flight.files:  # generated: written beside the telemetry, loaded from there
         paths = flight.write(workdir / f"{vehicle}-{seed}")
         return flight, load_vehicle(paths["vehicle"])

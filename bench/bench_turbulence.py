@@ -38,16 +38,6 @@ from machine import cpu_model, loadavg  # noqa: E402  (bench/machine.py)
 NAMES = ("Cm_alpha", "Cm_delta", "damping", "CN_alpha", "Cl_p", "Cl_delta", "Cn_beta", "Cn_r", "Cn_delta")
 
 
-def simulate(vehicle: str, seed: int, level: str, workdir: Path):
-    from aerosid.simulation.jsbsim_flight import simulate_jsbsim
-    from aerosid.vehicles.vehicle import load_vehicle
-
-    flight = simulate_jsbsim(vehicle, "3211", seed, turbulence=level)
-    if "vehicle.toml" in flight.files:
-        return flight, load_vehicle(flight.write(workdir / f"{vehicle}-{seed}")["vehicle"])
-    return flight, load_vehicle(vehicle)
-
-
 def one(job: tuple[str, int, str]) -> list[dict]:
     import bench_generalisation as G
     from aerosid.ebm import process_telemetry
@@ -56,7 +46,7 @@ def one(job: tuple[str, int, str]) -> list[dict]:
     vehicle_name, seed, level = job
     base = {"vehicle": vehicle_name, "seed": seed, "turbulence": level}
     with tempfile.TemporaryDirectory() as tmp:
-        flight, vehicle = simulate(vehicle_name, seed, level, Path(tmp))
+        flight, vehicle = G.simulate(vehicle_name, seed, Path(tmp), turbulence=level)
     T = flight.truth
     V = T["V_m_s"].to_numpy()
     base["alpha_gust_deg"] = math.nan

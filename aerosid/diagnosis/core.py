@@ -59,7 +59,7 @@ from aerosid.diagnosis.candidates import Candidate, default_candidates, derived_
 from aerosid.diagnosis.lookalikes import heldout_sse as _heldout_sse, scaled_lstsq as _scaled_lstsq
 from aerosid.diagnosis.lookalikes import windows_index as _windows_index
 from aerosid.modelling.expressions import evaluate
-from aerosid.identification.identify import angle_cutoff_hz, mach_window_mask
+from aerosid.identification.identify import angle_cutoff_hz, identity_channels, mach_window_mask
 from aerosid.identification.band import segment_keys
 from aerosid.identification.eiv import with_angle_noise
 from aerosid.modelling.models import ChannelModel, default_models, vehicle_signals
@@ -329,14 +329,6 @@ def diagnose(flight_data: pd.DataFrame, vehicle, models: dict[str, ChannelModel]
                      bool(getattr(vehicle, "turbulent_air", False)))
 
 
-def identity_channels(vehicle, channels) -> tuple[str, ...]:
-    """The channels that are identities by construction: C_N and C_Y when alpha and beta
-    are inverted from them (no vanes), as aerosid.identification.identify reports them."""
-    from aerosid.identification.identify import INVERSION_CHANNELS
-
-    if getattr(vehicle, "air_data_source", None) == "vanes":
-        return ()
-    return tuple(ch for ch in INVERSION_CHANNELS if ch in channels)
 
 
 

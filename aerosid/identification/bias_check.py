@@ -143,9 +143,9 @@ def estimator_bias(fd: pd.DataFrame, regressors: Callable[[pd.DataFrame], dict[s
     chans = [ch for ch, fit in fits.items() if ch in X and np.all(np.isfinite(fit.estimate))
              and np.all(np.isfinite(X[ch])) and np.all(np.isfinite(fd[ch].to_numpy(float)))]
     for ch in chans:
-        y = fd[ch].to_numpy(float)
         if getattr(fits[ch], "method", "") == INSTRUMENTAL:  # its own residual: the world is the flight's response itself
             continue
+        y = fd[ch].to_numpy(float)
         ols = np.linalg.lstsq(X[ch], y, rcond=None)[0]
         world[ch] = X[ch] @ np.asarray(fits[ch].estimate, float) + (y - X[ch] @ ols)
     changes = {ch: [] for ch in chans}

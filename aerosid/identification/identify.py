@@ -220,12 +220,20 @@ IDENTITY_NOTE = ("not identifiable from this telemetry: alpha/beta are inverted 
                  "preflight force database, so the fit returns that database by construction")
 
 
+def identity_channels(vehicle, channels) -> tuple[str, ...]:
+    """The channels that are identities by construction: C_N and C_Y when alpha and beta
+    are inverted from them (no vanes), those of ``channels`` (names, or a dict keyed by them)."""
+    if getattr(vehicle, "air_data_source", None) == "vanes":
+        return ()
+    return tuple(ch for ch in INVERSION_CHANNELS if ch in channels)
+
+
 def _eiv_corrected(fd: pd.DataFrame, vehicle: Vehicle, models: dict, fits: dict, sigma,
                    rate_sigma=None) -> dict:
     """The fits with their estimates corrected for the noise in alpha and beta and, given
     rate_sigma, in the band-limited rates p, q, r (aerosid.identification.eiv, SIMEX); for
     inverted angles the force channels they come from are left as they are."""
-    skip = INVERSION_CHANNELS if vehicle.air_data_source != "vanes" else ()
+    skip = identity_channels(vehicle, fits)
     ok = {ch: f for ch, f in fits.items()
           if np.all(np.isfinite(f.estimate)) and f.n_dropped == 0 and ch not in skip}
     if not ok:
@@ -443,7 +451,7 @@ def identify(flight_data: pd.DataFrame, vehicle: Vehicle, models: dict[str, Chan
                          f"{MIN_FIT_SAMPLES} are needed ({span})")
     bias_pairs = default_bias_pairs() if bias_pairs is None else _checked_bias_pairs(bias_pairs)
     instrumental = vehicle.turbulent_air if instrumental is None else bool(instrumental)
-    identities = tuple(ch for ch in INVERSION_CHANNELS if ch in models) if vehicle.air_data_source != "vanes" else ()
+    identities = identity_channels(vehicle, models)
     signals = vehicle_signals(fd, vehicle)
     corrected = _corrected_fits(fd, vehicle, models, cov, gyro_eiv, signals, instrumental)
     fits, wrong_sign = _with_prior_and_structure(fd, signals, vehicle, models, corrected, identities)
@@ -487,7 +495,7 @@ def _corrected_fits(fd: pd.DataFrame, vehicle: Vehicle, models: dict, cov: str, 
         from aerosid.identification.instrumental import control_instruments, instrumental_fit
 
         Z = control_instruments(fd)
-        skip = INVERSION_CHANNELS if vehicle.air_data_source != "vanes" else ()
+        skip = identity_channels(vehicle, fits)
         return {ch: fit if ch in skip else
                 instrumental_fit(fit, fd[ch].to_numpy(float), designs[ch][0].to_numpy(float), Z, flights)
                 for ch, fit in fits.items()}

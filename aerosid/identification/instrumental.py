@@ -89,17 +89,15 @@ def control_instruments(fd: pd.DataFrame, lags_s=INSTRUMENT_LAGS_S) -> np.ndarra
     time constants ``lags_s`` [s] (per contiguous stretch, _stretches, on its own median step)."""
     t = fd["t_s"].to_numpy(float)
     groups = _stretches(fd)
+    stretches = [idx for idx in (np.flatnonzero(groups == g) for g in pd.unique(groups)) if idx.size >= 2]
+    steps = [float(np.median(np.diff(t[idx]))) for idx in stretches]
     cols = [np.ones(len(fd))]
     for c in CONTROL_COLUMNS:
         if c not in fd.columns:
             continue
         u = fd[c].to_numpy(float)
         lagged = [np.zeros(len(fd)) for _ in lags_s]
-        for g in pd.unique(groups):
-            idx = np.flatnonzero(groups == g)
-            if idx.size < 2:
-                continue
-            dt = float(np.median(np.diff(t[idx])))
+        for idx, dt in zip(stretches, steps):
             x = u[idx] - u[idx][0]
             for j, tau in enumerate(lags_s):
                 a = float(np.exp(-dt / tau))

@@ -256,13 +256,18 @@ TURBULENCE_SEVERITY = {"none": 0, "light": 2, "moderate": 3}
 TURBULENCE_WIND_20FT_FPS = 25.3
 
 
+def checked_turbulence(level: str) -> str:
+    """``level`` if it is a TURBULENCE_SEVERITY key, else a ValueError naming the choices."""
+    if level not in TURBULENCE_SEVERITY:
+        raise ValueError(f"unknown turbulence level {level!r}; choices: {', '.join(TURBULENCE_SEVERITY)}")
+    return level
+
+
 def start_turbulence(fdm, level: str, seed: int) -> dict:
     """Turn JSBSim's turbulence on at ``level`` (a TURBULENCE_SEVERITY key; "none": nothing is set),
     its random sequence from ``seed``; after the trim, before the flight.  Returns what was set
     (the flight's ``info["turbulence"]``)."""
-    if level not in TURBULENCE_SEVERITY:
-        raise ValueError(f"unknown turbulence level {level!r}; choices: {', '.join(TURBULENCE_SEVERITY)}")
-    if TURBULENCE_SEVERITY[level] == 0:
+    if TURBULENCE_SEVERITY[checked_turbulence(level)] == 0:
         return {"level": level}
     fdm["atmosphere/randomseed"] = int(seed) + 1  # JSBSim treats 0 as its default sequence
     fdm["atmosphere/turb-type"] = 4
@@ -327,8 +332,7 @@ def simulate_jsbsim(aircraft: str = "c172x", manoeuvre: str = "3211", seed: int 
         return simulate_aircraft(aircraft, seed, faults=faults, progress=progress, input_table=input_table,
                                  turbulence=turbulence)
     _check_names(aircraft, manoeuvre)
-    if turbulence not in TURBULENCE_SEVERITY:
-        raise ValueError(f"unknown turbulence level {turbulence!r}; choices: {', '.join(TURBULENCE_SEVERITY)}")
+    checked_turbulence(turbulence)
     jsbsim = _import_jsbsim()
     sim_cfg, veh_cfg = load_jsbsim_config(aircraft)
     model = sim_cfg["jsbsim"]["model"]
