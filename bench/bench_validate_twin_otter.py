@@ -158,6 +158,7 @@ def run_bench(args, work: Path, t0: float) -> str:
                                "mach_half_width": 0.5}}, run_dir / "run.json")
     results = {bias: validate(run_dir, work / "m017" / "telemetry.parquet", bias=bias, axes="lon")
                for bias in ("none", "offsets", "intercepts")}
+    oe_lines = output_error_section(args.data, run, run_dir, work)
     lines = [
         "# aerosid validate on the Twin Otter: identify on 018, predict 017",
         "",
@@ -202,8 +203,72 @@ def run_bench(args, work: Path, t0: float) -> str:
     lines += ["", "Coefficient prediction on 017 (bias offsets):", "",
               "| channel | TIC | RMS | RMS/std |", "|---|---|---|---|",
               *(f"| {m.name} | {m.tic:.3f} | {m.rms:.3g} | {m.nrms:.3f} |" for m in results["offsets"].coefficients),
-              "", "```", results["offsets"].summary().replace(str(work), "$TMP"), "```", ""]
+              "", "```", results["offsets"].summary().replace(str(work), "$TMP"), "```", "", *oe_lines]
     return "\n".join(lines)
+
+
+def output_error_section(data: Path, run, run_dir: Path, work: Path) -> list[str]:
+    """`aerosid refine` on 018 (output error from the equation-error start) against SIDPAC's own
+    output-error estimates, and the refined model's prediction of 017."""
+    from aerosid.identification.refine import refine
+    from aerosid.identification.validate import validate
+    from aerosid.io import write_json_atomic, write_parquet_atomic
+
+    t0 = time.time()
+    res = refine(run_dir, work / "m018" / "telemetry.parquet", axes="lon")
+    seconds = time.time() - t0
+    fit = res.fits[0]
+    p = sio.loadmat(data / "sidpac_results_018.mat", squeeze_me=True)
+    sid = {"CN_0": (-p["p"][2], p["serr"][2]), "CN_alpha": (-p["p"][0], p["serr"][0]),
+           "CN_delta_p": (-p["p"][1], p["serr"][1]), "Cm_0": (p["p"][6], p["serr"][6]),
+           "Cm_alpha": (p["p"][3], p["serr"][3]), "Cm_q": (p["p"][4], p["serr"][4]),
+           "Cm_delta_p": (p["p"][5], p["serr"][5])}
+    ee_sigma = run.identification.table().set_index("coefficient")["std_error"]
+    rows = []
+    for k in fit.names:
+        s_est, s_sig = sid.get(k, (math.nan, math.nan))
+        rows.append(f"| {k} | {fit.start[k]:.4g} ± {ee_sigma[k]:.2g} | {fit.estimate[k]:.4g} ± {fit.sigma[k]:.2g} "
+                    f"({fit.sigma_white[k]:.2g}) | {s_est:.4g} ± {s_sig:.2g} | "
+                    f"{100 * (fit.start[k] / s_est - 1):+.1f} % | {100 * (fit.estimate[k] / s_est - 1):+.1f} % | "
+                    f"{(fit.estimate[k] - s_est) / math.hypot(fit.sigma[k], s_sig):+.1f} |")
+    # the refined model as a run folder of its own, predicting 017 as above
+    refined = work / "run018_oe"
+    table = run.identification.table()
+    table["estimate"] = [fit.estimate.get(k, v) for k, v in zip(table["coefficient"], table["estimate"])]
+    write_parquet_atomic(table, refined / "coefficients.parquet")
+    write_parquet_atomic(run.flight_data, refined / "flight_data.parquet")
+    write_json_atomic(json_of(run_dir), refined / "run.json")
+    val = validate(refined, work / "m017" / "telemetry.parquet", bias="offsets", axes="lon")
+    a, q, z = (val.metric(o) for o in ("alpha_rad", "q_rad_s", "az_m_s2"))
+    return [
+        "## 3. Output-error refinement: `aerosid refine` on 018",
+        "",
+        f"The run's model refined by output error on its own manoeuvre (aerosid/identification/output_error.py: "
+        f"simulated with the measured elevator before the band's low-pass, airspeed, dynamic pressure and "
+        f"attitude; alpha, q, a_z compared with the measurements; {fit.nfev} cost simulations, {seconds:.0f} s). "
+        "sigma: Morelli-Klein (coloured residuals), in brackets the Cramér-Rao bound. SIDPAC: its output-error "
+        "estimates and their standard errors (`sidpac_results_018.mat`: p, serr). z: (aerosid OE - SIDPAC) over "
+        "the two sigmas in quadrature. SIDPAC's model is written in deviations from 018's initial state, so its "
+        "intercepts (CN_0, Cm_0 rows) are not comparable; the slopes are.",
+        "",
+        "| coefficient | equation error ± sigma | output error ± sigma (CRB) | SIDPAC output error ± sigma | "
+        "EE vs SIDPAC | OE vs SIDPAC | z |",
+        "|---|---|---|---|---|---|---|",
+        *rows,
+        "",
+        "Outputs on 018: " + "; ".join(f"{o} noise {fit.noise_std[o]:.3g}, TIC {fit.tic_start[o]:.3f} -> "
+                                       f"{fit.tic_end[o]:.3f}" for o in fit.noise_std) + ".",
+        "",
+        f"The refined model predicting 017 (bias offsets): TIC alpha {a.tic:.3f}, q {q.tic:.3f}, a_z {z.tic:.4f}; "
+        f"RMS/std alpha {a.nrms:.3f}, q {q.nrms:.3f} (the equation-error model's row above: offsets).",
+        "",
+    ]
+
+
+def json_of(run_dir: Path) -> dict:
+    import json
+
+    return json.loads((run_dir / "run.json").read_text())
 
 
 if __name__ == "__main__":

@@ -9,6 +9,7 @@ loads Prefect).
 ``modelling``      ``aerosid diagnose`` / ``fit`` / ``history`` (the modelling loop)
 ``import_``        ``aerosid import sidpac|csv`` (``import`` is a Python keyword)
 ``validate``       ``aerosid validate`` (predict another manoeuvre)
+``refine``         ``aerosid refine`` (output-error refinement of a run's model)
 ``design``         ``aerosid design`` (experiment design)
 ``prefect_server`` the Prefect API server ``aerosid run`` starts or reuses
 ``progress``       the progress display (rich)

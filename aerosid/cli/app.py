@@ -56,11 +56,12 @@ from aerosid.cli.audit import audit  # noqa: E402  (the commands, one module eac
 from aerosid.cli.design import design  # noqa: E402
 from aerosid.cli.import_ import import_group  # noqa: E402  (aerosid import sidpac|csv)
 from aerosid.cli.modelling import diagnose, fit, history  # noqa: E402  (the modelling loop)
+from aerosid.cli.refine import refine  # noqa: E402  (output-error refinement)
 from aerosid.cli.run import run  # noqa: E402
 from aerosid.cli.simulate import simulate  # noqa: E402
 from aerosid.cli.validate import validate  # noqa: E402  (predict another manoeuvre)
 
-for _command in (simulate, run, audit, diagnose, fit, history, import_group, validate, design):
+for _command in (simulate, run, audit, diagnose, fit, history, import_group, validate, refine, design):
     main.add_command(_command)
 
 if __name__ == "__main__":  # pragma: no cover

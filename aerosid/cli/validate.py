@@ -19,9 +19,10 @@ Examples:
 """
 
 
-def _default_out(run_dir: Path, telemetry: Path) -> Path:
+def _default_out(run_dir: Path, telemetry: Path, folder: str = "validation") -> Path:
+    """RUN_DIR/<folder>/<the telemetry's name> (its folder's name for a telemetry.parquet)."""
     stem = telemetry.parent.name if telemetry.stem == "telemetry" and telemetry.parent.name else telemetry.stem
-    return run_dir / "validation" / (re.sub(r"[^A-Za-z0-9_.-]+", "_", stem).strip("._-") or "other")
+    return run_dir / folder / (re.sub(r"[^A-Za-z0-9_.-]+", "_", stem).strip("._-") or "other")
 
 
 @click.command(epilog=EPILOG)

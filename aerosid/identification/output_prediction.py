@@ -96,12 +96,20 @@ def gravity_less_relief(h_m, V_m_s, alpha, beta, phi, theta) -> np.ndarray:
     return gravity_m_s2(h_m) - v_h2 / (R_EARTH_M + np.asarray(h_m, float))
 
 
-def prediction_inputs(fd: pd.DataFrame, vehicle: Vehicle, phi_rad, theta_rad, span) -> pd.DataFrame:
+def prediction_inputs(fd: pd.DataFrame, vehicle: Vehicle, phi_rad, theta_rad, span,
+                      wideband_controls: bool = False) -> pd.DataFrame:
     """The inputs frame of a manoeuvre from its flight data (aerosid.identification.flight_data columns,
     sorted by time within each segment), the attitude [rad] on the same rows and a span
-    id per row (contiguous samples simulated together; negative: not simulated)."""
+    id per row (contiguous samples simulated together; negative: not simulated).
+    wideband_controls: drive the simulation with the fins' deflections before the band
+    path's low-pass (``delta_*_wideband_rad``, when the flight data carry them) instead of the
+    low-passed ones the regression reads: what an output-error fit compares with unfiltered
+    measurements needs (c172x seed 0: the low-passed 3-2-1-1 moved its C_m,delta by +9.4 %)."""
+    from aerosid.identification.flight_data import WIDEBAND_COLUMNS
     from aerosid.modelling.models import vehicle_signals
 
+    if wideband_controls:
+        fd = fd.assign(**{c: fd[w] for c, w in WIDEBAND_COLUMNS.items() if c.startswith("delta_") and w in fd})
     sig = vehicle_signals(fd, vehicle)
     qS = fd["qbar_pa"].to_numpy(float) * vehicle.S_m2
     m = vehicle.mass_kg

@@ -87,6 +87,25 @@ def _effective_n(r_windowed: np.ndarray, n: int, p: int) -> float:
     return float(np.clip(n_eff, p + 1.0, n))
 
 
+def morelli_klein_middle(X: np.ndarray, v: np.ndarray, max_lag: int,
+                         slices: list[slice] | None = None) -> tuple[np.ndarray, float]:
+    """The middle matrix sum_i sum_j x_i R_vv(i - j) x_j' of the Morelli-Klein sandwich (Parzen
+    lag window, within each group of ``slices``) and N_eff.  X (N, p): the regressors of a
+    linear fit, or an output-error fit's output sensitivities; v (N,): its residuals."""
+    n, p = X.shape
+    r = _pooled_autocovariance(v, slices, max_lag) * _parzen(max_lag)
+    n_eff = _effective_n(r, n, p)
+    if max_lag == 0:
+        return r[0] * (X.T @ X), n_eff
+    r_sym = np.concatenate([r[:0:-1], r])  # lags -L..L
+    middle = np.zeros((p, p))
+    for s in slices or [slice(0, n)]:
+        Xg = X[s]
+        tx = scipy.signal.fftconvolve(Xg, r_sym[:, None], mode="full", axes=0)[max_lag : max_lag + Xg.shape[0]]
+        middle += Xg.T @ tx
+    return 0.5 * (middle + middle.T), n_eff
+
+
 def _morelli_klein(X: np.ndarray, v: np.ndarray, xtx_inv: np.ndarray, max_lag: int,
                    slices: list[slice] | None = None):
     """Morelli-Klein coloured-residual covariance with a Parzen lag window (within each
@@ -94,19 +113,8 @@ def _morelli_klein(X: np.ndarray, v: np.ndarray, xtx_inv: np.ndarray, max_lag: i
 
     Returns (cov, n_eff) where cov already carries the N_eff/(N_eff - p) factor.
     """
-    n, p = X.shape
-    r = _pooled_autocovariance(v, slices, max_lag) * _parzen(max_lag)
-    n_eff = _effective_n(r, n, p)
-    if max_lag == 0:
-        middle = r[0] * (X.T @ X)
-    else:
-        r_sym = np.concatenate([r[:0:-1], r])  # lags -L..L
-        middle = np.zeros((p, p))
-        for s in slices or [slice(0, n)]:
-            Xg = X[s]
-            tx = scipy.signal.fftconvolve(Xg, r_sym[:, None], mode="full", axes=0)[max_lag : max_lag + Xg.shape[0]]
-            middle += Xg.T @ tx
-        middle = 0.5 * (middle + middle.T)
+    p = X.shape[1]
+    middle, n_eff = morelli_klein_middle(X, v, max_lag, slices)
     cov = xtx_inv @ middle @ xtx_inv
     cov = 0.5 * (cov + cov.T) * (n_eff / max(n_eff - p, 1.0))
     return cov, n_eff

@@ -283,24 +283,19 @@ def choose_axes(model: IdentifiedModel, axes: str) -> tuple[tuple[str, ...], lis
 
 
 # --------------------------------------------------------------------------- the whole check
-def validate(run_dir: str | Path, telemetry: str | Path, *, vehicle: str | None = None, version: str | None = None,
-             bias: str = "offsets", axes: str = "auto", windows=None, progress=None) -> ValidationResult:
-    """Predict the manoeuvre in `telemetry` with RUN_DIR's identified model (the latest
-    model version, or `version`).  vehicle: the other manoeuvre's vehicle file (default:
-    the run's); windows: time windows [s] of the other telemetry, as `aerosid run --window`;
-    progress: an optional callback progress(stage, fraction) (the CLI's display)."""
+def estimate_manoeuvre(run_dir, telemetry, model: IdentifiedModel, veh: Vehicle, windows=None,
+                       needs_attitude: bool = True, progress=None):
+    """A manoeuvre through the run's own estimation (preprocessing and smoothing settings from
+    RUN_DIR/run.json), in memory: (raw telemetry, EstimatedFlightData, flight data sorted by
+    time, span id per row (-1 outside the model's Mach window or in a stretch shorter than
+    MIN_SPAN_S), notes).  needs_attitude: check the attitude columns' units before the
+    estimation's minutes, not after."""
     from aerosid.ebm import estimate_flight_data
     from aerosid.preprocess.io import read_raw_parquet
-    from aerosid.vehicles.vehicle import load_vehicle
 
-    if bias not in BIAS_MODES:
-        raise ValueError(f"unknown bias treatment {bias!r}; choose one of {', '.join(BIAS_MODES)}")
-    model = load_identified_model(run_dir, version)
-    veh = load_vehicle(vehicle or model.vehicle)
-    chosen, notes = choose_axes(model, axes)
     job = read_run_json(run_dir).get("job") or {}
     raw = read_raw_parquet(telemetry)
-    if chosen:  # a unit error in the attitude fails before the estimation's minutes, not after
+    if needs_attitude:
         attitude_on(raw, raw["t_s"].to_numpy(float), str(telemetry))
     est = estimate_flight_data(raw, veh, flight=Path(telemetry).stem, windows=windows,
                                preprocess_params=job.get("preprocess_params") or None,
@@ -309,16 +304,34 @@ def validate(run_dir: str | Path, telemetry: str | Path, *, vehicle: str | None 
                                skip_failed=True, progress=progress)
     if progress is not None:
         progress("predict", 0.0)
-    notes += [f"segment {s} of {telemetry} left out: {why}" for s, why in est.failed]
+    notes = [f"segment {s} of {telemetry} left out: {why}" for s, why in est.failed]
     fd = est.flight_data.sort_values(["flight", "t_s"], kind="stable").reset_index(drop=True)
     keep = mach_window_mask(fd["mach"].to_numpy(), veh.mach_reference, model.mach_half_width)
     span = spans_of(fd, keep)
-    use = span >= 0
-    if not use.any():
+    if not (span >= 0).any():
         hw = model.mach_half_width
         raise ValueError(f"{telemetry}: no stretch of at least {MIN_SPAN_S:g} s inside the identification's Mach "
                          f"window {veh.mach_reference:g} +- {hw} (the manoeuvre spans Mach "
                          f"{fd['mach'].min():.3g}..{fd['mach'].max():.3g})")
+    return raw, est, fd, span, notes
+
+
+def validate(run_dir: str | Path, telemetry: str | Path, *, vehicle: str | None = None, version: str | None = None,
+             bias: str = "offsets", axes: str = "auto", windows=None, progress=None) -> ValidationResult:
+    """Predict the manoeuvre in `telemetry` with RUN_DIR's identified model (the latest
+    model version, or `version`).  vehicle: the other manoeuvre's vehicle file (default:
+    the run's); windows: time windows [s] of the other telemetry, as `aerosid run --window`;
+    progress: an optional callback progress(stage, fraction) (the CLI's display)."""
+    from aerosid.vehicles.vehicle import load_vehicle
+
+    if bias not in BIAS_MODES:
+        raise ValueError(f"unknown bias treatment {bias!r}; choose one of {', '.join(BIAS_MODES)}")
+    model = load_identified_model(run_dir, version)
+    veh = load_vehicle(vehicle or model.vehicle)
+    chosen, notes = choose_axes(model, axes)
+    raw, est, fd, span, more = estimate_manoeuvre(run_dir, telemetry, model, veh, windows, bool(chosen), progress)
+    notes += more
+    use = span >= 0
     coef_frame, coef_metrics = predict_coefficients(model, fd, veh, span, bias)
     rho_src, rho_note = density_source(raw, fd)
     sources = {"density": rho_src}

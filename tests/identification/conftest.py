@@ -1,4 +1,5 @@
 """Shared flights of the identification tests."""
+import math
 from dataclasses import replace
 
 import numpy as np
@@ -7,6 +8,7 @@ import pytest
 
 from aerosid.identification.identified import IdentifiedModel
 from aerosid.identification.output_prediction import prediction_inputs
+from aerosid.io import write_json_atomic, write_parquet_atomic
 from aerosid.modelling.models import default_models
 from aerosid.simulation import load_case, simulate
 from aerosid.vehicles.vehicle import load_vehicle
@@ -38,3 +40,39 @@ def clean_flight(clean_truth):
     return veh, inputs, measured, model
 
 
+
+
+TWENTY_S = {"duration_s": 20.0, "V0_m_s": 3780.0}  # starts at M 12.5: the whole flight is in the Mach window
+
+
+def _telemetry(tmp, name, seed, attitude=True, degrees=False):
+    flight = simulate(load_case("seed-rlv", **TWENTY_S), seed=seed)
+    tel = flight.telemetry.copy()
+    if attitude:
+        tr = flight.truth.set_index("t_s")
+        k = 180 / math.pi if degrees else 1.0
+        for col in ("phi_rad", "theta_rad"):
+            tel[col] = tr[col].reindex(tel["t_s"]).to_numpy() * k
+    path = tmp / name / "telemetry.parquet"
+    write_parquet_atomic(tel, path, metadata={"aerosid.case": "seed-rlv"})
+    return path
+
+
+@pytest.fixture(scope="module")
+def small_run(tmp_path_factory):
+    """RUN_DIR as `aerosid run` lays it out (flight_data.parquet, coefficients.parquet,
+    run.json), from the in-memory method on a 20 s seed-rlv flight; plus other manoeuvres."""
+    from aerosid.ebm import process_telemetry
+    from aerosid.vehicles.vehicle import load_vehicle
+
+    tmp = tmp_path_factory.mktemp("validate")
+    own = _telemetry(tmp, "f0", 0)
+    run = process_telemetry(pd.read_parquet(own), load_vehicle("seed-rlv"), flight="f0")
+    run_dir = tmp / "run"
+    write_parquet_atomic(run.flight_data, run_dir / "flight_data.parquet")
+    write_parquet_atomic(run.identification.table(), run_dir / "coefficients.parquet")
+    write_json_atomic({"vehicle": "seed-rlv", "job": {"vehicle": "seed-rlv", "mach_half_width": 0.5,
+                                                      "preprocess_params": {}, "smoothing_options": {},
+                                                      "min_segment_s": 5.0}}, run_dir / "run.json")
+    return {"run": run_dir, "other": _telemetry(tmp, "f1", 1), "no_attitude": _telemetry(tmp, "f2", 2, False),
+            "degrees": _telemetry(tmp, "f3", 3, degrees=True), "tmp": tmp}

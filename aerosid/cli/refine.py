@@ -1,0 +1,75 @@
+"""``aerosid refine RUN_DIR TELEMETRY``: output-error refinement of a run's model.
+
+Parses and prints only; the work is in aerosid.identification.refine (the core, in memory:
+the manoeuvre's estimation runs without Prefect, as ``aerosid validate``'s).  Registered in
+aerosid/cli/app.py.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+import click
+
+EPILOG = """\b
+Examples:
+  aerosid run runs/m018/telemetry.parquet --out runs/m018/run
+  aerosid refine runs/m018/run runs/m018/telemetry.parquet
+  aerosid refine runs/m018/run runs/m018/telemetry.parquet --axes lon --free Cm_alpha --free Cm_q
+"""
+
+
+@click.command(epilog=EPILOG)
+@click.argument("run_dir", type=click.Path(file_okay=False, path_type=Path))
+@click.argument("telemetry", type=click.Path(exists=True, dir_okay=False, path_type=Path))
+@click.option("--vehicle", default=None, metavar="NAME_OR_FILE",
+              help="Vehicle of the manoeuvre (default: the run's, from RUN_DIR/run.json).")
+@click.option("--version", "version_id", default=None, metavar="vNNN",
+              help="Start from this model version (default: the latest under RUN_DIR/models, else the run's "
+                   "coefficients).")
+@click.option("--axes", type=click.Choice(["auto", "lon", "lat", "both"]), default="auto", show_default=True,
+              help="Axes to refine: lon (CN, Cm: alpha, q, a_z), lat (CY, Cl, Cn: beta, p, r, a_y); auto = lon, "
+                   "plus lat when the lateral channels are all identified.")
+@click.option("--free", multiple=True, metavar="COEFFICIENT",
+              help="Refine only this coefficient (repeatable; default: every identified one of the axes).")
+@click.option("--window", "windows", multiple=True, nargs=2, type=float, metavar="T0 T1",
+              help="Only this time window [s] of the telemetry (repeatable).")
+@click.option("--out", "out_dir", type=click.Path(file_okay=False, path_type=Path), default=None,
+              help="Folder for output_error.json (default: RUN_DIR/refine/<telemetry name>).")
+def refine(run_dir, telemetry, vehicle, version_id, axes, free, windows, out_dir):
+    """Refine the run's model by output error on a manoeuvre, from its equation-error estimates.
+
+    \b
+    The model is simulated with the measured controls, airspeed, dynamic pressure and
+    attitude (telemetry columns phi_rad, theta_rad) and its coefficients adjusted until the
+    simulated alpha, q, a_z (beta, p, r, a_y) match the measured ones.  The sensors' noise is
+    then output noise, which biases nothing, where the equation-error regression reads it in
+    its regressors.  Slow: one simulation per coefficient per iteration (minutes on a long
+    flight).  Prints the equation-error and output-error estimates side by side with sigma
+    (coloured residuals) and the Cramer-Rao bound; writes output_error.json.
+    """
+    from aerosid.cli.progress import stage_progress
+    from aerosid.cli.validate import _default_out
+    from aerosid.identification.identified import ModelSourceError
+    from aerosid.identification.refine import refine as run_refine, write_refinement
+    from aerosid.preprocess import TelemetryError
+    from aerosid.vehicles.vehicle import VehicleError
+
+    if not run_dir.is_dir():
+        raise click.ClickException(f"{run_dir}: no such run folder (make one with `aerosid run TELEMETRY --out "
+                                   f"{run_dir}`)")
+    try:
+        with stage_progress("refine") as progress:
+            result = run_refine(run_dir, telemetry, vehicle=vehicle, version=version_id, axes=axes,
+                                free=list(free) or None, windows=[tuple(w) for w in windows] or None,
+                                progress=progress)
+    except (ModelSourceError, VehicleError, TelemetryError) as exc:
+        raise click.ClickException(str(exc)) from exc
+    except ValueError as exc:
+        raise click.ClickException(f"{telemetry}: {exc}" if str(telemetry) not in str(exc) else str(exc)) from exc
+    click.echo(result.summary())
+    out = out_dir or _default_out(run_dir, telemetry, "refine")
+    try:
+        paths = write_refinement(result, out)
+    except OSError as exc:
+        raise click.ClickException(f"cannot write {out}: {exc.strerror or exc}") from exc
+    click.echo("wrote " + ", ".join(str(p) for p in paths.values()))

@@ -1,0 +1,99 @@
+"""Refine a run's model by output error on a manoeuvre (``aerosid refine``).
+
+The manoeuvre goes through the run's own estimation (as ``aerosid validate`` does:
+:func:`aerosid.identification.validate.estimate_manoeuvre`); the model's axes are then fitted
+by output error (:mod:`aerosid.identification.output_error`), started from the run's
+equation-error estimates, driven by the measured controls (before the band's low-pass),
+airspeed, dynamic pressure and attitude (telemetry columns ``phi_rad``, ``theta_rad``), and
+compared with the measured alpha, q, a_z (beta, p, r, a_y).  Usually the manoeuvre the run
+was identified on; any other of the same vehicle works too.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from aerosid.identification.identified import IdentifiedModel, load_identified_model
+from aerosid.identification.output_error import output_error_fit
+from aerosid.identification.output_prediction import AXIS_CHANNELS, prediction_inputs
+from aerosid.identification.validate import (ATTITUDE_COLUMNS, attitude_on, choose_axes, estimate_manoeuvre,
+                                             measured_outputs)
+
+__all__ = ["RefineResult", "refine", "write_refinement"]
+
+
+@dataclass(frozen=True)
+class RefineResult:
+    """The output-error fits (OutputErrorFit per axis) of one run's model on one manoeuvre."""
+
+    run_dir: str
+    telemetry: str
+    model: IdentifiedModel = field(repr=False)
+    vehicle: str
+    fits: tuple
+    sources: dict = field(default_factory=dict)  # output -> where it was measured
+    notes: tuple = ()
+
+    def summary(self) -> str:
+        lines = [f"output-error refinement of {self.model.source} on {self.telemetry} (vehicle {self.vehicle})",
+                 "  started from the equation-error estimates; sigma: Morelli-Klein (coloured residuals), "
+                 "sigma CRB: the Cramer-Rao bound with the fitted output noise"]
+        lines += [f"  {o}: {s}" for o, s in self.sources.items()]
+        for fit in self.fits:
+            lines += ["", fit.summary()]
+        lines += [f"note: {n}" for n in self.notes]
+        return "\n".join(lines)
+
+    def to_json(self) -> dict:
+        return {"run_dir": self.run_dir, "telemetry": self.telemetry, "model": self.model.source,
+                "vehicle": self.vehicle, "axes": {f.axis: f.to_dict() for f in self.fits},
+                "sources": dict(self.sources), "notes": list(self.notes)}
+
+
+def refine(run_dir: str | Path, telemetry: str | Path, *, vehicle: str | None = None, version: str | None = None,
+           axes: str = "auto", free=None, windows=None, progress=None) -> RefineResult:
+    """Output-error fits of RUN_DIR's model (the latest version, or `version`) on the manoeuvre
+    in `telemetry`.  axes: as ``aerosid validate`` (auto = lon, plus lat when the lateral
+    channels are all identified); free: the coefficients to refine (default: every
+    identified one of each axis); windows: time windows [s] of the telemetry."""
+    from aerosid.vehicles.vehicle import load_vehicle
+
+    model = load_identified_model(run_dir, version)
+    veh = load_vehicle(vehicle or model.vehicle)
+    chosen, notes = choose_axes(model, axes)
+    if not chosen:
+        raise ValueError("no axis to refine: " + "; ".join(notes))
+    raw, est, fd, span, more = estimate_manoeuvre(run_dir, telemetry, model, veh, windows, True, progress)
+    notes += more
+    att = attitude_on(raw, fd["t_s"].to_numpy(float), str(telemetry))
+    if att is None:
+        raise ValueError(f"{telemetry}: the output-error fit needs the attitude for gravity, and the telemetry has "
+                         f"no {' / '.join(ATTITUDE_COLUMNS)} columns: add the measured roll and pitch attitude [rad]")
+    inputs = prediction_inputs(fd, veh, att[0], att[1], span, wideband_controls=True)
+    meas, sources = measured_outputs(est.preprocessed.frame, fd, veh)
+    fits = []
+    for k, ax in enumerate(chosen):
+        if progress is not None:
+            progress(f"output error ({ax})", k / len(chosen))
+        own = {t.coefficient for ch in AXIS_CHANNELS[ax] if ch in model.models for t in model.models[ch].terms}
+        names = [n for n in free if n in own] if free else None
+        if free and not names:
+            notes.append(f"{ax} axis not refined: none of {list(free)} is one of its coefficients")
+            continue
+        fits.append(output_error_fit(model, inputs, meas, veh, ax, free=names))
+    if free:
+        unknown = sorted(set(free) - {n for f in fits for n in f.names})
+        if unknown:
+            notes.append(f"not refined (not in the refined axes' models): {unknown}")
+    if progress is not None:
+        progress("done", 1.0)
+    used = {o for f in fits for o in f.noise_std}
+    return RefineResult(str(run_dir), str(telemetry), model, veh.name, tuple(fits),
+                        {o: s for o, s in sources.items() if o in used}, tuple(notes))
+
+
+def write_refinement(result: RefineResult, out_dir: str | Path) -> dict[str, Path]:
+    """output_error.json (estimates, sigma, covariance, output noise and TIC per axis), atomically."""
+    from aerosid.io import write_json_atomic
+
+    return {"json": write_json_atomic(result.to_json(), Path(out_dir) / "output_error.json")}

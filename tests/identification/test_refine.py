@@ -1,0 +1,37 @@
+"""aerosid refine: output-error refinement of a run's model on a manoeuvre (the command on
+the small seed-rlv run of tests/identification/conftest.py, built without Prefect)."""
+import json
+
+from click.testing import CliRunner
+
+from aerosid.cli import main
+
+
+def test_cli_refine_prints_both_estimates_and_writes_json(small_run):
+    out = small_run["tmp"] / "refined"
+    res = CliRunner().invoke(main, ["refine", str(small_run["run"]), str(small_run["other"]), "--axes", "lon",
+                                    "--free", "Cm_alpha", "--free", "Cm_delta_p", "--free", "Cn_beta",
+                                    "--out", str(out)])
+    assert res.exit_code == 0, res.output
+    assert "output-error refinement of the lon axis" in res.output and "equation error" in res.output
+    assert "not refined (not in the refined axes' models): ['Cn_beta']" in res.output
+    doc = json.loads((out / "output_error.json").read_text())
+    lon = doc["axes"]["lon"]
+    assert list(lon["coefficients"]) == ["Cm_alpha", "Cm_delta_p"]
+    truth = {"Cm_alpha": -0.2521, "Cm_delta_p": 0.03747}  # seed-rlv's linear truth (bench/results/generalisation.md)
+    for k, c in lon["coefficients"].items():
+        assert c["std_error"] >= 0.7 * c["std_error_crb"] > 0
+        assert abs(c["estimate"] - truth[k]) < 4 * c["std_error"], (k, c)
+    outs = lon["outputs"]
+    assert set(outs) == {"alpha_rad", "q_rad_s", "az_m_s2"}
+    assert all(o["tic_end"] <= o["tic_start"] + 1e-3 for o in outs.values())
+    # what the simulated q cannot follow is the gyro's white noise (Table 2: 2 deg/s)
+    assert abs(outs["q_rad_s"]["noise_std"] / 0.03490659 - 1) < 0.1
+
+
+def test_cli_refine_without_attitude_names_the_columns(small_run, tmp_path):
+    res = CliRunner().invoke(main, ["refine", str(small_run["run"]), str(small_run["no_attitude"]), "--axes", "lon",
+                                    "--out", str(tmp_path / "r")])
+    assert res.exit_code == 1 and "Traceback" not in res.output
+    assert "phi_rad / theta_rad" in res.output and "attitude" in res.output
+    assert not (tmp_path / "r").exists()
