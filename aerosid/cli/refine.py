@@ -73,3 +73,5 @@ def refine(run_dir, telemetry, vehicle, version_id, axes, free, windows, out_dir
     except OSError as exc:
         raise click.ClickException(f"cannot write {out}: {exc.strerror or exc}") from exc
     click.echo("wrote " + ", ".join(str(p) for p in paths.values()))
+    click.echo("which model predicts better? predict another manoeuvre with each: aerosid validate "
+               f"{run_dir} OTHER_TELEMETRY [--coefficients {paths['coefficients']}]")

@@ -16,6 +16,7 @@ Examples:
   aerosid run runs/m018/telemetry.parquet --out runs/m018/run
   aerosid validate runs/m018/run runs/m017/telemetry.parquet
   aerosid validate runs/m018/run runs/m017/telemetry.parquet --bias intercepts --out runs/m018/pred017
+  aerosid validate runs/m018/run runs/m017/telemetry.parquet --coefficients runs/m018/run/refine/m018/coefficients.parquet
 """
 
 
@@ -35,6 +36,10 @@ def _default_out(run_dir: Path, telemetry: Path, folder: str = "validation") -> 
                    "(default: RUN_DIR/validation/<telemetry name>).")
 @click.option("--version", "version_id", default=None, metavar="vNNN",
               help="Use this model version (default: the latest under RUN_DIR/models, else the run's coefficients).")
+@click.option("--coefficients", "coefficients", type=click.Path(exists=True, dir_okay=False, path_type=Path),
+              default=None, metavar="FILE",
+              help="Use this coefficients table instead of a model version (e.g. aerosid refine's "
+                   "RUN_DIR/refine/<name>/coefficients.parquet).")
 @click.option("--bias", type=click.Choice(["none", "offsets", "intercepts"]), default="offsets", show_default=True,
               help="none: the model as identified; offsets: remove the mean of measured - predicted per output "
                    "(SIDPAC's prediction); intercepts: also re-estimate CN_0, Cm_0, ... on this manoeuvre.")
@@ -43,7 +48,7 @@ def _default_out(run_dir: Path, telemetry: Path, folder: str = "validation") -> 
                    "the lateral channels are all identified.")
 @click.option("--window", "windows", multiple=True, nargs=2, type=float, metavar="T0 T1",
               help="Only this time window [s] of the other telemetry (repeatable).")
-def validate(run_dir, other_telemetry, vehicle, out_dir, version_id, bias, axes, windows):
+def validate(run_dir, other_telemetry, vehicle, out_dir, version_id, coefficients, bias, axes, windows):
     """Predict another manoeuvre of the same vehicle with the run's identified model.
 
     \b
@@ -72,7 +77,8 @@ def validate(run_dir, other_telemetry, vehicle, out_dir, version_id, bias, axes,
     try:
         with stage_progress("validate") as progress:
             result = run_validation(run_dir, other_telemetry, vehicle=vehicle, version=version_id, bias=bias,
-                                    axes=axes, windows=[tuple(w) for w in windows] or None, progress=progress)
+                                    axes=axes, windows=[tuple(w) for w in windows] or None, progress=progress,
+                                    coefficients=coefficients)
     except (ModelSourceError, VehicleError, TelemetryError) as exc:
         raise click.ClickException(str(exc)) from exc
     except ValueError as exc:

@@ -39,6 +39,7 @@ class IdentifiedModel:
     source: str = "<memory>"
     vehicle: str = ""
     mach_half_width: float | None = 0.5
+    path: str = ""  # the coefficients.parquet it was read from ("" in memory)
     _compiled: dict = field(default_factory=dict, repr=False, compare=False)
 
     def __post_init__(self):
@@ -101,7 +102,7 @@ class IdentifiedModel:
 
 
 def model_from_table(table: pd.DataFrame, source: str, vehicle: str = "",
-                     mach_half_width: float | None = 0.5) -> IdentifiedModel:
+                     mach_half_width: float | None = 0.5, path: str | Path = "") -> IdentifiedModel:
     """An IdentifiedModel from coefficients.parquet rows (channel, coefficient, expression, estimate)."""
     need = {"channel", "coefficient", "expression", "estimate"}
     missing = sorted(need - set(table.columns))
@@ -122,7 +123,7 @@ def model_from_table(table: pd.DataFrame, source: str, vehicle: str = "",
         models[str(ch)] = ChannelModel(str(ch), tuple(terms))
     if not models:
         raise ModelSourceError(f"{source}: no coefficients")
-    return IdentifiedModel(models, values, source, vehicle, mach_half_width)
+    return IdentifiedModel(models, values, source, vehicle, mach_half_width, str(path))
 
 
 def read_run_json(run_dir: str | Path) -> dict:
@@ -134,6 +135,24 @@ def read_run_json(run_dir: str | Path) -> dict:
     except (OSError, ValueError) as exc:
         raise ModelSourceError(f"{path}: not valid JSON ({exc})") from exc
     return doc if isinstance(doc, dict) else {}
+
+
+def load_model_file(path: str | Path, run_dir: str | Path) -> IdentifiedModel:
+    """The model of a coefficients table outside the run's versions (e.g. ``aerosid refine``'s
+    coefficients.parquet), for the run's vehicle and Mach window."""
+    from aerosid.modelling.versions import VersionError, run_vehicle
+
+    path = Path(path)
+    try:
+        table = pd.read_parquet(path)
+    except Exception as exc:  # pyarrow raises several types
+        raise ModelSourceError(f"{path}: cannot read the coefficients ({exc})") from exc
+    try:
+        vehicle = run_vehicle(run_dir)
+    except VersionError as exc:
+        raise ModelSourceError(str(exc)) from exc
+    job = read_run_json(run_dir).get("job") or {}
+    return model_from_table(table, str(path), vehicle, job.get("mach_half_width", 0.5), path)
 
 
 def load_identified_model(run_dir: str | Path, version: str | None = None) -> IdentifiedModel:
@@ -165,7 +184,7 @@ def load_identified_model(run_dir: str | Path, version: str | None = None) -> Id
         table = pd.read_parquet(path)
     except Exception as exc:  # pyarrow raises several types
         raise ModelSourceError(f"{path}: cannot read the coefficients ({exc})") from exc
-    model = model_from_table(table, source, vehicle, mhw)
+    model = model_from_table(table, source, vehicle, mhw, path)
     if v is not None:  # the version's spec is the authority on its terms
         spec = {ch: m.terms for ch, m in v.models.items()}
         if {ch: tuple(t.coefficient for t in ts) for ch, ts in spec.items()} != \

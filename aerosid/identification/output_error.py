@@ -137,7 +137,7 @@ def _free_names(model: IdentifiedModel, axis: str, free) -> list[str]:
 
 def output_error_fit(model: IdentifiedModel, inputs: pd.DataFrame, measured: pd.DataFrame, vehicle: Vehicle,
                      axis: str = "lon", free=None, controls: str = "linear", relaxations: int = RELAXATIONS,
-                     max_nfev: int = 40) -> OutputErrorFit:
+                     max_nfev: int = 40, tol: float = 1e-8) -> OutputErrorFit:
     """Refine `model`'s `axis` coefficients (`free`: their names; default every identified one
     of the axis's channels) by output error on one manoeuvre.  inputs / measured: as
     :func:`aerosid.identification.output_prediction.predict_axis` takes them (rows with span
@@ -188,7 +188,7 @@ def output_error_fit(model: IdentifiedModel, inputs: pd.DataFrame, measured: pd.
     x, sol, nfev = x0, None, 0
     for _ in range(max(1, int(relaxations))):
         sol = least_squares(lambda z: stacked(residual_matrix(predict(z)), scale), x, x_scale="jac",
-                            method="trf", max_nfev=max_nfev)
+                            method="trf", max_nfev=max_nfev, ftol=tol, xtol=tol, gtol=tol)
         x, nfev = sol.x, nfev + int(sol.nfev)
         res = residual_matrix(predict(x))
         new = np.array([float(np.nanstd(res[ok[:, j], j])) if j in outs_used else 1.0 for j in range(len(outs))])

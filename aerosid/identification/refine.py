@@ -13,6 +13,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import pandas as pd
+
 from aerosid.identification.identified import IdentifiedModel, load_identified_model
 from aerosid.identification.output_error import output_error_fit
 from aerosid.identification.output_prediction import AXIS_CHANNELS, prediction_inputs
@@ -92,8 +94,41 @@ def refine(run_dir: str | Path, telemetry: str | Path, *, vehicle: str | None = 
                         {o: s for o, s in sources.items() if o in used}, tuple(notes))
 
 
-def write_refinement(result: RefineResult, out_dir: str | Path) -> dict[str, Path]:
-    """output_error.json (estimates, sigma, covariance, output noise and TIC per axis), atomically."""
-    from aerosid.io import write_json_atomic
+def refined_table(result: RefineResult) -> pd.DataFrame:
+    """coefficients.parquet rows (schemas/coefficients.py) of the refined model: the model's
+    own table (the run's or the version's coefficients.parquet) with the output-error
+    estimates in place of the refined rows' (std_error: sigma; std_error_ols and crb_std: the
+    Cramer-Rao bound; the 95 % interval and t, p from sigma); ``method`` says which rows were
+    refined.  ``aerosid validate --coefficients`` reads it."""
+    from scipy.stats import norm
 
-    return {"json": write_json_atomic(result.to_json(), Path(out_dir) / "output_error.json")}
+    table = (pd.read_parquet(result.model.path) if result.model.path else result.model.table()).copy()
+    table["method"] = "equation error (not refined)"
+    for f in result.fits:
+        for k in f.names:
+            est, s = f.estimate[k], f.sigma[k]
+            row = table["coefficient"] == k
+            table.loc[row, ["estimate", "std_error", "std_error_ols", "ci_low", "ci_high"]] = \
+                [est, s, f.sigma_white[k], est - 1.96 * s, est + 1.96 * s]
+            table.loc[row, "method"] = "output error"
+            if "crb_std" in table:
+                table.loc[row, "crb_std"] = f.sigma_white[k]
+            if "t_value" in table and s > 0:
+                table.loc[row, ["t_value", "p_value"]] = [est / s, float(2 * norm.sf(abs(est / s)))]
+    return table
+
+
+def write_refinement(result: RefineResult, out_dir: str | Path) -> dict[str, Path]:
+    """output_error.json (estimates, sigma, covariance, output noise and TIC per axis) and
+    coefficients.parquet (:func:`refined_table`, checked against schemas/coefficients.py before
+    it is written), atomically."""
+    from aerosid.io import write_json_atomic, write_parquet_atomic
+    from schemas.coefficients import Coefficients
+
+    out = Path(out_dir)
+    table = Coefficients.validate(refined_table(result), lazy=True)
+    return {"json": write_json_atomic(result.to_json(), out / "output_error.json"),
+            "coefficients": write_parquet_atomic(table, out / "coefficients.parquet",
+                                                 metadata={"aerosid.kind": "coefficients",
+                                                           "aerosid.model": f"{result.model.source} refined by "
+                                                                            f"output error on {result.telemetry}"})}

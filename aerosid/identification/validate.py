@@ -317,16 +317,22 @@ def estimate_manoeuvre(run_dir, telemetry, model: IdentifiedModel, veh: Vehicle,
 
 
 def validate(run_dir: str | Path, telemetry: str | Path, *, vehicle: str | None = None, version: str | None = None,
-             bias: str = "offsets", axes: str = "auto", windows=None, progress=None) -> ValidationResult:
+             bias: str = "offsets", axes: str = "auto", windows=None, progress=None,
+             coefficients: str | Path | None = None) -> ValidationResult:
     """Predict the manoeuvre in `telemetry` with RUN_DIR's identified model (the latest
-    model version, or `version`).  vehicle: the other manoeuvre's vehicle file (default:
-    the run's); windows: time windows [s] of the other telemetry, as `aerosid run --window`;
-    progress: an optional callback progress(stage, fraction) (the CLI's display)."""
+    model version, or `version`, or the coefficients table `coefficients`, e.g. ``aerosid
+    refine``'s).  vehicle: the other manoeuvre's vehicle file (default: the run's); windows:
+    time windows [s] of the other telemetry, as `aerosid run --window`; progress: an optional
+    callback progress(stage, fraction) (the CLI's display)."""
+    from aerosid.identification.identified import load_model_file
     from aerosid.vehicles.vehicle import load_vehicle
 
     if bias not in BIAS_MODES:
         raise ValueError(f"unknown bias treatment {bias!r}; choose one of {', '.join(BIAS_MODES)}")
-    model = load_identified_model(run_dir, version)
+    if coefficients is not None and version is not None:
+        raise ValueError("give a model version or a coefficients file, not both")
+    model = load_model_file(coefficients, run_dir) if coefficients is not None else load_identified_model(run_dir,
+                                                                                                          version)
     veh = load_vehicle(vehicle or model.vehicle)
     chosen, notes = choose_axes(model, axes)
     raw, est, fd, span, more = estimate_manoeuvre(run_dir, telemetry, model, veh, windows, bool(chosen), progress)

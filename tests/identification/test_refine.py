@@ -2,6 +2,7 @@
 the small seed-rlv run of tests/identification/conftest.py, built without Prefect)."""
 import json
 
+import pandas as pd
 from click.testing import CliRunner
 
 from aerosid.cli import main
@@ -27,6 +28,17 @@ def test_cli_refine_prints_both_estimates_and_writes_json(small_run):
     assert all(o["tic_end"] <= o["tic_start"] + 1e-3 for o in outs.values())
     # what the simulated q cannot follow is the gyro's white noise (Table 2: 2 deg/s)
     assert abs(outs["q_rad_s"]["noise_std"] / 0.03490659 - 1) < 0.1
+    # the refined model as a coefficients table validate can predict with
+    table = pd.read_parquet(out / "coefficients.parquet")
+    rows = table.set_index("coefficient")
+    assert rows.loc["Cm_alpha", "estimate"] == lon["coefficients"]["Cm_alpha"]["estimate"]
+    assert rows.loc["Cm_alpha", "method"] == "output error" and rows.loc["CN_alpha", "method"].startswith("equation")
+    res = CliRunner().invoke(main, ["validate", str(small_run["run"]), str(small_run["other"]), "--axes", "lon",
+                                    "--coefficients", str(out / "coefficients.parquet"), "--out", str(out / "val")])
+    assert res.exit_code == 0, res.output
+    doc = json.loads((out / "val" / "validation.json").read_text())
+    assert doc["model"] == str(out / "coefficients.parquet")
+    assert doc["model_coefficients"]["Cm_alpha"] == rows.loc["Cm_alpha", "estimate"]
 
 
 def test_cli_refine_without_attitude_names_the_columns(small_run, tmp_path):
