@@ -210,9 +210,8 @@ def run_bench(args, work: Path, t0: float) -> str:
 def output_error_section(data: Path, run, run_dir: Path, work: Path) -> list[str]:
     """`aerosid refine` on 018 (output error from the equation-error start) against SIDPAC's own
     output-error estimates, and the refined model's prediction of 017."""
-    from aerosid.identification.refine import refine
+    from aerosid.identification.refine import refine, write_refinement
     from aerosid.identification.validate import validate
-    from aerosid.io import write_json_atomic, write_parquet_atomic
 
     t0 = time.time()
     res = refine(run_dir, work / "m018" / "telemetry.parquet", axes="lon")
@@ -231,21 +230,17 @@ def output_error_section(data: Path, run, run_dir: Path, work: Path) -> list[str
                     f"({fit.sigma_white[k]:.2g}) | {s_est:.4g} ± {s_sig:.2g} | "
                     f"{100 * (fit.start[k] / s_est - 1):+.1f} % | {100 * (fit.estimate[k] / s_est - 1):+.1f} % | "
                     f"{(fit.estimate[k] - s_est) / math.hypot(fit.sigma[k], s_sig):+.1f} |")
-    # the refined model as a run folder of its own, predicting 017 as above
-    refined = work / "run018_oe"
-    table = run.identification.table()
-    table["estimate"] = [fit.estimate.get(k, v) for k, v in zip(table["coefficient"], table["estimate"])]
-    write_parquet_atomic(table, refined / "coefficients.parquet")
-    write_parquet_atomic(run.flight_data, refined / "flight_data.parquet")
-    write_json_atomic(json_of(run_dir), refined / "run.json")
-    val = validate(refined, work / "m017" / "telemetry.parquet", bias="offsets", axes="lon")
+    # the refined model's table, predicting 017 as above (aerosid validate --coefficients)
+    paths = write_refinement(res, work / "refine018")
+    val = validate(run_dir, work / "m017" / "telemetry.parquet", bias="offsets", axes="lon",
+                   coefficients=paths["coefficients"])
     a, q, z = (val.metric(o) for o in ("alpha_rad", "q_rad_s", "az_m_s2"))
     return [
         "## 3. Output-error refinement: `aerosid refine` on 018",
         "",
         f"The run's model refined by output error on its own manoeuvre (aerosid/identification/output_error.py: "
         f"simulated with the measured elevator before the band's low-pass, airspeed, dynamic pressure and "
-        f"attitude; alpha, q, a_z compared with the measurements; {fit.nfev} cost simulations, {seconds:.0f} s). "
+        f"attitude; alpha, q, a_z compared with the measurements; {fit.nfev} simulations, the sensitivities included, {seconds:.0f} s). "
         "sigma: Morelli-Klein (coloured residuals), in brackets the Cramér-Rao bound. SIDPAC: its output-error "
         "estimates and their standard errors (`sidpac_results_018.mat`: p, serr). z: (aerosid OE - SIDPAC) over "
         "the two sigmas in quadrature. SIDPAC's model is written in deviations from 018's initial state, so its "
@@ -259,16 +254,11 @@ def output_error_section(data: Path, run, run_dir: Path, work: Path) -> list[str
         "Outputs on 018: " + "; ".join(f"{o} noise {fit.noise_std[o]:.3g}, TIC {fit.tic_start[o]:.3f} -> "
                                        f"{fit.tic_end[o]:.3f}" for o in fit.noise_std) + ".",
         "",
-        f"The refined model predicting 017 (bias offsets): TIC alpha {a.tic:.3f}, q {q.tic:.3f}, a_z {z.tic:.4f}; "
+        f"The refined model predicting 017 (`aerosid validate --coefficients`, bias offsets): TIC alpha {a.tic:.3f}, q {q.tic:.3f}, a_z {z.tic:.4f}; "
         f"RMS/std alpha {a.nrms:.3f}, q {q.nrms:.3f} (the equation-error model's row above: offsets).",
         "",
     ]
 
-
-def json_of(run_dir: Path) -> dict:
-    import json
-
-    return json.loads((run_dir / "run.json").read_text())
 
 
 if __name__ == "__main__":

@@ -34,7 +34,7 @@ Examples:
 @click.option("--window", "windows", multiple=True, nargs=2, type=float, metavar="T0 T1",
               help="Only this time window [s] of the telemetry (repeatable).")
 @click.option("--out", "out_dir", type=click.Path(file_okay=False, path_type=Path), default=None,
-              help="Folder for output_error.json (default: RUN_DIR/refine/<telemetry name>).")
+              help="Folder for coefficients.parquet and output_error.json (default: RUN_DIR/refine/<telemetry name>).")
 def refine(run_dir, telemetry, vehicle, version_id, axes, free, windows, out_dir):
     """Refine the run's model by output error on a manoeuvre, from its equation-error estimates.
 
@@ -45,7 +45,8 @@ def refine(run_dir, telemetry, vehicle, version_id, axes, free, windows, out_dir
     then output noise, which biases nothing, where the equation-error regression reads it in
     its regressors.  Slow: one simulation per coefficient per iteration (minutes on a long
     flight).  Prints the equation-error and output-error estimates side by side with sigma
-    (coloured residuals) and the Cramer-Rao bound; writes output_error.json.
+    (coloured residuals) and the Cramer-Rao bound; writes coefficients.parquet (the refined
+    model, for aerosid validate --coefficients) and output_error.json.
     """
     from aerosid.cli.progress import stage_progress
     from aerosid.cli.validate import _default_out

@@ -39,7 +39,7 @@ class IdentifiedModel:
     source: str = "<memory>"
     vehicle: str = ""
     mach_half_width: float | None = 0.5
-    path: str = ""  # the coefficients.parquet it was read from ("" in memory)
+    path: str = field(default="", compare=False)  # the coefficients.parquet its values were read from ("": none)
     _compiled: dict = field(default_factory=dict, repr=False, compare=False)
 
     def __post_init__(self):
@@ -86,7 +86,7 @@ class IdentifiedModel:
         unknown = set(values) - set(self.values)
         if unknown:
             raise KeyError(f"unknown coefficient(s) {sorted(unknown)}; the model has {sorted(self.values)}")
-        return replace(self, values={**self.values, **values}, _compiled={})
+        return replace(self, values={**self.values, **values}, path="", _compiled={})
 
     def table(self) -> pd.DataFrame:
         return pd.DataFrame([{"channel": ch, "coefficient": t.coefficient, "expression": t.expression,
@@ -140,19 +140,29 @@ def read_run_json(run_dir: str | Path) -> dict:
 def load_model_file(path: str | Path, run_dir: str | Path) -> IdentifiedModel:
     """The model of a coefficients table outside the run's versions (e.g. ``aerosid refine``'s
     coefficients.parquet), for the run's vehicle and Mach window."""
+    import pyarrow.parquet as pq
+
     from aerosid.modelling.versions import VersionError, run_vehicle
 
     path = Path(path)
-    try:
-        table = pd.read_parquet(path)
-    except Exception as exc:  # pyarrow raises several types
-        raise ModelSourceError(f"{path}: cannot read the coefficients ({exc})") from exc
+    table = _read_coefficients(path)
     try:
         vehicle = run_vehicle(run_dir)
+        meta = pq.read_schema(path).metadata or {}
     except VersionError as exc:
         raise ModelSourceError(str(exc)) from exc
+    # the Mach window the table was identified (or refined) in, else the run's
     job = read_run_json(run_dir).get("job") or {}
-    return model_from_table(table, str(path), vehicle, job.get("mach_half_width", 0.5), path)
+    mhw = meta.get(b"aerosid.mach_half_width")
+    mhw = (None if mhw.decode() == "none" else float(mhw)) if mhw is not None else job.get("mach_half_width", 0.5)
+    return model_from_table(table, str(path), vehicle, mhw, path)
+
+
+def _read_coefficients(path: Path) -> pd.DataFrame:
+    try:
+        return pd.read_parquet(path)
+    except Exception as exc:  # pyarrow raises several types
+        raise ModelSourceError(f"{path}: cannot read the coefficients ({exc})") from exc
 
 
 def load_identified_model(run_dir: str | Path, version: str | None = None) -> IdentifiedModel:
@@ -180,10 +190,7 @@ def load_identified_model(run_dir: str | Path, version: str | None = None) -> Id
         mhw = job.get("mach_half_width", 0.5)
     if not path.is_file():
         raise ModelSourceError(f"{path}: no coefficients (run `aerosid run TELEMETRY --out {run_dir}` first)")
-    try:
-        table = pd.read_parquet(path)
-    except Exception as exc:  # pyarrow raises several types
-        raise ModelSourceError(f"{path}: cannot read the coefficients ({exc})") from exc
+    table = _read_coefficients(path)
     model = model_from_table(table, source, vehicle, mhw, path)
     if v is not None:  # the version's spec is the authority on its terms
         spec = {ch: m.terms for ch, m in v.models.items()}

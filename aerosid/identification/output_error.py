@@ -25,8 +25,8 @@ axis's states, V, dynamic pressure and the attitude measured).  The fit:
   span; aerosid.identification.residual_covariance); the sandwich's sigma is the reported one:
   output-error residuals on real data are far from white (modelling error, turbulence).
 
-Not a default: ``aerosid refine`` runs it on a finished run (docs/estimation.md, "Output-error
-refinement").
+Not a default: ``aerosid refine`` runs it on a finished run (docs/refine.md: what it does, how
+it was measured and why it is not the default).
 """
 from __future__ import annotations
 
@@ -39,18 +39,17 @@ from scipy.optimize import least_squares
 
 from aerosid.identification.identified import IdentifiedModel
 from aerosid.identification.output_prediction import (AXES, AXIS_CHANNELS, AXIS_OUTPUTS, CONTROL_MODES,
-                                                      INPUT_COLUMNS, _offsets, _simulate_all, theil_inequality)
+                                                      DIVERGED_RESIDUAL, INPUT_COLUMNS, predicted_outputs,
+                                                      span_offsets, theil_inequality)
 from aerosid.identification.residual_covariance import auto_max_lag, morelli_klein_middle
 from aerosid.vehicles.vehicle import Vehicle
 
-__all__ = ["OutputErrorFit", "output_error_fit", "RELAXATIONS"]
+__all__ = ["OutputErrorFit", "output_error_fit", "axis_coefficients", "RELAXATIONS"]
 
 #: Gauss-Newton passes, each followed by a new estimate of the outputs' noise levels.
 RELAXATIONS = 3
 #: Relative step of the central differences that give the output sensitivities.
 SENSITIVITY_STEP = 1e-4
-#: Residual assigned to a sample after the simulation left the envelope (in noise levels).
-DIVERGED_RESIDUAL = 10.0
 
 
 @dataclass(frozen=True)
@@ -69,12 +68,12 @@ class OutputErrorFit:
     tic_end: dict
     n_samples: int
     n_spans: int
-    n_eff: float
+    n_eff: float          # effective samples, summed over the outputs
     converged: bool
     message: str
     nfev: int
     model: IdentifiedModel = field(repr=False)
-    covariance: np.ndarray = field(repr=False, default=None)  # reported (coloured-residual), in `names` order
+    covariance: np.ndarray = field(repr=False, compare=False, default=None)  # reported (coloured-residual), `names` order
     notes: tuple[str, ...] = ()
 
     def combination(self, weights: dict[str, float]) -> tuple[float, float]:
@@ -107,8 +106,8 @@ class OutputErrorFit:
 
     def summary(self) -> str:
         lines = [f"output-error refinement of the {self.axis} axis: {self.n_samples} samples in {self.n_spans} "
-                 f"span(s), N_eff = {self.n_eff:.0f}; {'converged' if self.converged else 'NOT converged'} "
-                 f"({self.message}; {self.nfev} simulations of the cost)",
+                 f"span(s), N_eff = {self.n_eff:.0f} (summed over the outputs); "
+                 f"{'converged' if self.converged else 'NOT converged'} ({self.message}; {self.nfev} simulations)",
                  f"{'coefficient':<16}{'equation error':>16}{'output error':>14}{'sigma':>11}{'sigma CRB':>11}"
                  f"{'change/sigma':>14}"]
         for k in self.names:
@@ -122,17 +121,34 @@ class OutputErrorFit:
         return "\n".join(lines)
 
 
+def axis_coefficients(model: IdentifiedModel, axis: str) -> list[str]:
+    """The coefficients of the model's channels that the axis's simulation reads."""
+    return [t.coefficient for ch in AXIS_CHANNELS[axis] if ch in model.models for t in model.models[ch].terms]
+
+
 def _free_names(model: IdentifiedModel, axis: str, free) -> list[str]:
-    chans = [ch for ch in AXIS_CHANNELS[axis] if ch in model.models]
-    own = [t.coefficient for ch in chans for t in model.models[ch].terms]
+    own = axis_coefficients(model, axis)
     if free is None:
         return [k for k in own if math.isfinite(float(model.values[k]))]
-    names = list(free)
+    names = list(dict.fromkeys(free))  # once each: a repeated name would be a zero sensitivity
     bad = [k for k in names if k not in own]
     if bad:
         raise ValueError(f"coefficient(s) {bad} are not in the {axis} axis's channels "
-                         f"({', '.join(chans)}); free ones: {own}")
+                         f"({', '.join(ch for ch in AXIS_CHANNELS[axis] if ch in model.models)}); its coefficients: "
+                         f"{own}")
+    unknown = [k for k in names if not math.isfinite(float(model.values[k]))]
+    if unknown:
+        raise ValueError(f"coefficient(s) {unknown} were not identifiable in the run (no value to start from): "
+                         "leave them out of the refinement")
     return names
+
+
+def _record_slices(spans: np.ndarray, rows: np.ndarray) -> list[slice]:
+    """Contiguous records of one output's stacked samples: a new record at every change of
+    span and at every hole (a sample not measured or left out) inside a span."""
+    brk = np.flatnonzero((spans[1:] != spans[:-1]) | (np.diff(rows) != 1)) + 1
+    bounds = np.r_[0, brk, rows.size]
+    return [slice(int(a), int(b)) for a, b in zip(bounds[:-1], bounds[1:])]
 
 
 def output_error_fit(model: IdentifiedModel, inputs: pd.DataFrame, measured: pd.DataFrame, vehicle: Vehicle,
@@ -141,7 +157,8 @@ def output_error_fit(model: IdentifiedModel, inputs: pd.DataFrame, measured: pd.
     """Refine `model`'s `axis` coefficients (`free`: their names; default every identified one
     of the axis's channels) by output error on one manoeuvre.  inputs / measured: as
     :func:`aerosid.identification.output_prediction.predict_axis` takes them (rows with span
-    >= 0 are fitted; measured holds the axis's outputs, NaN where not measured)."""
+    >= 0 are fitted; measured holds the axis's outputs, NaN where not measured).  max_nfev
+    and tol: each Gauss-Newton pass's budget of cost evaluations and its tolerances."""
     if axis not in AXES:
         raise ValueError(f"unknown axis {axis!r}; axes: {', '.join(AXES)}")
     if controls not in CONTROL_MODES:
@@ -162,20 +179,20 @@ def output_error_fit(model: IdentifiedModel, inputs: pd.DataFrame, measured: pd.
     outs_used = [j for j in range(len(outs)) if ok[:, j].sum() > 10]
     if not outs_used:
         raise ValueError(f"no measured {axis} output ({', '.join(outs)}) on the fitted rows")
+    simulations = [0]
 
     def predict(x) -> np.ndarray:
-        sims, _ = _simulate_all(model, inputs, vehicle, axis, dict(zip(names, map(float, x))), controls)
-        pred = np.full(meas.shape, np.nan)
-        for idx, y in sims:
-            pred[idx] = y
-        return pred
+        simulations[0] += 1
+        return predicted_outputs(model, inputs, vehicle, axis, dict(zip(names, map(float, x))), controls)[0]
 
     def residual_matrix(pred) -> np.ndarray:
-        return meas - pred - _offsets(meas, pred, spans)
+        return meas - pred - span_offsets(meas, pred, spans)
 
-    def stacked(res, scale) -> np.ndarray:  # output-major, time order within each output
-        return np.concatenate([np.where(np.isfinite(res[ok[:, j], j]), res[ok[:, j], j] / scale[j],
-                                        DIVERGED_RESIDUAL) for j in outs_used])
+    def stacked(res, scale, diverged: float | None = DIVERGED_RESIDUAL) -> np.ndarray:
+        """Output-major, time order within each output; diverged None: NaN stays NaN."""
+        parts = [res[ok[:, j], j] / scale[j] for j in outs_used]
+        v = np.concatenate(parts)
+        return v if diverged is None else np.where(np.isfinite(v), v, diverged)
 
     x0 = np.array([float(model.values[k]) for k in names])
     pred0 = predict(x0)
@@ -185,11 +202,11 @@ def output_error_fit(model: IdentifiedModel, inputs: pd.DataFrame, measured: pd.
     res0 = residual_matrix(pred0)
     scale = np.array([float(np.std(res0[ok[:, j], j])) if j in outs_used else 1.0 for j in range(len(outs))])
     scale[~(scale > 0)] = 1.0
-    x, sol, nfev = x0, None, 0
+    x, sol = x0, None
     for _ in range(max(1, int(relaxations))):
         sol = least_squares(lambda z: stacked(residual_matrix(predict(z)), scale), x, x_scale="jac",
                             method="trf", max_nfev=max_nfev, ftol=tol, xtol=tol, gtol=tol)
-        x, nfev = sol.x, nfev + int(sol.nfev)
+        x = sol.x
         res = residual_matrix(predict(x))
         new = np.array([float(np.nanstd(res[ok[:, j], j])) if j in outs_used else 1.0 for j in range(len(outs))])
         new[~(new > 0)] = 1.0
@@ -197,40 +214,46 @@ def output_error_fit(model: IdentifiedModel, inputs: pd.DataFrame, measured: pd.
         scale = new
         if done:
             break
-    # uncertainty at the solution, with the final noise levels
+    # uncertainty at the solution, with the final noise levels; samples a simulation leaves
+    # the envelope on (at the solution or one step off it) carry no sensitivity: left out
     pred = predict(x)
-    res = residual_matrix(pred)
-    v = stacked(res, scale)
+    v = stacked(residual_matrix(pred), scale, None)
     J = np.empty((v.size, len(names)))  # sensitivities of the scaled outputs (central differences)
     for i in range(len(names)):
         h = SENSITIVITY_STEP * max(abs(x[i]), 1e-3)
         up, down = x.copy(), x.copy()
         up[i] += h
         down[i] -= h
-        J[:, i] = (stacked(residual_matrix(predict(down)), scale) - stacked(residual_matrix(predict(up)), scale)) / (2 * h)
-    m_inv = np.linalg.pinv(J.T @ J)
+        J[:, i] = (stacked(residual_matrix(predict(down)), scale, None)
+                   - stacked(residual_matrix(predict(up)), scale, None)) / (2 * h)
+    good = np.isfinite(v) & np.all(np.isfinite(J), axis=1)
     p = len(names)
-    cov_white = m_inv * float(v @ v) / max(v.size - p, 1)
+    m_inv = np.linalg.pinv(J[good].T @ J[good])
+    cov_white = m_inv * float(v[good] @ v[good]) / max(int(good.sum()) - p, 1)
+    # Morelli-Klein, output by output (each with its own residual autocovariance, within each
+    # record): the outputs' cross-covariances are left out (a diagonal approximation)
     middle, n_eff, start = np.zeros((p, p)), 0.0, 0
-    span_rows = {j: spans[ok[:, j]] for j in outs_used}
     for j in outs_used:
-        n_j = int(ok[:, j].sum())
-        rows = slice(start, start + n_j)
-        sp = span_rows[j]
-        cuts = np.flatnonzero(sp[1:] != sp[:-1]) + 1
-        bounds = np.r_[0, cuts, n_j]
-        slices = [slice(int(a), int(b)) for a, b in zip(bounds[:-1], bounds[1:])]
-        lag = auto_max_lag(v[rows], groups=sp)
-        mid, ne = morelli_klein_middle(J[rows], v[rows], lag, slices if len(slices) > 1 else None)
+        rows = np.flatnonzero(ok[:, j])
+        seg = slice(start, start + rows.size)
+        keep = good[seg]
+        start += rows.size
+        if keep.sum() <= p:
+            continue
+        sp, vj, Jj = spans[rows][keep], v[seg][keep], J[seg][keep]
+        slices = _record_slices(sp, rows[keep])
+        lag = auto_max_lag(vj, groups=np.repeat(np.arange(len(slices)), [s.stop - s.start for s in slices]))
+        mid, ne = morelli_klein_middle(Jj, vj, lag, slices if len(slices) > 1 else None)
         middle += mid
         n_eff += ne
-        start += n_j
     cov = m_inv @ middle @ m_inv * (n_eff / max(n_eff - p, 1.0))
     notes = []
     if not np.isfinite(pred[use]).all():
         notes.append("the refined model's simulation leaves the envelope in part of the manoeuvre")
+    if (~good).any():
+        notes.append(f"{int((~good).sum())} sample(s) where a simulation left the envelope are not in sigma")
     est = dict(zip(names, map(float, x)))
-    tic = lambda P: {outs[j]: theil_inequality(meas[ok[:, j], j], (P + _offsets(meas, P, spans))[ok[:, j], j])  # noqa: E731
+    tic = lambda P: {outs[j]: theil_inequality(meas[ok[:, j], j], (P + span_offsets(meas, P, spans))[ok[:, j], j])  # noqa: E731
                      for j in outs_used}
     return OutputErrorFit(
         axis=axis, names=tuple(names), start=dict(zip(names, map(float, x0))), estimate=est,
@@ -238,5 +261,5 @@ def output_error_fit(model: IdentifiedModel, inputs: pd.DataFrame, measured: pd.
         sigma_white={k: float(math.sqrt(max(cov_white[i, i], 0.0))) for i, k in enumerate(names)},
         noise_std={outs[j]: float(scale[j]) for j in outs_used}, tic_start=tic(pred0), tic_end=tic(pred),
         n_samples=int(use.sum()), n_spans=int(len(np.unique(spans[use]))), n_eff=float(n_eff),
-        converged=bool(sol.status > 0), message=str(sol.message), nfev=nfev, model=model.with_values(**est),
-        covariance=cov, notes=tuple(notes))
+        converged=bool(sol.status > 0), message=str(sol.message), nfev=simulations[0],
+        model=model.with_values(**est), covariance=cov, notes=tuple(notes))

@@ -74,6 +74,9 @@ _CONTROLS = ("delta_p_rad", "delta_y_rad", "delta_r_rad")
 MAX_STEP_S = 0.01
 R_EARTH_M = 6_371_000.0  # as aerosid.simulation.dynamics
 MAX_ANGLE_RAD = 1.5  # a simulated alpha or beta beyond this has left any model's range: stop
+#: Residual [in output noise levels] given to a sample after the simulation left the envelope
+#: by the output-error fits (the intercepts here, aerosid.identification.output_error).
+DIVERGED_RESIDUAL = 10.0
 
 
 def theil_inequality(y, yhat) -> float:
@@ -108,8 +111,9 @@ def prediction_inputs(fd: pd.DataFrame, vehicle: Vehicle, phi_rad, theta_rad, sp
     from aerosid.identification.flight_data import WIDEBAND_COLUMNS
     from aerosid.modelling.models import vehicle_signals
 
-    if wideband_controls:
-        fd = fd.assign(**{c: fd[w] for c, w in WIDEBAND_COLUMNS.items() if c.startswith("delta_") and w in fd})
+    if wideband_controls:  # where a wide-band value is missing, the low-passed one
+        fd = fd.assign(**{c: np.where(np.isfinite(fd[w].to_numpy(float)), fd[w].to_numpy(float), fd[c].to_numpy(float))
+                          for c, w in WIDEBAND_COLUMNS.items() if c.startswith("delta_") and w in fd})
     sig = vehicle_signals(fd, vehicle)
     qS = fd["qbar_pa"].to_numpy(float) * vehicle.S_m2
     m = vehicle.mass_kg
@@ -271,19 +275,23 @@ class AxisPrediction:
         return AXIS_OUTPUTS[self.axis]
 
 
-def _simulate_all(model, inputs, vehicle, axis, values, controls):
-    outs, diverged = [], {}
+def predicted_outputs(model, inputs: pd.DataFrame, vehicle: Vehicle, axis: str, values: dict | None = None,
+                      controls: str = "linear") -> tuple[np.ndarray, dict]:
+    """(predicted outputs (len(inputs), n_outputs), NaN on rows span < 0 and after a divergence;
+    {span: time of the divergence [s]}): every span of `inputs` (index 0..n-1) simulated."""
+    pred = np.full((len(inputs), len(AXIS_OUTPUTS[axis])), np.nan)
+    diverged = {}
     for sp, rows in inputs.groupby("span", sort=True):
         if sp < 0:
             continue
         y, t_div = simulate_span(model, rows, vehicle, axis, values, controls)
         if t_div is not None:
             diverged[int(sp)] = t_div
-        outs.append((rows.index.to_numpy(), y))
-    return outs, diverged
+        pred[rows.index.to_numpy()] = y
+    return pred, diverged
 
 
-def _offsets(meas: np.ndarray, pred: np.ndarray, spans: np.ndarray) -> np.ndarray:
+def span_offsets(meas: np.ndarray, pred: np.ndarray, spans: np.ndarray) -> np.ndarray:
     """Per span and output: mean(measured - predicted) over the finite samples, on every row."""
     off = np.zeros_like(pred)
     for sp in np.unique(spans):
@@ -324,12 +332,9 @@ def predict_axis(model: IdentifiedModel, inputs: pd.DataFrame, measured: pd.Data
         else:
             values = _fit_intercepts(model, inputs, meas, use, vehicle, axis, names, controls)
             intercepts = {k: (float(model.values[k]), float(values[k])) for k in names}
-    sims, diverged = _simulate_all(model, inputs, vehicle, axis, values, controls)
-    pred = np.full((len(inputs), len(outs)), np.nan)
-    for idx, y in sims:
-        pred[idx] = y
+    pred, diverged = predicted_outputs(model, inputs, vehicle, axis, values, controls)
     spans = inputs["span"].to_numpy()
-    off = _offsets(meas, pred, spans) if bias != "none" else np.zeros_like(pred)
+    off = span_offsets(meas, pred, spans) if bias != "none" else np.zeros_like(pred)
     off[~use] = np.nan
     frame = {"t_s": inputs["t_s"].to_numpy(float), "span": spans}
     for j, o in enumerate(outs):
@@ -351,12 +356,9 @@ def _fit_intercepts(model, inputs, meas, use, vehicle, axis, names, controls) ->
     x0 = np.array([float(model.values[k]) if math.isfinite(float(model.values[k])) else 0.0 for k in names])
 
     def residuals(x):
-        sims, _ = _simulate_all(model, inputs, vehicle, axis, dict(zip(names, x)), controls)
-        pred = np.full(meas.shape, np.nan)
-        for idx, y in sims:
-            pred[idx] = y
-        res = (meas - pred - _offsets(meas, pred, spans)) / scale
-        res = np.where(np.isfinite(pred), res, 10.0)  # a diverged simulation: far from the data
+        pred, _ = predicted_outputs(model, inputs, vehicle, axis, dict(zip(names, x)), controls)
+        res = (meas - pred - span_offsets(meas, pred, spans)) / scale
+        res = np.where(np.isfinite(pred), res, DIVERGED_RESIDUAL)  # a diverged simulation: far from the data
         return res[ok]
 
     sol = least_squares(residuals, x0, x_scale="jac", method="trf", max_nfev=60)

@@ -16,10 +16,9 @@ from pathlib import Path
 import pandas as pd
 
 from aerosid.identification.identified import IdentifiedModel, load_identified_model
-from aerosid.identification.output_error import output_error_fit
-from aerosid.identification.output_prediction import AXIS_CHANNELS, prediction_inputs
-from aerosid.identification.validate import (ATTITUDE_COLUMNS, attitude_on, choose_axes, estimate_manoeuvre,
-                                             measured_outputs)
+from aerosid.identification.output_error import axis_coefficients, output_error_fit
+from aerosid.identification.output_prediction import prediction_inputs
+from aerosid.identification.validate import attitude_on, choose_axes, estimate_manoeuvre, measured_outputs
 
 __all__ = ["RefineResult", "refine", "write_refinement"]
 
@@ -65,28 +64,32 @@ def refine(run_dir: str | Path, telemetry: str | Path, *, vehicle: str | None = 
     chosen, notes = choose_axes(model, axes)
     if not chosen:
         raise ValueError("no axis to refine: " + "; ".join(notes))
-    raw, est, fd, span, more = estimate_manoeuvre(run_dir, telemetry, model, veh, windows, True, progress)
+    wanted = list(dict.fromkeys(free)) if free else None
+    if wanted:  # a name in no channel of the model is a typo: refused before the estimation's minutes
+        every = {t.coefficient for m in model.models.values() for t in m.terms}
+        typo = [n for n in wanted if n not in every]
+        if typo:
+            raise ValueError(f"coefficient(s) {typo} are not in the model ({model.source}); its coefficients: "
+                             f"{sorted(every)}")
+        outside = [n for n in wanted if not any(n in axis_coefficients(model, ax) for ax in chosen)]
+        if len(outside) == len(wanted):
+            raise ValueError(f"none of {wanted} is a coefficient of the {'/'.join(chosen)} axis models: "
+                             "nothing to refine (choose --axes)")
+        if outside:
+            notes.append(f"not refined (not in the {'/'.join(chosen)} axis models): {outside}")
+    raw, est, fd, span, more = estimate_manoeuvre(run_dir, telemetry, model, veh, windows, "required", progress)
     notes += more
     att = attitude_on(raw, fd["t_s"].to_numpy(float), str(telemetry))
-    if att is None:
-        raise ValueError(f"{telemetry}: the output-error fit needs the attitude for gravity, and the telemetry has "
-                         f"no {' / '.join(ATTITUDE_COLUMNS)} columns: add the measured roll and pitch attitude [rad]")
     inputs = prediction_inputs(fd, veh, att[0], att[1], span, wideband_controls=True)
-    meas, sources = measured_outputs(est.preprocessed.frame, fd, veh)
+    meas, sources = measured_outputs(est.preprocessed.frame, fd, veh, wideband=True)
     fits = []
     for k, ax in enumerate(chosen):
         if progress is not None:
             progress(f"output error ({ax})", k / len(chosen))
-        own = {t.coefficient for ch in AXIS_CHANNELS[ax] if ch in model.models for t in model.models[ch].terms}
-        names = [n for n in free if n in own] if free else None
-        if free and not names:
-            notes.append(f"{ax} axis not refined: none of {list(free)} is one of its coefficients")
+        names = [n for n in wanted if n in axis_coefficients(model, ax)] if wanted else None
+        if wanted and not names:
             continue
         fits.append(output_error_fit(model, inputs, meas, veh, ax, free=names))
-    if free:
-        unknown = sorted(set(free) - {n for f in fits for n in f.names})
-        if unknown:
-            notes.append(f"not refined (not in the refined axes' models): {unknown}")
     if progress is not None:
         progress("done", 1.0)
     used = {o for f in fits for o in f.noise_std}
@@ -102,7 +105,10 @@ def refined_table(result: RefineResult) -> pd.DataFrame:
     refined.  ``aerosid validate --coefficients`` reads it."""
     from scipy.stats import norm
 
-    table = (pd.read_parquet(result.model.path) if result.model.path else result.model.table()).copy()
+    if not result.model.path:
+        raise ValueError("the refined model's own coefficients table is unknown (a model built in memory): "
+                         "refine a run folder's model")
+    table = pd.read_parquet(result.model.path)
     table["method"] = "equation error (not refined)"
     for f in result.fits:
         for k in f.names:
@@ -110,7 +116,7 @@ def refined_table(result: RefineResult) -> pd.DataFrame:
             row = table["coefficient"] == k
             table.loc[row, ["estimate", "std_error", "std_error_ols", "ci_low", "ci_high"]] = \
                 [est, s, f.sigma_white[k], est - 1.96 * s, est + 1.96 * s]
-            table.loc[row, "method"] = "output error"
+            table.loc[row, "method"] = "output error" if f.converged else "output error (not converged)"
             if "crb_std" in table:
                 table.loc[row, "crb_std"] = f.sigma_white[k]
             if "t_value" in table and s > 0:
@@ -119,16 +125,24 @@ def refined_table(result: RefineResult) -> pd.DataFrame:
 
 
 def write_refinement(result: RefineResult, out_dir: str | Path) -> dict[str, Path]:
-    """output_error.json (estimates, sigma, covariance, output noise and TIC per axis) and
-    coefficients.parquet (:func:`refined_table`, checked against schemas/coefficients.py before
-    it is written), atomically."""
+    """coefficients.parquet (:func:`refined_table`, checked against schemas/coefficients.py before
+    it is written; its metadata hold the model's Mach window) and output_error.json (estimates,
+    sigma, covariance, output noise and TIC per axis), each atomically."""
     from aerosid.io import write_json_atomic, write_parquet_atomic
     from schemas.coefficients import Coefficients
 
+    import pandera.errors
+
     out = Path(out_dir)
-    table = Coefficients.validate(refined_table(result), lazy=True)
-    return {"json": write_json_atomic(result.to_json(), out / "output_error.json"),
-            "coefficients": write_parquet_atomic(table, out / "coefficients.parquet",
-                                                 metadata={"aerosid.kind": "coefficients",
-                                                           "aerosid.model": f"{result.model.source} refined by "
-                                                                            f"output error on {result.telemetry}"})}
+    try:
+        table = Coefficients.validate(refined_table(result), lazy=True)
+    except pandera.errors.SchemaErrors as exc:
+        raise ValueError(f"the refined coefficients fail schemas/coefficients.py: {exc.failure_cases}") from exc
+    mhw = result.model.mach_half_width
+    # the table first: the JSON that describes it only once it is there
+    paths = {"coefficients": write_parquet_atomic(
+        table, out / "coefficients.parquet",
+        metadata={"aerosid.kind": "coefficients", "aerosid.mach_half_width": "none" if mhw is None else str(mhw),
+                  "aerosid.model": f"{result.model.source} refined by output error on {result.telemetry}"})}
+    paths["json"] = write_json_atomic(result.to_json(), out / "output_error.json")
+    return paths

@@ -221,9 +221,13 @@ def attitude_on(raw: pd.DataFrame, t_s: np.ndarray, source: str):
     return tuple(out)
 
 
-def measured_outputs(pre: pd.DataFrame, fd: pd.DataFrame, vehicle: Vehicle) -> tuple[pd.DataFrame, dict]:
+def measured_outputs(pre: pd.DataFrame, fd: pd.DataFrame, vehicle: Vehicle,
+                     wideband: bool = False) -> tuple[pd.DataFrame, dict]:
     """The measured outputs on the flight data's rows (from the preprocessed telemetry's
-    clean columns) and where each came from."""
+    clean columns) and where each came from.  Without vanes alpha and beta are the flight
+    data's (inverted from the force database); wideband: those before the band's low-pass
+    (``alpha_wideband_rad``, ``beta_wideband_rad``, when the flight data carry them), as the
+    other outputs are (an output-error fit)."""
     t_pre, t = pre["t_s"].to_numpy(float), fd["t_s"].to_numpy(float)
     idx = np.clip(np.searchsorted(t_pre, t - 1e-9), 0, len(t_pre) - 1)
     if not np.allclose(t_pre[idx], t, atol=1e-6, rtol=0):
@@ -239,6 +243,9 @@ def measured_outputs(pre: pd.DataFrame, fd: pd.DataFrame, vehicle: Vehicle) -> t
         if vehicle.air_data_source == "vanes" and f"{col}_clean" in pre:
             cols[out] = pre[f"{col}_clean"].to_numpy(float)[idx] - bias
             src[out] = f"telemetry {col}" + (f" less its calibration bias {bias:g} rad" if bias else "")
+        elif wideband and f"{out[:-4]}_wideband_rad" in fd:
+            cols[out] = fd[f"{out[:-4]}_wideband_rad"].to_numpy(float)
+            src[out] = "EBM flight data before the band's low-pass (from the force-database inversion; no vane)"
         else:
             cols[out] = fd[out].to_numpy(float)
             src[out] = "EBM flight data (from the force-database inversion; no vane)"
@@ -289,14 +296,16 @@ def estimate_manoeuvre(run_dir, telemetry, model: IdentifiedModel, veh: Vehicle,
     RUN_DIR/run.json), in memory: (raw telemetry, EstimatedFlightData, flight data sorted by
     time, span id per row (-1 outside the model's Mach window or in a stretch shorter than
     MIN_SPAN_S), notes).  needs_attitude: check the attitude columns' units before the
-    estimation's minutes, not after."""
+    estimation's minutes, not after ("required": also that they are there)."""
     from aerosid.ebm import estimate_flight_data
     from aerosid.preprocess.io import read_raw_parquet
 
     job = read_run_json(run_dir).get("job") or {}
     raw = read_raw_parquet(telemetry)
-    if needs_attitude:
-        attitude_on(raw, raw["t_s"].to_numpy(float), str(telemetry))
+    if needs_attitude and attitude_on(raw, raw["t_s"].to_numpy(float), str(telemetry)) is None \
+            and needs_attitude == "required":
+        raise ValueError(f"{telemetry}: no {' / '.join(ATTITUDE_COLUMNS)} columns: the simulation needs the "
+                         "attitude for gravity; add the measured roll and pitch attitude [rad] to the telemetry")
     est = estimate_flight_data(raw, veh, flight=Path(telemetry).stem, windows=windows,
                                preprocess_params=job.get("preprocess_params") or None,
                                smoothing_options=job.get("smoothing_options") or None,

@@ -58,7 +58,7 @@ def _telemetry(tmp, name, seed, attitude=True, degrees=False):
     return path
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="session")
 def small_run(tmp_path_factory):
     """RUN_DIR as `aerosid run` lays it out (flight_data.parquet, coefficients.parquet,
     run.json), from the in-memory method on a 20 s seed-rlv flight; plus other manoeuvres."""

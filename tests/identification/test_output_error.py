@@ -28,6 +28,13 @@ def test_a_perturbed_start_converges_to_the_true_model(pitch_doublet):
         assert fit.estimate[k] == pytest.approx(model.values[k], rel=2e-3), k
     assert max(fit.tic_end.values()) < 1e-3 < min(fit.tic_start[o] for o in ("alpha_rad", "q_rad_s"))
     assert fit.model.values["Cm_alpha"] == fit.estimate["Cm_alpha"]
+    # a sum's sigma from the covariance: Var(a + b) = Var a + Var b + 2 Cov(a, b)
+    i, j = fit.names.index("Cm_alpha"), fit.names.index("Cm_delta_p")
+    est, se = fit.combination({"Cm_alpha": 1.0, "Cm_delta_p": 1.0})
+    assert est == pytest.approx(fit.estimate["Cm_alpha"] + fit.estimate["Cm_delta_p"])
+    c = fit.covariance
+    assert se == pytest.approx(np.sqrt(c[i, i] + c[j, j] + 2 * c[i, j]))
+    assert fit.sigma["Cm_alpha"] == pytest.approx(np.sqrt(c[i, i]))
     assert "output error" in fit.summary() and "Cm_delta_p" in fit.summary()
 
 
@@ -54,6 +61,8 @@ def test_refuses_coefficients_outside_the_axis_and_a_diverging_start(pitch_doubl
     veh, inputs, measured, model = pitch_doublet
     with pytest.raises(ValueError, match="Cn_beta"):
         output_error_fit(model, inputs, measured, veh, "lon", free=("Cm_alpha", "Cn_beta"))
+    with pytest.raises(ValueError, match="not identifiable"):
+        output_error_fit(model.with_values(CN_0=float("nan")), inputs, measured, veh, "lon", free=("CN_0",))
     unstable = model.with_values(Cm_alpha=-20.0 * model.values["Cm_alpha"])
     with pytest.raises(ValueError, match="leaves the envelope"):
         output_error_fit(unstable, inputs, measured, veh, "lon", free=FREE, controls="hold")

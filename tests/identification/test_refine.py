@@ -3,6 +3,7 @@ the small seed-rlv run of tests/identification/conftest.py, built without Prefec
 import json
 
 import pandas as pd
+import pyarrow.parquet as pq
 from click.testing import CliRunner
 
 from aerosid.cli import main
@@ -15,7 +16,7 @@ def test_cli_refine_prints_both_estimates_and_writes_json(small_run):
                                     "--out", str(out)])
     assert res.exit_code == 0, res.output
     assert "output-error refinement of the lon axis" in res.output and "equation error" in res.output
-    assert "not refined (not in the refined axes' models): ['Cn_beta']" in res.output
+    assert "not refined (not in the lon axis models): ['Cn_beta']" in res.output
     doc = json.loads((out / "output_error.json").read_text())
     lon = doc["axes"]["lon"]
     assert list(lon["coefficients"]) == ["Cm_alpha", "Cm_delta_p"]
@@ -30,6 +31,8 @@ def test_cli_refine_prints_both_estimates_and_writes_json(small_run):
     assert abs(outs["q_rad_s"]["noise_std"] / 0.03490659 - 1) < 0.1
     # the refined model as a coefficients table validate can predict with
     table = pd.read_parquet(out / "coefficients.parquet")
+    meta = pq.read_schema(out / "coefficients.parquet").metadata
+    assert meta[b"aerosid.mach_half_width"] == b"0.5"  # the window validate --coefficients predicts in
     rows = table.set_index("coefficient")
     assert rows.loc["Cm_alpha", "estimate"] == lon["coefficients"]["Cm_alpha"]["estimate"]
     assert rows.loc["Cm_alpha", "method"] == "output error" and rows.loc["CN_alpha", "method"].startswith("equation")
@@ -41,9 +44,19 @@ def test_cli_refine_prints_both_estimates_and_writes_json(small_run):
     assert doc["model_coefficients"]["Cm_alpha"] == rows.loc["Cm_alpha", "estimate"]
 
 
+def test_cli_refine_refuses_a_misspelt_coefficient_before_the_estimation(small_run, tmp_path):
+    res = CliRunner().invoke(main, ["refine", str(small_run["run"]), str(small_run["other"]), "--free", "Cm_alpa",
+                                    "--out", str(tmp_path / "r")])
+    assert res.exit_code == 1 and "Traceback" not in res.output
+    assert "['Cm_alpa'] are not in the model" in res.output and "Cm_alpha" in res.output
+    assert "preprocess" not in res.output  # refused before the estimation
+    assert not (tmp_path / "r").exists()
+
+
 def test_cli_refine_without_attitude_names_the_columns(small_run, tmp_path):
     res = CliRunner().invoke(main, ["refine", str(small_run["run"]), str(small_run["no_attitude"]), "--axes", "lon",
                                     "--out", str(tmp_path / "r")])
     assert res.exit_code == 1 and "Traceback" not in res.output
     assert "phi_rad / theta_rad" in res.output and "attitude" in res.output
+    assert "output error" not in res.output  # refused before the estimation, not after
     assert not (tmp_path / "r").exists()
