@@ -154,7 +154,10 @@ def load_model_file(path: str | Path, run_dir: str | Path) -> IdentifiedModel:
     # the Mach window the table was identified (or refined) in, else the run's
     job = read_run_json(run_dir).get("job") or {}
     mhw = meta.get(b"aerosid.mach_half_width")
-    mhw = (None if mhw.decode() == "none" else float(mhw)) if mhw is not None else job.get("mach_half_width", 0.5)
+    try:
+        mhw = (None if mhw.decode() == "none" else float(mhw)) if mhw is not None else job.get("mach_half_width", 0.5)
+    except ValueError as exc:
+        raise ModelSourceError(f"{path}: its aerosid.mach_half_width metadata {mhw!r} is not a number") from exc
     return model_from_table(table, str(path), vehicle, mhw, path)
 
 

@@ -228,6 +228,16 @@ def output_error_fit(model: IdentifiedModel, inputs: pd.DataFrame, measured: pd.
                    - stacked(residual_matrix(predict(up)), scale, None)) / (2 * h)
     good = np.isfinite(v) & np.all(np.isfinite(J), axis=1)
     p = len(names)
+    # an output with no more usable samples than coefficients adds nothing to either matrix
+    start = 0
+    for j in outs_used:
+        n_j = int(ok[:, j].sum())
+        if good[start:start + n_j].sum() <= p:
+            good[start:start + n_j] = False
+        start += n_j
+    if good.sum() <= p:
+        raise ValueError(f"the {axis} simulations leave the envelope on all but {int(good.sum())} samples: "
+                         "no uncertainty can be given (validate the run first: aerosid validate)")
     m_inv = np.linalg.pinv(J[good].T @ J[good])
     cov_white = m_inv * float(v[good] @ v[good]) / max(int(good.sum()) - p, 1)
     # Morelli-Klein, output by output (each with its own residual autocovariance, within each
@@ -238,7 +248,7 @@ def output_error_fit(model: IdentifiedModel, inputs: pd.DataFrame, measured: pd.
         seg = slice(start, start + rows.size)
         keep = good[seg]
         start += rows.size
-        if keep.sum() <= p:
+        if not keep.any():
             continue
         sp, vj, Jj = spans[rows][keep], v[seg][keep], J[seg][keep]
         slices = _record_slices(sp, rows[keep])

@@ -10,6 +10,7 @@ was identified on; any other of the same vehicle works too.
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -77,6 +78,10 @@ def refine(run_dir: str | Path, telemetry: str | Path, *, vehicle: str | None = 
                              "nothing to refine (choose --axes)")
         if outside:
             notes.append(f"not refined (not in the {'/'.join(chosen)} axis models): {outside}")
+        unset = [n for n in wanted if not math.isfinite(float(model.values[n]))]
+        if unset:
+            raise ValueError(f"coefficient(s) {unset} were not identifiable in the run (no value to start from): "
+                             "leave them out of --free")
     raw, est, fd, span, more = estimate_manoeuvre(run_dir, telemetry, model, veh, windows, "required", progress)
     notes += more
     att = attitude_on(raw, fd["t_s"].to_numpy(float), str(telemetry))
@@ -88,6 +93,7 @@ def refine(run_dir: str | Path, telemetry: str | Path, *, vehicle: str | None = 
             progress(f"output error ({ax})", k / len(chosen))
         names = [n for n in wanted if n in axis_coefficients(model, ax)] if wanted else None
         if wanted and not names:
+            notes.append(f"{ax} axis not refined: none of {wanted} is one of its coefficients")
             continue
         fits.append(output_error_fit(model, inputs, meas, veh, ax, free=names))
     if progress is not None:
