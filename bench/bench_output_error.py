@@ -7,10 +7,10 @@ Each run: the generalisation bench's flight (bench_generalisation.simulate: the 
 telemetry, vehicle file and truth), the default pipeline (process_telemetry: the equation-error
 estimates, with their reported sigma), then the longitudinal output-error fit
 (aerosid.identification.output_error.output_error_fit) started from them on the same flight:
-inputs from the flight data (the fins before the band's low-pass, as ``aerosid refine``), the
-attitude from the truth (the simulators' telemetry carries none; a real aircraft's AHRS
-measures it), the measured outputs from the preprocessed telemetry, the rows in the Mach
-window.  Errors in % of the at-trim truth (bench_generalisation.truth_of); coverage: the truth
+inputs and outputs as ``aerosid refine`` takes them (the fins and, without vanes, the inverted
+alpha and beta before the band's low-pass; the other outputs from the preprocessed telemetry),
+the attitude from the truth (the simulators' telemetry carries none; a real aircraft's AHRS
+measures it), the rows in the Mach window.  Errors in % of the at-trim truth (bench_generalisation.truth_of); coverage: the truth
 inside estimate +- 1.96 sigma.  Not a default and not tuned here: the bench measures it.
 """
 from __future__ import annotations
@@ -62,7 +62,7 @@ def one(job: tuple[str, int]) -> dict:
         T = flight.truth
         att = [np.interp(fd["t_s"], T["t_s"], T[c]) for c in ("phi_rad", "theta_rad")]
         inputs = prediction_inputs(fd, veh, att[0], att[1], span, wideband_controls=True)
-        meas, _ = measured_outputs(run.preprocessed.frame, fd, veh)
+        meas, _ = measured_outputs(run.preprocessed.frame, fd, veh, wideband=True)
         t0 = time.perf_counter()
         oe = output_error_fit(model, inputs, meas, veh, "lon")
     except Exception as exc:  # recorded, not hidden
