@@ -48,31 +48,14 @@ def refine(run_dir, telemetry, vehicle, version_id, axes, free, windows, out_dir
     (coloured residuals) and the Cramer-Rao bound; writes coefficients.parquet (the refined
     model, for aerosid validate --coefficients) and output_error.json.
     """
-    from aerosid.cli.progress import stage_progress
-    from aerosid.cli.validate import _default_out
-    from aerosid.identification.identified import ModelSourceError
+    from aerosid.cli.validate import _default_out, run_on_manoeuvre
     from aerosid.identification.refine import refine as run_refine, write_refinement
-    from aerosid.preprocess import TelemetryError
-    from aerosid.vehicles.vehicle import VehicleError
 
-    if not run_dir.is_dir():
-        raise click.ClickException(f"{run_dir}: no such run folder (make one with `aerosid run TELEMETRY --out "
-                                   f"{run_dir}`)")
-    try:
-        with stage_progress("refine") as progress:
-            result = run_refine(run_dir, telemetry, vehicle=vehicle, version=version_id, axes=axes,
-                                free=list(free) or None, windows=[tuple(w) for w in windows] or None,
-                                progress=progress)
-    except (ModelSourceError, VehicleError, TelemetryError) as exc:
-        raise click.ClickException(str(exc)) from exc
-    except ValueError as exc:
-        raise click.ClickException(f"{telemetry}: {exc}" if str(telemetry) not in str(exc) else str(exc)) from exc
-    click.echo(result.summary())
-    out = out_dir or _default_out(run_dir, telemetry, "refine")
-    try:
-        paths = write_refinement(result, out)
-    except OSError as exc:
-        raise click.ClickException(f"cannot write {out}: {exc.strerror or exc}") from exc
-    click.echo("wrote " + ", ".join(str(p) for p in paths.values()))
+    paths = run_on_manoeuvre(run_dir, telemetry, "refine",
+                             lambda progress: run_refine(run_dir, telemetry, vehicle=vehicle, version=version_id,
+                                                         axes=axes, free=list(free) or None,
+                                                         windows=[tuple(w) for w in windows] or None,
+                                                         progress=progress),
+                             write_refinement, out_dir or _default_out(run_dir, telemetry, "refine"))
     click.echo("which model predicts better? predict another manoeuvre with each: aerosid validate "
                f"{run_dir} OTHER_TELEMETRY [--coefficients {paths['coefficients']}]")

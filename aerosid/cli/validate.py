@@ -64,30 +64,40 @@ def validate(run_dir, other_telemetry, vehicle, out_dir, version_id, coefficient
     channel; writes validation.json, validation.html (measured vs predicted plots,
     self-contained) and validation.parquet (the time histories).
     """
-    from aerosid.identification.identified import ModelSourceError
     from aerosid.identification.validate import validate as run_validation, write_validation
+
+    run_on_manoeuvre(run_dir, other_telemetry, "validate",
+                     lambda progress: run_validation(run_dir, other_telemetry, vehicle=vehicle, version=version_id,
+                                                     bias=bias, axes=axes, windows=[tuple(w) for w in windows] or None,
+                                                     progress=progress, coefficients=coefficients),
+                     write_validation, out_dir or _default_out(run_dir, other_telemetry))
+
+
+def run_on_manoeuvre(run_dir: Path, telemetry: Path, stage: str, compute, write, out: Path) -> dict:
+    """What ``validate`` and ``refine`` share: RUN_DIR checked, compute(progress) under the
+    progress display with the core's errors as one clear line, its summary printed, then
+    write(result, out) and what it wrote.  Returns the written paths."""
+    from aerosid.cli.progress import stage_progress
+    from aerosid.identification.identified import ModelSourceError
     from aerosid.preprocess import TelemetryError
     from aerosid.vehicles.vehicle import VehicleError
 
     if not run_dir.is_dir():
         raise click.ClickException(f"{run_dir}: no such run folder (make one with `aerosid run TELEMETRY --out "
                                    f"{run_dir}`)")
-    from aerosid.cli.progress import stage_progress
-
     try:
-        with stage_progress("validate") as progress:
-            result = run_validation(run_dir, other_telemetry, vehicle=vehicle, version=version_id, bias=bias,
-                                    axes=axes, windows=[tuple(w) for w in windows] or None, progress=progress,
-                                    coefficients=coefficients)
+        with stage_progress(stage) as progress:
+            result = compute(progress)
     except (ModelSourceError, VehicleError, TelemetryError) as exc:
         raise click.ClickException(str(exc)) from exc
     except ValueError as exc:
-        raise click.ClickException(f"{other_telemetry}: {exc}" if str(other_telemetry) not in str(exc)
-                                   else str(exc)) from exc
+        raise click.ClickException(f"{telemetry}: {exc}" if str(telemetry) not in str(exc) else str(exc)) from exc
     click.echo(result.summary())
-    out = out_dir or _default_out(run_dir, other_telemetry)
     try:
-        paths = write_validation(result, out)
+        paths = write(result, out)
     except OSError as exc:
         raise click.ClickException(f"cannot write {out}: {exc.strerror or exc}") from exc
+    except ValueError as exc:
+        raise click.ClickException(f"nothing written to {out}: {exc}") from exc
     click.echo("wrote " + ", ".join(str(p) for p in paths.values()))
+    return paths

@@ -38,9 +38,9 @@ import pandas as pd
 from scipy.optimize import least_squares
 
 from aerosid.identification.identified import IdentifiedModel
-from aerosid.identification.output_prediction import (AXES, AXIS_CHANNELS, AXIS_OUTPUTS, CONTROL_MODES,
-                                                      DIVERGED_RESIDUAL, INPUT_COLUMNS, predicted_outputs,
-                                                      span_offsets, theil_inequality)
+from aerosid.identification.output_prediction import (AXIS_CHANNELS, AXIS_OUTPUTS, DIVERGED_RESIDUAL,
+                                                      check_simulation_inputs, predicted_outputs, span_offsets,
+                                                      theil_inequality)
 from aerosid.identification.residual_covariance import auto_max_lag, morelli_klein_middle
 from aerosid.vehicles.vehicle import Vehicle
 
@@ -159,13 +159,7 @@ def output_error_fit(model: IdentifiedModel, inputs: pd.DataFrame, measured: pd.
     :func:`aerosid.identification.output_prediction.predict_axis` takes them (rows with span
     >= 0 are fitted; measured holds the axis's outputs, NaN where not measured).  max_nfev
     and tol: each Gauss-Newton pass's budget of cost evaluations and its tolerances."""
-    if axis not in AXES:
-        raise ValueError(f"unknown axis {axis!r}; axes: {', '.join(AXES)}")
-    if controls not in CONTROL_MODES:
-        raise ValueError(f"unknown control interpolation {controls!r}; choose one of {', '.join(CONTROL_MODES)}")
-    missing = [c for c in INPUT_COLUMNS if c not in inputs.columns]
-    if missing:
-        raise ValueError(f"the output-error inputs lack column(s) {missing}")
+    check_simulation_inputs(inputs, axis, controls, "output-error")
     names = _free_names(model, axis, free)
     if not names:
         raise ValueError(f"no identified coefficient to refine in the {axis} axis")

@@ -303,20 +303,25 @@ def span_offsets(meas: np.ndarray, pred: np.ndarray, spans: np.ndarray) -> np.nd
     return off
 
 
+def check_simulation_inputs(inputs: pd.DataFrame, axis: str, controls: str, what: str) -> None:
+    """ValueError naming what is wrong with an axis's simulation request (`what`: whose inputs)."""
+    if axis not in AXES:
+        raise ValueError(f"unknown axis {axis!r}; axes: {', '.join(AXES)}")
+    if controls not in CONTROL_MODES:
+        raise ValueError(f"unknown control interpolation {controls!r}; choose one of {', '.join(CONTROL_MODES)}")
+    missing = [c for c in INPUT_COLUMNS if c not in inputs.columns]
+    if missing:
+        raise ValueError(f"the {what} inputs lack column(s) {missing}")
+
+
 def predict_axis(model: IdentifiedModel, inputs: pd.DataFrame, measured: pd.DataFrame, vehicle: Vehicle,
                  axis: str, bias: str = "offsets", controls: str = "linear") -> AxisPrediction:
     """Simulate one axis over every span of `inputs` (rows with span >= 0) and compare
     with `measured` (same rows; one column per output name, NaN where not measured).
     controls: how the controls vary between samples (CONTROL_MODES)."""
-    if axis not in AXES:
-        raise ValueError(f"unknown axis {axis!r}; axes: {', '.join(AXES)}")
     if bias not in BIAS_MODES:
         raise ValueError(f"unknown bias treatment {bias!r}; choose one of {', '.join(BIAS_MODES)}")
-    if controls not in CONTROL_MODES:
-        raise ValueError(f"unknown control interpolation {controls!r}; choose one of {', '.join(CONTROL_MODES)}")
-    missing = [c for c in INPUT_COLUMNS if c not in inputs.columns]
-    if missing:
-        raise ValueError(f"the prediction inputs lack column(s) {missing}")
+    check_simulation_inputs(inputs, axis, controls, "prediction")
     inputs = inputs.reset_index(drop=True)
     measured = measured.reset_index(drop=True)
     outs = AXIS_OUTPUTS[axis]
