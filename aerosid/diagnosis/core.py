@@ -329,9 +329,6 @@ def diagnose(flight_data: pd.DataFrame, vehicle, models: dict[str, ChannelModel]
                      bool(getattr(vehicle, "turbulent_air", False)))
 
 
-
-
-
 def _simex_signals(fd: pd.DataFrame, vehicle, groups: np.ndarray, sigma: float) -> dict:
     """{lambda: [signals]}: extra white noise of variance lambda sigma^2 on alpha and beta
     (alpha_r, phi_r and the derivatives recomputed from them), SIMEX_REPLICATES per

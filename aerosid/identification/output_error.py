@@ -41,10 +41,10 @@ from aerosid.identification.identified import IdentifiedModel
 from aerosid.identification.output_prediction import (AXIS_CHANNELS, AXIS_OUTPUTS, DIVERGED_RESIDUAL,
                                                       check_simulation_inputs, predicted_outputs, span_offsets,
                                                       theil_inequality)
-from aerosid.identification.residual_covariance import auto_max_lag, morelli_klein_middle
+from aerosid.identification.residual_covariance import _group_slices, auto_max_lag, morelli_klein_middle
 from aerosid.vehicles.vehicle import Vehicle
 
-__all__ = ["OutputErrorFit", "output_error_fit", "axis_coefficients", "RELAXATIONS"]
+__all__ = ["OutputErrorFit", "output_error_fit", "axis_coefficients", "free_coefficients", "RELAXATIONS"]
 
 #: Gauss-Newton passes, each followed by a new estimate of the outputs' noise levels.
 RELAXATIONS = 3
@@ -126,7 +126,9 @@ def axis_coefficients(model: IdentifiedModel, axis: str) -> list[str]:
     return [t.coefficient for ch in AXIS_CHANNELS[axis] if ch in model.models for t in model.models[ch].terms]
 
 
-def _free_names(model: IdentifiedModel, axis: str, free) -> list[str]:
+def free_coefficients(model: IdentifiedModel, axis: str, free=None) -> list[str]:
+    """The axis's coefficients to refine: `free` (each once; ValueError naming any outside the
+    axis's channels or without a value to start from), or every identified one."""
     own = axis_coefficients(model, axis)
     if free is None:
         return [k for k in own if math.isfinite(float(model.values[k]))]
@@ -143,12 +145,10 @@ def _free_names(model: IdentifiedModel, axis: str, free) -> list[str]:
     return names
 
 
-def _record_slices(spans: np.ndarray, rows: np.ndarray) -> list[slice]:
-    """Contiguous records of one output's stacked samples: a new record at every change of
-    span and at every hole (a sample not measured or left out) inside a span."""
-    brk = np.flatnonzero((spans[1:] != spans[:-1]) | (np.diff(rows) != 1)) + 1
-    bounds = np.r_[0, brk, rows.size]
-    return [slice(int(a), int(b)) for a, b in zip(bounds[:-1], bounds[1:])]
+def _record_labels(spans: np.ndarray, rows: np.ndarray) -> np.ndarray:
+    """A record label per stacked sample of one output (rows: their row numbers): a new record
+    at every change of span and at every hole (a sample not measured or left out) in a span."""
+    return np.cumsum(np.r_[0, (spans[1:] != spans[:-1]) | (np.diff(rows) != 1)])
 
 
 def output_error_fit(model: IdentifiedModel, inputs: pd.DataFrame, measured: pd.DataFrame, vehicle: Vehicle,
@@ -160,7 +160,7 @@ def output_error_fit(model: IdentifiedModel, inputs: pd.DataFrame, measured: pd.
     >= 0 are fitted; measured holds the axis's outputs, NaN where not measured).  max_nfev
     and tol: each Gauss-Newton pass's budget of cost evaluations and its tolerances."""
     check_simulation_inputs(inputs, axis, controls, "output-error")
-    names = _free_names(model, axis, free)
+    names = free_coefficients(model, axis, free)
     if not names:
         raise ValueError(f"no identified coefficient to refine in the {axis} axis")
     inputs = inputs.reset_index(drop=True)
@@ -193,24 +193,26 @@ def output_error_fit(model: IdentifiedModel, inputs: pd.DataFrame, measured: pd.
     if not np.isfinite(pred0[use]).all():
         raise ValueError(f"the {axis} simulation of the starting model leaves the envelope: no output-error fit "
                          "from this start (validate the run first: aerosid validate)")
-    res0 = residual_matrix(pred0)
-    scale = np.array([float(np.std(res0[ok[:, j], j])) if j in outs_used else 1.0 for j in range(len(outs))])
-    scale[~(scale > 0)] = 1.0
+    def noise_levels(pred) -> np.ndarray:  # the residual std per output (1 for an unused one)
+        res = residual_matrix(pred)
+        out = np.array([float(np.nanstd(res[ok[:, j], j])) if j in outs_used else 1.0 for j in range(len(outs))])
+        out[~(out > 0)] = 1.0
+        return out
+
+    scale = noise_levels(pred0)
     x, sol = x0, None
     for _ in range(max(1, int(relaxations))):
         sol = least_squares(lambda z: stacked(residual_matrix(predict(z)), scale), x, x_scale="jac",
                             method="trf", max_nfev=max_nfev, ftol=tol, xtol=tol, gtol=tol)
         x = sol.x
-        res = residual_matrix(predict(x))
-        new = np.array([float(np.nanstd(res[ok[:, j], j])) if j in outs_used else 1.0 for j in range(len(outs))])
-        new[~(new > 0)] = 1.0
+        pred = predict(x)
+        new = noise_levels(pred)
         done = np.all(np.abs(new / scale - 1.0) < 0.01)
         scale = new
         if done:
             break
-    # uncertainty at the solution, with the final noise levels; samples a simulation leaves
-    # the envelope on (at the solution or one step off it) carry no sensitivity: left out
-    pred = predict(x)
+    # uncertainty at the solution (pred), with the final noise levels; samples a simulation
+    # leaves the envelope on (at the solution or one step off it) carry no sensitivity: left out
     v = stacked(residual_matrix(pred), scale, None)
     J = np.empty((v.size, len(names)))  # sensitivities of the scaled outputs (central differences)
     for i in range(len(names)):
@@ -222,13 +224,12 @@ def output_error_fit(model: IdentifiedModel, inputs: pd.DataFrame, measured: pd.
                    - stacked(residual_matrix(predict(up)), scale, None)) / (2 * h)
     good = np.isfinite(v) & np.all(np.isfinite(J), axis=1)
     p = len(names)
+    edges = np.cumsum([0] + [int(ok[:, j].sum()) for j in outs_used])
+    blocks = [(j, slice(int(a), int(b))) for j, a, b in zip(outs_used, edges[:-1], edges[1:])]  # as `stacked`
     # an output with no more usable samples than coefficients adds nothing to either matrix
-    start = 0
-    for j in outs_used:
-        n_j = int(ok[:, j].sum())
-        if good[start:start + n_j].sum() <= p:
-            good[start:start + n_j] = False
-        start += n_j
+    for _, seg in blocks:
+        if good[seg].sum() <= p:
+            good[seg] = False
     if good.sum() <= p:
         raise ValueError(f"the {axis} simulations leave the envelope on all but {int(good.sum())} samples: "
                          "no uncertainty can be given (validate the run first: aerosid validate)")
@@ -236,18 +237,15 @@ def output_error_fit(model: IdentifiedModel, inputs: pd.DataFrame, measured: pd.
     cov_white = m_inv * float(v[good] @ v[good]) / max(int(good.sum()) - p, 1)
     # Morelli-Klein, output by output (each with its own residual autocovariance, within each
     # record): the outputs' cross-covariances are left out (a diagonal approximation)
-    middle, n_eff, start = np.zeros((p, p)), 0.0, 0
-    for j in outs_used:
-        rows = np.flatnonzero(ok[:, j])
-        seg = slice(start, start + rows.size)
+    middle, n_eff = np.zeros((p, p)), 0.0
+    for j, seg in blocks:
         keep = good[seg]
-        start += rows.size
         if not keep.any():
             continue
-        sp, vj, Jj = spans[rows][keep], v[seg][keep], J[seg][keep]
-        slices = _record_slices(sp, rows[keep])
-        lag = auto_max_lag(vj, groups=np.repeat(np.arange(len(slices)), [s.stop - s.start for s in slices]))
-        mid, ne = morelli_klein_middle(Jj, vj, lag, slices if len(slices) > 1 else None)
+        rows = np.flatnonzero(ok[:, j])[keep]
+        vj, Jj = v[seg][keep], J[seg][keep]
+        labels = _record_labels(spans[rows], rows)
+        mid, ne = morelli_klein_middle(Jj, vj, auto_max_lag(vj, groups=labels), _group_slices(labels))
         middle += mid
         n_eff += ne
     cov = m_inv @ middle @ m_inv * (n_eff / max(n_eff - p, 1.0))

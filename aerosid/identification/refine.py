@@ -10,14 +10,13 @@ was identified on; any other of the same vehicle works too.
 """
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import pandas as pd
 
 from aerosid.identification.identified import IdentifiedModel, load_identified_model
-from aerosid.identification.output_error import axis_coefficients, output_error_fit
+from aerosid.identification.output_error import axis_coefficients, free_coefficients, output_error_fit
 from aerosid.identification.output_prediction import prediction_inputs
 from aerosid.identification.validate import attitude_on, choose_axes, estimate_manoeuvre, measured_outputs
 
@@ -78,23 +77,22 @@ def refine(run_dir: str | Path, telemetry: str | Path, *, vehicle: str | None = 
                              "nothing to refine (choose --axes)")
         if outside:
             notes.append(f"not refined (not in the {'/'.join(chosen)} axis models): {outside}")
-        unset = [n for n in wanted if not math.isfinite(float(model.values[n]))]
-        if unset:
-            raise ValueError(f"coefficient(s) {unset} were not identifiable in the run (no value to start from): "
-                             "leave them out of --free")
+    plan = {}  # axis -> its coefficients to refine, checked before the estimation
+    for ax in chosen:
+        names = [n for n in wanted if n in axis_coefficients(model, ax)] if wanted else None
+        if wanted and not names:
+            notes.append(f"{ax} axis not refined: none of {wanted} is one of its coefficients")
+            continue
+        plan[ax] = free_coefficients(model, ax, names)
     raw, est, fd, span, more = estimate_manoeuvre(run_dir, telemetry, model, veh, windows, "required", progress)
     notes += more
     att = attitude_on(raw, fd["t_s"].to_numpy(float), str(telemetry))
     inputs = prediction_inputs(fd, veh, att[0], att[1], span, wideband_controls=True)
     meas, sources = measured_outputs(est.preprocessed.frame, fd, veh, wideband=True)
     fits = []
-    for k, ax in enumerate(chosen):
+    for k, (ax, names) in enumerate(plan.items()):
         if progress is not None:
-            progress(f"output error ({ax})", k / len(chosen))
-        names = [n for n in wanted if n in axis_coefficients(model, ax)] if wanted else None
-        if wanted and not names:
-            notes.append(f"{ax} axis not refined: none of {wanted} is one of its coefficients")
-            continue
+            progress(f"output error ({ax})", k / len(plan))
         fits.append(output_error_fit(model, inputs, meas, veh, ax, free=names))
     if progress is not None:
         progress("done", 1.0)
