@@ -20,7 +20,7 @@ from aerosid.modelling.effects import Effect
 from aerosid.vehicles.rigid_body import body_rate_derivatives, lever_arm_acceleration
 from aerosid.simulation.case import SimulationCase, load_case
 from aerosid.simulation.dynamics import Plant, aero_angles, euler_from_quat, integrate, quat_from_euler, quat_to_dcm, schedule
-from aerosid.simulation.sensors import IMU_COLUMNS, apply_faults, noisy_channels
+from aerosid.simulation.sensors import ATTITUDE_COLUMNS, IMU_COLUMNS, apply_faults, noisy_channels, with_extra_channels
 
 __all__ = ["SimulatedFlight", "simulate", "load_case", "flight_model"]
 
@@ -190,11 +190,15 @@ def simulate(case: SimulationCase | str = "seed-rlv", effects: tuple[tuple[Effec
     clean["V_m_s"] = truth["V_m_s"].to_numpy()
     clean["h_m"] = truth["h_m"].to_numpy()
 
-    children = np.random.SeedSequence(seed).spawn(3)
-    rng_noise, rng_drop, rng_out = (np.random.default_rng(c) for c in children)
+    # the attitude's noise has the fourth child: the other channels' draws are those of a flight without it
+    children = np.random.SeedSequence(seed).spawn(4)
+    rng_noise, rng_drop, rng_out, rng_att = (np.random.default_rng(c) for c in children)
     noisy = noisy_channels(clean, case.sensors, rng_noise)
     sigma_imu = np.array([*case.sensors.accel_noise_m_s2, *case.sensors.gyro_noise_rad_s])
     telemetry, masks = apply_faults(noisy, sigma_imu, case.faults, rng_drop, rng_out)
+    attitude = {c: truth[c].to_numpy() + case.sensors.attitude_noise_rad * rng_att.standard_normal(n)
+                for c in ATTITUDE_COLUMNS}
+    telemetry = with_extra_channels(telemetry, masks, attitude, ATTITUDE_COLUMNS)
     for col in masks.columns[1:]:
         truth[f"fault_{col}"] = masks[col].to_numpy()
     # ground truth of the noise actually added, for checks downstream

@@ -1,6 +1,7 @@
 """A simulation case: trajectory, manoeuvre plan, flight deviations, sensors, faults."""
 from __future__ import annotations
 
+import math
 import tomllib
 from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
@@ -8,15 +9,22 @@ from pathlib import Path
 from aerosid.vehicles.vehicle import DATA_DIR, Vehicle, load_vehicle
 
 
+#: Default 1-sigma white noise of the INS's roll and pitch attitude [deg] (a navigation-grade
+#: system's attitude output is good to 0.05-0.1 deg); [sensors] attitude_noise_deg overrides it.
+ATTITUDE_NOISE_DEG = 0.1
+
+
 @dataclass(frozen=True)
 class SensorSpec:
-    """1-sigma noise: accelerometers [m/s^2], gyros [rad/s], fins [rad], V [m/s], h [m]."""
+    """1-sigma noise: accelerometers [m/s^2], gyros [rad/s], fins [rad], V [m/s], h [m],
+    the INS's roll and pitch attitude [rad]."""
 
     accel_noise_m_s2: tuple[float, float, float] = (0.8, 1.0, 2.0)
     gyro_noise_rad_s: tuple[float, float, float] = (0.06981317, 0.03490659, 0.01745329)
     fin_noise_rad: float = 3.5e-4
     V_noise_m_s: float = 0.3
     h_noise_m: float = 3.0
+    attitude_noise_rad: float = math.radians(ATTITUDE_NOISE_DEG)
 
     def scaled(self, factor: float) -> "SensorSpec":
         """Every sensor's 1-sigma noise multiplied by `factor` [-] (a sensitivity study)."""
@@ -113,6 +121,7 @@ def load_case(name: str = "seed-rlv", **overrides) -> SimulationCase:
             fin_noise_rad=s["fin_noise_deg"] * deg,
             V_noise_m_s=s["V_noise_m_s"],
             h_noise_m=s["h_noise_m"],
+            attitude_noise_rad=s.get("attitude_noise_deg", ATTITUDE_NOISE_DEG) * deg,
         ),
         faults=FaultSpec(
             dropout_rate_per_s=f["dropout_rate_per_s"],

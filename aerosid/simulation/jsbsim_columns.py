@@ -9,12 +9,13 @@ import math
 import numpy as np
 import pandas as pd
 
-from aerosid.simulation.case import FaultSpec
-from aerosid.simulation.sensors import IMU_COLUMNS, RAW_COLUMNS, apply_faults
+from aerosid.simulation.case import ATTITUDE_NOISE_DEG, FaultSpec
+from aerosid.simulation.sensors import ATTITUDE_COLUMNS, IMU_COLUMNS, RAW_COLUMNS, apply_faults, with_extra_channels
 from aerosid.vehicles.rigid_body import lever_arm_acceleration
 
 VANE_COLUMNS = ["alpha_vane_rad", "beta_vane_rad"]
-TELEMETRY_COLUMNS = RAW_COLUMNS + VANE_COLUMNS
+#: appended last, so each earlier channel keeps its own child of the seed (its noise unchanged)
+TELEMETRY_COLUMNS = RAW_COLUMNS + VANE_COLUMNS + ATTITUDE_COLUMNS
 
 # unit conversions (exact definitions)
 FT = 0.3048                    # m
@@ -33,16 +34,19 @@ def sensor_sigma(sens: dict) -> dict[str, float]:
     sigma.update({f"d{i}_rad": sens["surface_noise_deg"] * DEG for i in range(1, 5)})
     sigma.update({"V_m_s": sens["V_noise_m_s"], "h_m": sens["h_noise_m"],
                   "alpha_vane_rad": sens["vane_noise_deg"] * DEG, "beta_vane_rad": sens["vane_noise_deg"] * DEG})
+    sigma.update({c: sens.get("attitude_noise_deg", ATTITUDE_NOISE_DEG) * DEG for c in ATTITUDE_COLUMNS})
     return sigma
 
 
 def make_telemetry(clean: dict[str, np.ndarray], truth: pd.DataFrame, sens: dict, fcfg: dict, seed: int,
                    faults: bool):
-    """Noise ([sensors]) and faults ([faults]) on the clean signals: each channel's noise
+    """Noise ([sensors]) and faults ([faults]) on the clean signals and on the attitude of `truth`
+    (phi_rad, theta_rad: the INS's, ATTITUDE_COLUMNS): each channel's noise
     from its own child of SeedSequence(seed).  Adds the fault masks (fault_*) and the
     noise actually added (noise_*) to `truth`.  Returns (telemetry, masks, FaultSpec, sigma)."""
     t = clean["t_s"]
     n = len(t)
+    clean = {**clean, **{c: truth[c].to_numpy() for c in ATTITUDE_COLUMNS}}  # the INS's attitude: the true one
     sigma = sensor_sigma(sens)
     channels = TELEMETRY_COLUMNS[1:]
     children = np.random.SeedSequence(seed).spawn(2 + len(channels))
@@ -59,13 +63,7 @@ def make_telemetry(clean: dict[str, np.ndarray], truth: pd.DataFrame, sens: dict
         spec = spec.without_faults()
     sigma_imu = np.array([sigma[c] for c in IMU_COLUMNS])
     telemetry, masks = apply_faults({c: noisy[c] for c in RAW_COLUMNS}, sigma_imu, spec, rng_drop, rng_out)
-    keep = ~masks["dropout_missing_row"].to_numpy()
-    nan_rows = masks["dropout_nan"].to_numpy()
-    for col in VANE_COLUMNS:
-        v = noisy[col].copy()
-        v[nan_rows] = np.nan
-        telemetry[col] = v[keep]
-    telemetry = telemetry[TELEMETRY_COLUMNS]
+    telemetry = with_extra_channels(telemetry, masks, noisy, VANE_COLUMNS + ATTITUDE_COLUMNS)[TELEMETRY_COLUMNS]
     for col in masks.columns[1:]:
         truth[f"fault_{col}"] = masks[col].to_numpy()
     for col in channels:

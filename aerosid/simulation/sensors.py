@@ -14,6 +14,10 @@ from aerosid.simulation.case import FaultSpec, SensorSpec
 RAW_COLUMNS = ["t_s", "ax_m_s2", "ay_m_s2", "az_m_s2", "p_rad_s", "q_rad_s", "r_rad_s",
                "d1_rad", "d2_rad", "d3_rad", "d4_rad", "V_m_s", "h_m"]
 IMU_COLUMNS = RAW_COLUMNS[1:7]
+#: The inertial navigation system's roll and pitch attitude [rad]: optional raw columns that the
+#: estimation does not read (its 21-state model carries no attitude); ``aerosid validate`` and
+#: ``aerosid refine`` need them for the gravity terms of their simulation.
+ATTITUDE_COLUMNS = ["phi_rad", "theta_rad"]
 
 
 def noisy_channels(clean: dict[str, np.ndarray], spec: SensorSpec, rng: np.random.Generator) -> dict[str, np.ndarray]:
@@ -67,3 +71,17 @@ def apply_faults(noisy: dict[str, np.ndarray], sigma_imu: np.ndarray, spec: Faul
         data[col][masks["dropout_nan"]] = np.nan
     frame = pd.DataFrame({c: data[c] for c in RAW_COLUMNS})[~missing_row].reset_index(drop=True)
     return frame, pd.DataFrame(masks)
+
+
+def with_extra_channels(telemetry: pd.DataFrame, masks: pd.DataFrame, noisy: dict[str, np.ndarray],
+                        columns) -> pd.DataFrame:
+    """The telemetry with the noisy full-grid `columns` (not in RAW_COLUMNS) appended under the
+    same dropouts: NaN on the rows delivered as NaN, gone with the missing rows."""
+    keep = ~masks["dropout_missing_row"].to_numpy()
+    nan_rows = masks["dropout_nan"].to_numpy()
+    out = telemetry.copy()
+    for col in columns:
+        v = np.array(noisy[col], dtype=float)
+        v[nan_rows] = np.nan
+        out[col] = v[keep]
+    return out

@@ -46,13 +46,15 @@ TWENTY_S = {"duration_s": 20.0, "V0_m_s": 3780.0}  # starts at M 12.5: the whole
 
 
 def _telemetry(tmp, name, seed, attitude=True, degrees=False):
+    """The simulator's telemetry (with its INS attitude, phi_rad and theta_rad); attitude=False:
+    without those columns; degrees: those columns in degrees (a unit mistake)."""
     flight = simulate(load_case("seed-rlv", **TWENTY_S), seed=seed)
     tel = flight.telemetry.copy()
-    if attitude:
-        tr = flight.truth.set_index("t_s")
-        k = 180 / math.pi if degrees else 1.0
+    if not attitude:
+        tel = tel.drop(columns=["phi_rad", "theta_rad"])
+    elif degrees:
         for col in ("phi_rad", "theta_rad"):
-            tel[col] = tr[col].reindex(tel["t_s"]).to_numpy() * k
+            tel[col] = tel[col] * (180 / math.pi)
     path = tmp / name / "telemetry.parquet"
     write_parquet_atomic(tel, path, metadata={"aerosid.case": "seed-rlv"})
     return path

@@ -165,3 +165,31 @@ def test_sensor_noise_scaling_multiplies_every_sigma():
         assert type(getattr(half, f.name)) is type(getattr(s, f.name))
     assert s.scaled(1.0) == s
     assert not any(np.any(np.asarray(v)) for v in astuple(s.scaled(0.0)))
+
+
+def test_the_ins_attitude_has_its_noise_the_dropouts_and_leaves_the_other_channels_alone(reference_flight):
+    """phi_rad, theta_rad: the true attitude + the configured white noise (chi-square band), NaN on
+    exactly the rows where every other channel is NaN; without attitude noise every other column
+    is bit-identical (the attitude draws from its own child of the seed)."""
+    from dataclasses import replace
+
+    from aerosid.simulation.sensors import ATTITUDE_COLUMNS
+
+    tel, case = reference_flight.telemetry, load_case("seed-rlv")
+    truth = reference_flight.truth.set_index(np.round(reference_flight.truth["t_s"], 9))
+    nan_rows = tel[RAW_COLUMNS[1:]].isna().all(axis=1).to_numpy()
+    errors = []
+    for col in ATTITUDE_COLUMNS:
+        assert (tel[col].isna().to_numpy() == nan_rows).all()
+        errors.append(tel[col].to_numpy() - truth.loc[np.round(tel["t_s"], 9), col].to_numpy())
+    e = np.concatenate(errors)
+    e = e[np.isfinite(e)]
+    n = e.size
+    lo = np.sqrt(stats.chi2.ppf(0.0005, n - 1) / (n - 1))
+    hi = np.sqrt(stats.chi2.ppf(0.9995, n - 1) / (n - 1))
+    assert lo < e.std(ddof=1) / case.sensors.attitude_noise_rad < hi
+    assert case.sensors.attitude_noise_rad == pytest.approx(np.deg2rad(0.1))
+    quiet = replace(case, sensors=replace(case.sensors, attitude_noise_rad=0.0))
+    other = simulate(quiet, seed=0).telemetry
+    assert other[RAW_COLUMNS].equals(tel[RAW_COLUMNS])
+    assert not other[ATTITUDE_COLUMNS].equals(tel[ATTITUDE_COLUMNS])
