@@ -9,8 +9,10 @@ estimates, with their reported sigma), then the longitudinal output-error fit
 (aerosid.identification.output_error.output_error_fit) started from them on the same flight:
 inputs and outputs as ``aerosid refine`` takes them (the fins and, without vanes, the inverted
 alpha and beta before the band's low-pass; the other outputs from the preprocessed telemetry),
-the attitude from the truth (the simulators' telemetry carries none; a real aircraft's AHRS
-measures it), the rows in the Mach window.  Errors in % of the at-trim truth (bench_generalisation.truth_of); coverage: the truth
+the telemetry's INS attitude (phi_rad, theta_rad: 0.1 deg of noise; before 2026-11-27 the
+simulators wrote none and this bench read the truth's), the identity channels of a vehicle
+without vanes (C_N, C_Y) at the preflight database's values as in ``aerosid refine`` (before
+2026-11-27: at 0), the rows in the Mach window.  Errors in % of the at-trim truth (bench_generalisation.truth_of); coverage: the truth
 inside estimate +- 1.96 sigma.  Not a default and not tuned here: the bench measures it.
 """
 from __future__ import annotations
@@ -40,11 +42,11 @@ NAMES = {"Cm_alpha": "Cm_alpha", "Cm_delta": "Cm_delta_p", "damping": None, "CN_
 
 def one(job: tuple[str, int]) -> dict:
     from aerosid.ebm import process_telemetry
-    from aerosid.identification.identified import IdentifiedModel
+    from aerosid.identification.identified import IdentifiedModel, with_preflight_identities
     from aerosid.identification.identify import mach_window_mask
     from aerosid.identification.output_error import output_error_fit
     from aerosid.identification.output_prediction import prediction_inputs
-    from aerosid.identification.validate import measured_outputs, spans_of
+    from aerosid.identification.validate import attitude_on, measured_outputs, spans_of
     from aerosid.modelling.models import default_models
 
     vname, seed = job
@@ -58,9 +60,9 @@ def one(job: tuple[str, int]) -> dict:
         fd = run.flight_data.sort_values(["flight", "t_s"], kind="stable").reset_index(drop=True)
         tab = run.identification.table()
         model = IdentifiedModel(default_models(veh), dict(zip(tab["coefficient"], tab["estimate"])), "equation error")
+        model, _ = with_preflight_identities(model, veh)
         span = spans_of(fd, mach_window_mask(fd["mach"].to_numpy(), veh.mach_reference, 0.5))
-        T = flight.truth
-        att = [np.interp(fd["t_s"], T["t_s"], T[c]) for c in ("phi_rad", "theta_rad")]
+        att = attitude_on(flight.telemetry, fd["t_s"].to_numpy(float), "telemetry")
         inputs = prediction_inputs(fd, veh, att[0], att[1], span, wideband_controls=True)
         meas, _ = measured_outputs(run.preprocessed.frame, fd, veh, wideband=True)
         t0 = time.perf_counter()

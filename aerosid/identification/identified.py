@@ -40,6 +40,9 @@ class IdentifiedModel:
     vehicle: str = ""
     mach_half_width: float | None = 0.5
     path: str = field(default="", compare=False)  # the coefficients.parquet its values were read from ("": none)
+    #: coefficients whose values are the preflight database's, not estimates (with_preflight_identities):
+    #: a simulation reads them, a refinement leaves them fixed; the table at ``path`` keeps them NaN
+    preflight: tuple = field(default=(), compare=False)
     _compiled: dict = field(default_factory=dict, repr=False, compare=False)
 
     def __post_init__(self):
@@ -99,6 +102,31 @@ class IdentifiedModel:
             terms = " + ".join(f"{self.values[t.coefficient]:.5g}*({t.expression})" for t in m.terms)
             lines.append(f"  {ch} = {terms}")
         return "\n".join(lines)
+
+
+def with_preflight_identities(model: IdentifiedModel, vehicle) -> tuple[IdentifiedModel, list[str]]:
+    """The model to simulate, and a note: the unidentified coefficients of the channels that are
+    identities by construction (C_N and C_Y when alpha and beta are inverted from them through the
+    preflight force database, aerosid.identification.identify.identity_channels) take the preflight
+    database's linear values about the CG.  The inversion made the flight's C_N and C_Y equal to that
+    database, so it is the model of those channels; as 0 they would leave the simulated alpha
+    without its lift and a_z without its force.  Listed in ``preflight``; ``path`` is kept (the
+    table there still says "not identifiable")."""
+    from aerosid.identification.identify import identity_channels
+    from aerosid.modelling.aeromodel import AeroModel
+
+    chans = identity_channels(vehicle, model.models)
+    missing = model.unidentified(chans)
+    if not missing or getattr(vehicle, "preflight", None) is None:
+        return model, []
+    refs = AeroModel.preflight(vehicle).linear_truth()
+    vals = {k: float(refs[k]) for k in missing if k in refs and math.isfinite(float(refs[k]))}
+    if not vals:
+        return model, []
+    note = (f"{'/'.join(chans)}: identities by construction (alpha, beta are inverted from them through the "
+            "preflight force database), so the simulation uses that database's values: "
+            + ", ".join(f"{k} {v:.4g}" for k, v in vals.items()))
+    return replace(model, values={**model.values, **vals}, preflight=tuple(vals), _compiled={}), [note]
 
 
 def model_from_table(table: pd.DataFrame, source: str, vehicle: str = "",

@@ -128,16 +128,21 @@ def axis_coefficients(model: IdentifiedModel, axis: str) -> list[str]:
 
 def free_coefficients(model: IdentifiedModel, axis: str, free=None) -> list[str]:
     """The axis's coefficients to refine: `free` (each once; ValueError naming any outside the
-    axis's channels or without a value to start from), or every identified one."""
+    axis's channels, without a value to start from or fixed at the preflight database's value), or
+    every identified one (not those in ``model.preflight``)."""
     own = axis_coefficients(model, axis)
     if free is None:
-        return [k for k in own if math.isfinite(float(model.values[k]))]
+        return [k for k in own if math.isfinite(float(model.values[k])) and k not in model.preflight]
     names = list(dict.fromkeys(free))  # once each: a repeated name would be a zero sensitivity
     bad = [k for k in names if k not in own]
     if bad:
         raise ValueError(f"coefficient(s) {bad} are not in the {axis} axis's channels "
                          f"({', '.join(ch for ch in AXIS_CHANNELS[axis] if ch in model.models)}); its coefficients: "
                          f"{own}")
+    fixed = [k for k in names if k in model.preflight]
+    if fixed:
+        raise ValueError(f"coefficient(s) {fixed} are the preflight database's, not estimates (alpha, beta are "
+                         "inverted from their channel): leave them out of the refinement")
     unknown = [k for k in names if not math.isfinite(float(model.values[k]))]
     if unknown:
         raise ValueError(f"coefficient(s) {unknown} were not identifiable in the run (no value to start from): "

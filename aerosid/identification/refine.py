@@ -15,7 +15,7 @@ from pathlib import Path
 
 import pandas as pd
 
-from aerosid.identification.identified import IdentifiedModel, load_identified_model
+from aerosid.identification.identified import IdentifiedModel, load_identified_model, with_preflight_identities
 from aerosid.identification.output_error import axis_coefficients, free_coefficients, output_error_fit
 from aerosid.identification.output_prediction import prediction_inputs
 from aerosid.identification.validate import attitude_on, choose_axes, estimate_manoeuvre, measured_outputs
@@ -61,7 +61,10 @@ def refine(run_dir: str | Path, telemetry: str | Path, *, vehicle: str | None = 
 
     model = load_identified_model(run_dir, version)
     veh = load_vehicle(vehicle or model.vehicle)
-    chosen, notes = choose_axes(model, axes)
+    # the identity channels (inverted angles) simulated at the preflight database's values, not refined
+    model, notes = with_preflight_identities(model, veh)
+    chosen, more = choose_axes(model, axes)
+    notes += more
     if not chosen:
         raise ValueError("no axis to refine: " + "; ".join(notes))
     wanted = list(dict.fromkeys(free)) if free else None

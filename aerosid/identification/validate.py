@@ -26,7 +26,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from aerosid.identification.identified import IdentifiedModel, load_identified_model, read_run_json
+from aerosid.identification.identified import (IdentifiedModel, load_identified_model, read_run_json,
+                                               with_preflight_identities)
 from aerosid.identification.output_prediction import (AXIS_CHANNELS, AXIS_OUTPUTS, BIAS_MODES, OUTPUT_UNITS,
                                                       predict_axis, prediction_inputs,
                                                       theil_inequality)
@@ -343,7 +344,10 @@ def validate(run_dir: str | Path, telemetry: str | Path, *, vehicle: str | None 
     model = load_model_file(coefficients, run_dir) if coefficients is not None else load_identified_model(run_dir,
                                                                                                           version)
     veh = load_vehicle(vehicle or model.vehicle)
-    chosen, notes = choose_axes(model, axes)
+    # the simulation's model: the identity channels (inverted angles) at the preflight database's values
+    sim_model, pre_notes = with_preflight_identities(model, veh)
+    chosen, notes = choose_axes(sim_model, axes)
+    notes = (pre_notes if chosen else []) + notes
     raw, est, fd, span, more = estimate_manoeuvre(run_dir, telemetry, model, veh, windows, bool(chosen), progress)
     notes += more
     use = span >= 0
@@ -365,10 +369,10 @@ def validate(run_dir: str | Path, telemetry: str | Path, *, vehicle: str | None 
         inputs = prediction_inputs(fd, veh, att[0], att[1], span)
         meas, meas_src = measured_outputs(est.preprocessed.frame, fd, veh)
         for ax in chosen:
-            bad = model.unidentified(AXIS_CHANNELS[ax])
+            bad = sim_model.unidentified(AXIS_CHANNELS[ax])
             if bad:
                 notes.append(f"{ax} simulation: coefficient(s) {bad} were not identifiable in the run and count as 0")
-            pr = predict_axis(model, inputs, meas, veh, ax, bias)
+            pr = predict_axis(sim_model, inputs, meas, veh, ax, bias)
             preds.append(pr)
             intercepts.update(pr.intercepts)
             notes += list(pr.notes)

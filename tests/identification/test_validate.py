@@ -129,3 +129,35 @@ def test_a_manoeuvre_outside_the_mach_window_is_refused_naming_the_window(small_
                                     str(tmp_path / "v")])
     assert res.exit_code == 1 and "Traceback" not in res.output
     assert "Mach window 12.4 +- 0.5" in res.output and "spans Mach 13" in res.output
+
+
+def test_identity_channels_are_simulated_with_the_preflight_database(small_run):
+    """seed-rlv's alpha and beta are inverted from C_N and C_Y: the run cannot identify those
+    channels, and the simulation takes the preflight database's values for them.  With them at 0
+    (before) the predicted a_z had no lift and its error was the whole a_z motion; with the
+    database it is the accelerometer's own noise (seed Table 2: 2 m/s^2)."""
+    from aerosid.identification.identified import with_preflight_identities
+    from aerosid.identification.output_error import free_coefficients
+    from aerosid.identification.validate import validate
+    from aerosid.modelling.aeromodel import AeroModel
+    from aerosid.vehicles.vehicle import load_vehicle
+
+    veh = load_vehicle("seed-rlv")
+    model = load_identified_model(small_run["run"])
+    assert set(model.unidentified()) == {"CN_0", "CN_alpha", "CN_delta_p", "CY_0", "CY_beta", "CY_delta_y"}
+    sim, notes = with_preflight_identities(model, veh)
+    refs = AeroModel.preflight(veh).linear_truth()
+    assert set(sim.preflight) == set(model.unidentified()) and not sim.unidentified()
+    assert all(sim.values[k] == refs[k] for k in sim.preflight)
+    assert sim.values["Cm_alpha"] == model.values["Cm_alpha"] and sim.path == model.path
+    assert "CN/CY" in notes[0] and "preflight force database" in notes[0]
+    assert "CN_alpha" not in free_coefficients(sim, "lon") and "Cm_alpha" in free_coefficients(sim, "lon")
+    with pytest.raises(ValueError, match=r"\['CN_alpha'\] are the preflight database's"):
+        free_coefficients(sim, "lon", ["Cm_alpha", "CN_alpha"])
+    result = validate(small_run["run"], small_run["other"], axes="lon")
+    az = {m.name: m for m in result.outputs}["az_m_s2"]
+    accel_noise = load_case("seed-rlv").sensors.accel_noise_m_s2[2]
+    assert az.rms < 1.15 * accel_noise, az.rms
+    assert any("identities by construction" in n for n in result.notes)
+    # the model reported (and its coefficient prediction) stays the run's: NaN where not identified
+    assert np.isnan(result.model.values["CN_alpha"])
