@@ -28,7 +28,8 @@ Examples:
                    "coefficients).")
 @click.option("--axes", type=click.Choice(["auto", "lon", "lat", "both"]), default="auto", show_default=True,
               help="Axes to refine: lon (CN, Cm: alpha, q, a_z), lat (CY, Cl, Cn: beta, p, r, a_y); auto = lon, "
-                   "plus lat when the lateral channels are all identified.")
+                   "plus lat when the lateral channels are all identified (with beta inverted from C_Y, --axes lat "
+                   "simulates C_Y at the preflight database's values and does not refine it).")
 @click.option("--free", multiple=True, metavar="COEFFICIENT",
               help="Refine only this coefficient (repeatable; default: every identified one of the axes).")
 @click.option("--window", "windows", multiple=True, nargs=2, type=float, metavar="T0 T1",

@@ -54,17 +54,20 @@ class RefineResult:
 def refine(run_dir: str | Path, telemetry: str | Path, *, vehicle: str | None = None, version: str | None = None,
            axes: str = "auto", free=None, windows=None, progress=None) -> RefineResult:
     """Output-error fits of RUN_DIR's model (the latest version, or `version`) on the manoeuvre
-    in `telemetry`.  axes: as ``aerosid validate`` (auto = lon, plus lat when the lateral
-    channels are all identified); free: the coefficients to refine (default: every
+    in `telemetry`.  axes: lon, lat, both, or auto = lon, plus lat when the lateral channels
+    are all identified (an identity channel, C_Y with beta inverted from it, is simulated at the
+    preflight database's values and not refined: ``--axes lat`` asks for it); an axis whose fit
+    fails under auto or both is a note, the other's result is kept; free: the coefficients to refine (default: every
     identified one of each axis); windows: time windows [s] of the telemetry."""
     from aerosid.vehicles.vehicle import load_vehicle
 
     model = load_identified_model(run_dir, version)
     veh = load_vehicle(vehicle or model.vehicle)
-    # the identity channels (inverted angles) simulated at the preflight database's values, not refined
-    model, notes = with_preflight_identities(model, veh)
-    chosen, more = choose_axes(model, axes)
-    notes += more
+    # auto: lat only when its channels were identified (a lateral refinement costs minutes); then the
+    # identity channels (inverted angles) are simulated at the preflight database's values, not refined
+    chosen, notes = choose_axes(model, axes)
+    model, pre = with_preflight_identities(model, veh)
+    notes = pre + notes
     if not chosen:
         raise ValueError("no axis to refine: " + "; ".join(notes))
     wanted = list(dict.fromkeys(free)) if free else None
@@ -96,7 +99,14 @@ def refine(run_dir: str | Path, telemetry: str | Path, *, vehicle: str | None = 
     for k, (ax, names) in enumerate(plan.items()):
         if progress is not None:
             progress(f"output error ({ax})", k / len(plan))
-        fits.append(output_error_fit(model, inputs, meas, veh, ax, free=names))
+        try:
+            fits.append(output_error_fit(model, inputs, meas, veh, ax, free=names))
+        except ValueError as exc:
+            if axes in ("lon", "lat"):  # the one axis asked for by name fails the command
+                raise
+            notes.append(f"{ax} axis not refined: {exc}")  # the other axis's result is kept
+    if not fits:
+        raise ValueError("no axis refined: " + "; ".join(notes))
     if progress is not None:
         progress("done", 1.0)
     used = {o for f in fits for o in f.noise_std}

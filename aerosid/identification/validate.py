@@ -86,7 +86,7 @@ class ValidationResult:
     outputs: tuple  # FitMetric per simulated output
     coefficient_frame: pd.DataFrame = field(repr=False)  # t_s, span, measured_<ch>, predicted_<ch>
     predictions: tuple = field(repr=False)  # AxisPrediction per simulated axis
-    intercepts: dict = field(default_factory=dict)  # coefficient -> (identified, re-estimated)
+    intercepts: dict = field(default_factory=dict)  # coefficient -> (identified or preflight, re-estimated)
     sources: dict = field(default_factory=dict)  # density, attitude, ... -> where from
     notes: tuple = ()
 
@@ -135,7 +135,9 @@ class ValidationResult:
                 "n_samples": self.n_samples, "n_predicted": self.n_predicted, "n_spans": self.n_spans,
                 "coefficients": [m.as_dict() for m in self.coefficients],
                 "outputs": [m.as_dict() for m in self.outputs],
-                "intercepts": {k: {"identified": a, "re_estimated": b} for k, (a, b) in self.intercepts.items()},
+                # the start of a re-estimated intercept: the run's estimate, or (an identity channel's) the preflight's
+                "intercepts": {k: {("identified" if math.isfinite(self.model.values.get(k, math.nan)) else "preflight"): a,
+                                   "re_estimated": b} for k, (a, b) in self.intercepts.items()},
                 "sources": dict(self.sources), "notes": list(self.notes),
                 "model_coefficients": {k: (v if math.isfinite(v) else None) for k, v in self.model.values.items()}}
 
@@ -270,7 +272,8 @@ def density_source(raw: pd.DataFrame, fd: pd.DataFrame) -> tuple[str, str | None
 
 
 def choose_axes(model: IdentifiedModel, axes: str) -> tuple[tuple[str, ...], list[str]]:
-    """The axes to simulate: auto = lon, plus lat when the model has CY, Cl, Cn all identified."""
+    """The axes to simulate: auto = lon, plus lat when the model has CY, Cl, Cn all with values
+    (identified, or an identity channel's preflight values: with_preflight_identities)."""
     if axes not in AXES_CHOICES:
         raise ValueError(f"unknown axes {axes!r}; choose one of {', '.join(AXES_CHOICES)}")
     notes = []
@@ -347,7 +350,6 @@ def validate(run_dir: str | Path, telemetry: str | Path, *, vehicle: str | None 
     # the simulation's model: the identity channels (inverted angles) at the preflight database's values
     sim_model, pre_notes = with_preflight_identities(model, veh)
     chosen, notes = choose_axes(sim_model, axes)
-    notes = (pre_notes if chosen else []) + notes
     raw, est, fd, span, more = estimate_manoeuvre(run_dir, telemetry, model, veh, windows, bool(chosen), progress)
     notes += more
     use = span >= 0
@@ -365,6 +367,7 @@ def validate(run_dir: str | Path, telemetry: str | Path, *, vehicle: str | None 
         chosen = ()
     elif chosen:
         sources["attitude"] = f"telemetry {' and '.join(ATTITUDE_COLUMNS)}"
+        notes += pre_notes
     if chosen:
         inputs = prediction_inputs(fd, veh, att[0], att[1], span)
         meas, meas_src = measured_outputs(est.preprocessed.frame, fd, veh)

@@ -18,8 +18,8 @@ The construction: flight-path reconstruction takes alpha-dot from the rigid-body
 
 with a_x, a_z the specific forces at the CG (what the accelerometers measure, thrust included):
 a_x = -C_A qbar S/m, a_z = -C_N qbar S/m (the signs of aerosid.identification.flight_coefficients),
-and p, q, r the flight data's (band-limited) rates.  The telemetry has no attitude, so the
-gravity term
+and p, q, r the flight data's (band-limited) rates.  The estimation reads no attitude (the
+21-state model carries none, and telemetry need not have it), so the gravity term
 
     G(t) = g [cos a cos th cos ph + sin a sin th] / (V cos b)        (~ g cos(gamma) / V)
 

@@ -20,7 +20,8 @@ from aerosid.modelling.effects import Effect
 from aerosid.vehicles.rigid_body import body_rate_derivatives, lever_arm_acceleration
 from aerosid.simulation.case import SimulationCase, load_case
 from aerosid.simulation.dynamics import Plant, aero_angles, euler_from_quat, integrate, quat_from_euler, quat_to_dcm, schedule
-from aerosid.simulation.sensors import ATTITUDE_COLUMNS, IMU_COLUMNS, apply_faults, noisy_channels, with_extra_channels
+from aerosid.simulation.sensors import (ATTITUDE_COLUMNS, IMU_COLUMNS, apply_faults, attitude_angles, noisy_channels,
+                                       with_extra_channels)
 
 __all__ = ["SimulatedFlight", "simulate", "load_case", "flight_model"]
 
@@ -196,14 +197,16 @@ def simulate(case: SimulationCase | str = "seed-rlv", effects: tuple[tuple[Effec
     noisy = noisy_channels(clean, case.sensors, rng_noise)
     sigma_imu = np.array([*case.sensors.accel_noise_m_s2, *case.sensors.gyro_noise_rad_s])
     telemetry, masks = apply_faults(noisy, sigma_imu, case.faults, rng_drop, rng_out)
-    attitude = {c: truth[c].to_numpy() + case.sensors.attitude_noise_rad * rng_att.standard_normal(n)
-                for c in ATTITUDE_COLUMNS}
+    attitude = attitude_angles(*(truth[c].to_numpy() + case.sensors.attitude_noise_rad * rng_att.standard_normal(n)
+                                 for c in ATTITUDE_COLUMNS))
     telemetry = with_extra_channels(telemetry, masks, attitude, ATTITUDE_COLUMNS)
     for col in masks.columns[1:]:
         truth[f"fault_{col}"] = masks[col].to_numpy()
     # ground truth of the noise actually added, for checks downstream
     for col in IMU_COLUMNS:
         truth[f"noise_{col}"] = noisy[col] - clean[col]
+    for col in ATTITUDE_COLUMNS:
+        truth[f"noise_{col}"] = attitude[col] - truth[col].to_numpy()
 
     info = flight_info(case, truth, telemetry)
     return SimulatedFlight(
@@ -282,5 +285,6 @@ def flight_info(case: SimulationCase, truth: pd.DataFrame, telemetry: pd.DataFra
         "alpha_min_deg": float(truth["alpha_rad"].min() * deg), "alpha_max_deg": float(truth["alpha_rad"].max() * deg),
         "snr": snr,
         "mach_reference": case.vehicle.mach_reference,
-        "noise_sigma": {"accel_m_s2": list(s.accel_noise_m_s2), "gyro_rad_s": list(s.gyro_noise_rad_s)},
+        "noise_sigma": {"accel_m_s2": list(s.accel_noise_m_s2), "gyro_rad_s": list(s.gyro_noise_rad_s),
+                        "attitude_rad": s.attitude_noise_rad},
     }

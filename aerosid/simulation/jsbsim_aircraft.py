@@ -5,7 +5,7 @@ XML and JSBSim (aerosid.simulation.jsbsim_design: trim point, surfaces, manoeuvr
 flies two mirrored elevator 3-2-1-1s and aileron and rudder doublets at 100 Hz, and
 returns a :class:`~aerosid.simulation.SimulatedFlight` whose
 
-- ``telemetry`` is aerosid's raw schema plus the vanes (noise and faults as
+- ``telemetry`` is aerosid's raw schema plus the vanes and the INS attitude (noise and faults as
   aerosid/data/jsbsim/instrumentation.toml);
 - ``truth`` holds JSBSim's own aerodynamic coefficients about the CG at every sample,
   next to the aircraft's XML model re-evaluated independently at every sample

@@ -10,7 +10,8 @@ import numpy as np
 import pandas as pd
 
 from aerosid.simulation.case import ATTITUDE_NOISE_DEG, FaultSpec
-from aerosid.simulation.sensors import ATTITUDE_COLUMNS, IMU_COLUMNS, RAW_COLUMNS, apply_faults, with_extra_channels
+from aerosid.simulation.sensors import (ATTITUDE_COLUMNS, IMU_COLUMNS, RAW_COLUMNS, apply_faults, attitude_angles,
+                                       with_extra_channels)
 from aerosid.vehicles.rigid_body import lever_arm_acceleration
 
 VANE_COLUMNS = ["alpha_vane_rad", "beta_vane_rad"]
@@ -54,6 +55,7 @@ def make_telemetry(clean: dict[str, np.ndarray], truth: pd.DataFrame, sens: dict
     noisy = {"t_s": t.copy()}
     for child, col in zip(children[2:], channels):
         noisy[col] = clean[col] + sigma[col] * np.random.default_rng(child).standard_normal(n)
+    noisy.update(attitude_angles(noisy["phi_rad"], noisy["theta_rad"]))
     spec = FaultSpec(
         dropout_rate_per_s=fcfg["dropout_rate_per_s"], dropout_length_s=tuple(fcfg["dropout_length_s"]),
         dropout_nan_fraction=fcfg["dropout_nan_fraction"], outlier_probability=fcfg["outlier_probability"],

@@ -5,7 +5,8 @@
 doublet at 100 Hz, and returns a :class:`~aerosid.simulation.SimulatedFlight` with
 
 - ``telemetry``: aerosid's raw schema (``RAW_COLUMNS``) plus the air-data vanes
-  ``alpha_vane_rad``, ``beta_vane_rad``, with noise and faults;
+  ``alpha_vane_rad``, ``beta_vane_rad`` and the INS attitude ``phi_rad``, ``theta_rad``,
+  with noise and faults;
 - ``truth``: the noise-free per-sample state, the surface positions and the
   aerodynamic force and moment coefficients about the CG in body axes, taken
   from JSBSim's own aerodynamic forces and moments;
@@ -504,7 +505,8 @@ def simulate_jsbsim(aircraft: str = "c172x", manoeuvre: str = "3211", seed: int 
         "noise_sigma": {"accel_m_s2": list(sens["accel_noise_m_s2"]),
                         "gyro_rad_s": [g * DEG for g in sens["gyro_noise_deg_s"]],
                         "surface_rad": sens["surface_noise_deg"] * DEG, "V_m_s": sens["V_noise_m_s"],
-                        "h_m": sens["h_noise_m"], "vane_rad": sens["vane_noise_deg"] * DEG},
+                        "h_m": sens["h_noise_m"], "vane_rad": sens["vane_noise_deg"] * DEG,
+                        "attitude_rad": sigma["phi_rad"]},
         "vane_bias_rad": {"alpha": air["alpha_bias_deg"] * DEG, "beta": air["beta_bias_deg"] * DEG},
         "manoeuvre_windows_s": windows,
         "manoeuvre_settings": dict(m),

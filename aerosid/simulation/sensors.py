@@ -73,6 +73,14 @@ def apply_faults(noisy: dict[str, np.ndarray], sigma_imu: np.ndarray, spec: Faul
     return frame, pd.DataFrame(masks)
 
 
+def attitude_angles(phi_rad: np.ndarray, theta_rad: np.ndarray) -> dict[str, np.ndarray]:
+    """Noisy roll and pitch attitude [rad] as an INS reports them: phi wrapped into [-pi, pi),
+    theta kept within +-pi/2 (noise near a limit must not read as a wrong unit)."""
+    phi = np.asarray(phi_rad, float)
+    return {"phi_rad": (phi + np.pi) % (2 * np.pi) - np.pi,
+            "theta_rad": np.clip(np.asarray(theta_rad, float), -np.pi / 2, np.pi / 2)}
+
+
 def with_extra_channels(telemetry: pd.DataFrame, masks: pd.DataFrame, noisy: dict[str, np.ndarray],
                         columns) -> pd.DataFrame:
     """The telemetry with the noisy full-grid `columns` (not in RAW_COLUMNS) appended under the

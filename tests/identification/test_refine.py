@@ -3,6 +3,7 @@ the small seed-rlv run of tests/identification/conftest.py, built without Prefec
 import json
 
 import pandas as pd
+import pytest
 import pyarrow.parquet as pq
 from click.testing import CliRunner
 
@@ -60,3 +61,34 @@ def test_cli_refine_without_attitude_names_the_columns(small_run, tmp_path):
     assert "phi_rad / theta_rad" in res.output and "attitude" in res.output
     assert "output error" not in res.output  # refused before the estimation, not after
     assert not (tmp_path / "r").exists()
+
+
+def test_both_axes_keep_the_one_that_refined_when_the_other_fails(small_run, monkeypatch):
+    """--axes both on seed-rlv: lon, and lat (C_Y from the preflight database, simulated, not
+    refined).  An axis whose fit fails is a note, the other's result is kept; the one axis asked
+    for by name fails the command; auto leaves lat out (C_Y was not identified)."""
+    import aerosid.identification.refine as refine_mod
+
+    real = refine_mod.output_error_fit
+    calls = []
+
+    def fake(model, inputs, meas, veh, ax, free=None):
+        calls.append((ax, tuple(free)))
+        if ax == "lat":
+            raise ValueError("the lateral simulation leaves the envelope")
+        return real(model, inputs, meas, veh, ax, free=free)
+
+    monkeypatch.setattr(refine_mod, "output_error_fit", fake)
+    res = refine_mod.refine(small_run["run"], small_run["other"], axes="both")
+    assert [ax for ax, _ in calls] == ["lon", "lat"]
+    lat_free = dict(calls)["lat"]
+    assert "Cn_beta" in lat_free and not any(k.startswith("CY_") for k in lat_free)  # preflight: fixed
+    assert [f.axis for f in res.fits] == ["lon"]
+    assert any(n.startswith("lat axis not refined: the lateral simulation leaves the envelope") for n in res.notes)
+    assert any("identities by construction" in n for n in res.notes)
+    with pytest.raises(ValueError, match="leaves the envelope"):
+        refine_mod.refine(small_run["run"], small_run["other"], axes="lat")
+    calls.clear()
+    auto = refine_mod.refine(small_run["run"], small_run["other"], axes="auto")
+    assert [ax for ax, _ in calls] == ["lon"] and [f.axis for f in auto.fits] == ["lon"]
+    assert any("lateral axis not simulated" in n for n in auto.notes)
