@@ -57,8 +57,9 @@ def refine(run_dir: str | Path, telemetry: str | Path, *, vehicle: str | None = 
     in `telemetry`.  axes: lon, lat, both, or auto = lon, plus lat when the lateral channels
     are all identified (an identity channel, C_Y with beta inverted from it, is simulated at the
     preflight database's values and not refined: ``--axes lat`` asks for it); an axis whose fit
-    fails under auto or both is a note, the other's result is kept; free: the coefficients to refine (default: every
-    identified one of each axis); windows: time windows [s] of the telemetry."""
+    fails under auto or both is a note, the other's result is kept.  free: the coefficients to
+    refine (default: every identified one of each axis); windows: time windows [s] of the
+    telemetry."""
     from aerosid.vehicles.vehicle import load_vehicle
 
     model = load_identified_model(run_dir, version)
