@@ -45,8 +45,8 @@ def _default_out(run_dir: Path, telemetry: Path, folder: str = "validation") -> 
                    "(SIDPAC's prediction); intercepts: also re-estimate CN_0, Cm_0, ... on this manoeuvre.")
 @click.option("--axes", type=click.Choice(["auto", "lon", "lat", "both"]), default="auto", show_default=True,
               help="Which axes to simulate: lon (alpha, q, a_z), lat (beta, p, r, a_y); auto = lon, plus lat when "
-                   "the lateral channels all have values (identified, or C_Y from the preflight database when beta is "
-                   "inverted from it).")
+                   "the lateral channels are all identified (with beta inverted from C_Y, --axes lat simulates C_Y "
+                   "at the preflight database's values).")
 @click.option("--window", "windows", multiple=True, nargs=2, type=float, metavar="T0 T1",
               help="Only this time window [s] of the other telemetry (repeatable).")
 def validate(run_dir, other_telemetry, vehicle, out_dir, version_id, coefficients, bias, axes, windows):

@@ -272,8 +272,7 @@ def density_source(raw: pd.DataFrame, fd: pd.DataFrame) -> tuple[str, str | None
 
 
 def choose_axes(model: IdentifiedModel, axes: str) -> tuple[tuple[str, ...], list[str]]:
-    """The axes to simulate: auto = lon, plus lat when the model has CY, Cl, Cn all with values
-    (identified, or an identity channel's preflight values: with_preflight_identities)."""
+    """The axes to simulate: auto = lon, plus lat when the model has CY, Cl, Cn all identified."""
     if axes not in AXES_CHOICES:
         raise ValueError(f"unknown axes {axes!r}; choose one of {', '.join(AXES_CHOICES)}")
     notes = []
@@ -347,9 +346,11 @@ def validate(run_dir: str | Path, telemetry: str | Path, *, vehicle: str | None 
     model = load_model_file(coefficients, run_dir) if coefficients is not None else load_identified_model(run_dir,
                                                                                                           version)
     veh = load_vehicle(vehicle or model.vehicle)
-    # the simulation's model: the identity channels (inverted angles) at the preflight database's values
+    # auto: lat only when its channels were identified (seed-rlv's open-loop lateral replay drifts even
+    # with the true model, docs/validation.md); the simulation's model has the identity channels
+    # (inverted angles) at the preflight database's values
+    chosen, notes = choose_axes(model, axes)
     sim_model, pre_notes = with_preflight_identities(model, veh)
-    chosen, notes = choose_axes(sim_model, axes)
     raw, est, fd, span, more = estimate_manoeuvre(run_dir, telemetry, model, veh, windows, bool(chosen), progress)
     notes += more
     use = span >= 0
