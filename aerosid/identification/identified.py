@@ -74,15 +74,24 @@ class IdentifiedModel:
             return []
         return [t.coefficient for t in self.models[channel].terms if not names_in(t.expression, _SIGNALS)]
 
-    def evaluate(self, channel: str, signals: dict, values: dict | None = None) -> np.ndarray:
-        """The channel's coefficient sum_j value_j * term_j(signals); `values` overrides some
-        coefficients.  Unidentified coefficients count as 0 (the caller warns)."""
+    def weighted_terms(self, channel: str, values: dict | None = None) -> list:
+        """[(term's compiled function of the signals, value), ...] of the channel's terms that
+        count, in order: a NaN (unidentified) or zero value adds nothing.  For a loop that
+        evaluates the same channel many times (a simulation): look them up once."""
         vals = self.values if not values else {**self.values, **values}
-        total = 0.0
+        out = []
         for t in self.models[channel].terms:
             v = float(vals[t.coefficient])
             if math.isfinite(v) and v != 0.0:
-                total = total + v * self._compiled[(channel, t.coefficient)](signals)
+                out.append((self._compiled[(channel, t.coefficient)], v))
+        return out
+
+    def evaluate(self, channel: str, signals: dict, values: dict | None = None) -> np.ndarray:
+        """The channel's coefficient sum_j value_j * term_j(signals); `values` overrides some
+        coefficients.  Unidentified coefficients count as 0 (the caller warns)."""
+        total = 0.0
+        for fn, v in self.weighted_terms(channel, values):
+            total = total + v * fn(signals)
         return np.asarray(total, dtype=float)
 
     def with_values(self, **values: float) -> "IdentifiedModel":

@@ -153,6 +153,8 @@ class _Plant:
         force = "CN" if axis == "lon" else "CY"
         rate = "alpha_dot_hat" if axis == "lon" else "beta_dot_hat"
         self.iterations = 4 if rate in model.reads(force) else 1
+        # per channel, what IdentifiedModel.evaluate sums, looked up once instead of at every call
+        self._terms = {ch: model.weighted_terms(ch, self.values) for ch in model.models}
 
     def _signals(self, u: dict, alpha, beta, p, q, r) -> dict:
         V = u["V_m_s"]
@@ -164,7 +166,10 @@ class _Plant:
                 "alpha_dot_hat": u["alpha_dot_hat"], "beta_dot_hat": u["beta_dot_hat"], "t": u["t_s"]}
 
     def _coef(self, channel: str, s: dict) -> float:
-        return float(self.model.evaluate(channel, s, self.values)) if channel in self.model.models else 0.0
+        total = 0.0
+        for fn, v in self._terms.get(channel, ()):
+            total = total + v * fn(s)
+        return float(total)
 
     def rhs(self, x, u: dict):
         """State derivative and the outputs at (x, u)."""
