@@ -272,7 +272,13 @@ def _loud_warnings(coefficients: Path) -> list[str]:
 @click.option("--csv", "csv_path", type=click.Path(dir_okay=False, path_type=Path), default=None,
               help="Also write the table (version, parent, changes, note, rank_heldout, rms/heldout/r2/pse per "
                    "channel) as CSV.")
-def history(run_dir, csv_path):
+@click.option("--against", type=click.Path(exists=True, dir_okay=False, path_type=Path), default=None,
+              metavar="TELEMETRY",
+              help="Also simulate this manoeuvre (another flight of the vehicle, or the run's own telemetry; with "
+                   "phi_rad, theta_rad) with every version, as aerosid validate does (lon axis), and list the "
+                   "simulated alpha, q, a_z errors: look-alike terms that the equation error cannot tell apart "
+                   "often predict differently.")
+def history(run_dir, csv_path, against):
     """Show the model versions of a run: what changed and how the error fell.
 
     One row per version under RUN_DIR/models, best first by held-out
@@ -294,3 +300,13 @@ def history(run_dir, csv_path):
     if csv_path is not None:
         h.table().to_csv(csv_path, index=False)
         click.echo(f"wrote {csv_path}")
+    if against is not None and h.versions:
+        from aerosid.identification.identified import ModelSourceError
+        from aerosid.identification.validate import compare_versions, version_comparison_text
+
+        click.echo(f"simulating {len(h.versions)} version(s) on {against} ...")
+        try:
+            frame = compare_versions(run_dir, against, [v.id for v in h.versions])
+        except (ValueError, ModelSourceError, *_errors()) as exc:
+            raise click.ClickException(str(exc)) from exc
+        click.echo(version_comparison_text(frame, against, {v.id: h.changes(v) for v in h.versions}))

@@ -395,6 +395,48 @@ def validate(run_dir: str | Path, telemetry: str | Path, *, vehicle: str | None 
                             tuple(out_metrics), coef_frame, tuple(preds), intercepts, sources, tuple(notes))
 
 
+def compare_versions(run_dir: str | Path, telemetry: str | Path, versions, *, axes: str = "lon",
+                     bias: str = "offsets", windows=None, progress=None) -> pd.DataFrame:
+    """Each model version of RUN_DIR simulated on the manoeuvre in `telemetry` (:func:`validate`'s
+    output prediction): one row per version with ``version`` and, per simulated output,
+    ``<output>_rms`` [its unit] and ``<output>_tic`` [-].  The simulation integrates a model's
+    error over the manoeuvre, so two look-alike terms that lower the equation-error residual
+    alike can predict the outputs differently (bench/results/lookalike_simulation.md).
+    progress: an optional callback progress(stage, fraction)."""
+    rows = []
+    versions = list(versions)
+    for k, v in enumerate(versions):
+        if progress is not None:
+            progress(f"simulate {v}", k / max(len(versions), 1))
+        result = validate(run_dir, telemetry, version=v, axes=axes, bias=bias, windows=windows)
+        row = {"version": v}
+        for m in result.outputs:
+            row[f"{m.name}_rms"], row[f"{m.name}_tic"] = m.rms, m.tic
+        rows.append(row)
+    return pd.DataFrame(rows)
+
+
+def version_comparison_text(frame: pd.DataFrame, telemetry, changes: dict | None = None) -> str:
+    """compare_versions' frame as a table: RMS per simulated output (angles in deg, rates in
+    deg/s), * = the lowest; `changes`: version -> what it changed (printed after it)."""
+    outs = [c[:-4] for c in frame.columns if c.endswith("_rms")]
+    lines = [f"simulated on {telemetry} (aerosid validate's output prediction, output offsets; RMS of simulated "
+             "- measured, lower is better, * = lowest)"]
+    unit = {"rad": ("deg", math.degrees(1.0)), "rad/s": ("deg/s", math.degrees(1.0))}
+    heads, scales = [], []
+    for o in outs:
+        u, k = unit.get(OUTPUT_UNITS.get(o, ""), (OUTPUT_UNITS.get(o, ""), 1.0))
+        heads.append(f"{o.rsplit('_', 2)[0] if o.endswith(('_rad', '_rad_s', '_m_s2')) else o} [{u}]")
+        scales.append(k)
+    lines.append(f"  {'version':<9}" + "".join(f"{h:>18}" for h in heads) + "  changes")
+    best = {o: frame[f"{o}_rms"].min() for o in outs}
+    for _, r in frame.iterrows():
+        cells = "".join(f"{r[f'{o}_rms'] * k:>17.4g}{'*' if r[f'{o}_rms'] == best[o] else ' '}"
+                        for o, k in zip(outs, scales))
+        lines.append(f"  {r['version']:<9}{cells}  {(changes or {}).get(r['version'], '')}")
+    return "\n".join(lines)
+
+
 def write_validation(result: ValidationResult, out_dir: str | Path) -> dict[str, Path]:
     """validation.json, validation.parquet (time histories) and validation.html, atomically."""
     from aerosid.identification.validation_report import build_validation_report

@@ -161,3 +161,30 @@ def test_identity_channels_are_simulated_with_the_preflight_database(small_run):
     assert any("identities by construction" in n for n in result.notes)
     # the model reported (and its coefficient prediction) stays the run's: NaN where not identified
     assert np.isnan(result.model.values["CN_alpha"])
+
+
+def test_history_against_a_manoeuvre_simulates_every_version(small_run, tmp_path):
+    """`aerosid history RUN --against TELEMETRY`: each version simulated on the manoeuvre as
+    validate does (the same numbers), the lowest RMS per output starred."""
+    import shutil
+
+    from aerosid.identification.validate import compare_versions, validate
+    from aerosid.modelling.versions import fit_version, models_from_spec
+
+    run = tmp_path / "run"
+    shutil.copytree(small_run["run"], run)
+    spec = tmp_path / "damping.toml"
+    spec.write_text('[Cm]\nadd = ["pitch_damping"]\n')
+    fit_version(run, models_from_spec(spec, run), note="add pitch damping")
+    frame = compare_versions(run, small_run["other"], ["v001", "v002"])
+    assert list(frame["version"]) == ["v001", "v002"]
+    direct = validate(run, small_run["other"], version="v002", axes="lon")
+    for m in direct.outputs:
+        assert frame.set_index("version").loc["v002", f"{m.name}_rms"] == m.rms
+    res = CliRunner().invoke(main, ["history", str(run), "--against", str(small_run["other"])])
+    assert res.exit_code == 0, res.output
+    text = res.output[res.output.index("simulated on"):]
+    assert "alpha [deg]" in text and "Cm: +pitch_damping" in text
+    best = frame["alpha_rad_rms"].idxmin()
+    line = next(ln for ln in text.splitlines() if ln.strip().startswith(frame.loc[best, "version"]))
+    assert f"{np.degrees(frame.loc[best, 'alpha_rad_rms']):.4g}*" in line
