@@ -89,6 +89,9 @@ def test_run_summary_names_the_design_command_for_an_unresolved_pair(tmp_path):
     assert f"aerosid design {tmp_path} --effect alpha_nonlinearity --versus control_alpha --out DIR" in text
     assert "telemetry together" in text
     assert "two distinct alpha levels" in text
+    # and the check that needs no flight: both fitted, both simulated
+    assert 'add = ["alpha_nonlinearity"]' in text and 'add = ["control_alpha"]' in text and "[Cm]" in text
+    assert f"aerosid history {tmp_path} --against TELEMETRY" in text
     doc.update(recommended="alpha_nonlinearity", lookalikes=[dict(pair, verdict="separated")])
     (tmp_path / "diagnosis.json").write_text(json.dumps(doc))
     assert "aerosid design" not in "\n".join(verdict_lines(tmp_path))

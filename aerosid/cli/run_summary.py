@@ -68,6 +68,12 @@ def verdict_lines(run_dir: Path) -> list[str]:
                      f"`aerosid design {run_dir} --effect {open_pair['alternatives'][0]['name']} --versus "
                      f"{open_pair['alternatives'][1]['name']} --out DIR` proposes "
                      "one; fly it and `aerosid run` this flight's and the new flight's telemetry together")
+        a, b = (alt["name"] for alt in open_pair["alternatives"][:2])
+        lines.append(f"or compare them simulated, before flying: spec files A and B with `add = [\"{a}\"]` and "
+                     f"`add = [\"{b}\"]` under [{open_pair.get('channel', 'Cm')}]; `aerosid fit {run_dir} --model A`; "
+                     f"`aerosid fit {run_dir} --model B --parent vP` (vP: A's parent, `aerosid history` lists it); "
+                     f"`aerosid history {run_dir} --against TELEMETRY` (this flight's or another's): the term whose "
+                     "simulated alpha follows the measured one better is the likelier")
     lines.append(f"details: `aerosid diagnose {run_dir}`, {run_dir / 'report.html'}")
     return lines
 
