@@ -134,7 +134,7 @@ def report(df: pd.DataFrame, cmd: str, wall_s: float, load: tuple[str, str]) -> 
              "Definitions: bench/bench_lookalike_simulation.py (docstring). alpha RMS: RMS(simulated - measured "
              "alpha) [rad] over the Mach window's spans, output offsets removed; own: the flight the models were "
              "identified on; other: seed + 100 with the same hidden effect. Residual: the equation-error fit's "
-             "RMS residual of C_m (what the diagnosis compares).", "",
+             "in-sample RMS residual of C_m (the diagnosis compares held-out errors).", "",
              "| hidden effect | runs | true term better by: C_m residual | simulated alpha, own flight | "
              "simulated alpha, other flight | alpha RMS own: default -> true / look-alike (mean) | "
              "alpha RMS other: default -> true / look-alike (mean) | C_m residual: default -> true / look-alike | "

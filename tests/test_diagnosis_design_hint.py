@@ -92,6 +92,11 @@ def test_run_summary_names_the_design_command_for_an_unresolved_pair(tmp_path):
     # and the check that needs no flight: both fitted, both simulated
     assert 'add = ["alpha_nonlinearity"]' in text and 'add = ["control_alpha"]' in text and "[Cm]" in text
     assert f"aerosid history {tmp_path} --against TELEMETRY" in text
+    # not where it cannot tell them apart: a lateral pair (history --against simulates lon), or one
+    # of the two already in the model (adding each would compare a with a + b)
+    for other in ({"channel": "Cl"}, {"in_model": "alpha_nonlinearity"}):
+        (tmp_path / "diagnosis.json").write_text(json.dumps({**doc, "lookalikes": [{**pair, **other}]}))
+        assert "--against" not in "\n".join(verdict_lines(tmp_path))
     doc.update(recommended="alpha_nonlinearity", lookalikes=[dict(pair, verdict="separated")])
     (tmp_path / "diagnosis.json").write_text(json.dumps(doc))
     assert "aerosid design" not in "\n".join(verdict_lines(tmp_path))

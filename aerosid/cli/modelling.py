@@ -304,9 +304,11 @@ def history(run_dir, csv_path, against):
         from aerosid.identification.identified import ModelSourceError
         from aerosid.identification.validate import compare_versions, version_comparison_text
 
-        click.echo(f"simulating {len(h.versions)} version(s) on {against} ...")
+        from aerosid.cli.progress import stage_progress
+
         try:
-            frame = compare_versions(run_dir, against, [v.id for v in h.versions])
+            with stage_progress("history") as progress:
+                frame = compare_versions(run_dir, against, [v.id for v in h.versions], progress=progress)
         except (ValueError, ModelSourceError, *_errors()) as exc:
             raise click.ClickException(str(exc)) from exc
         click.echo(version_comparison_text(frame, against, {v.id: h.changes(v) for v in h.versions}))

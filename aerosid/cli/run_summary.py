@@ -68,6 +68,9 @@ def verdict_lines(run_dir: Path) -> list[str]:
                      f"`aerosid design {run_dir} --effect {open_pair['alternatives'][0]['name']} --versus "
                      f"{open_pair['alternatives'][1]['name']} --out DIR` proposes "
                      "one; fly it and `aerosid run` this flight's and the new flight's telemetry together")
+    # the simulated check: `history --against` simulates the longitudinal axis, and two specs that each
+    # add one term compare them only when neither is in the model yet
+    if open_pair and open_pair.get("channel", "Cm") in ("Cm", "CN") and open_pair.get("in_model") is None:
         a, b = (alt["name"] for alt in open_pair["alternatives"][:2])
         lines.append(f"or compare them simulated, before flying: spec files A and B with `add = [\"{a}\"]` and "
                      f"`add = [\"{b}\"]` under [{open_pair.get('channel', 'Cm')}]; `aerosid fit {run_dir} --model A`; "

@@ -395,24 +395,51 @@ def validate(run_dir: str | Path, telemetry: str | Path, *, vehicle: str | None 
                             tuple(out_metrics), coef_frame, tuple(preds), intercepts, sources, tuple(notes))
 
 
-def compare_versions(run_dir: str | Path, telemetry: str | Path, versions, *, axes: str = "lon",
-                     bias: str = "offsets", windows=None, progress=None) -> pd.DataFrame:
+def compare_versions(run_dir: str | Path, telemetry: str | Path, versions, *, bias: str = "offsets",
+                     windows=None, progress=None) -> pd.DataFrame:
     """Each model version of RUN_DIR simulated on the manoeuvre in `telemetry` (:func:`validate`'s
-    output prediction): one row per version with ``version`` and, per simulated output,
-    ``<output>_rms`` [its unit] and ``<output>_tic`` [-].  The simulation integrates a model's
-    error over the manoeuvre, so two look-alike terms that lower the equation-error residual
-    alike can predict the outputs differently (bench/results/lookalike_simulation.md).
+    longitudinal output prediction): one row per version with ``version``, ``mach_half_width``,
+    ``notes`` and, per output, ``<output>_rms`` [its unit], ``<output>_tic`` [-] and ``<output>_n``
+    (the samples scored: a simulation that left the envelope scores fewer).  The manoeuvre is
+    estimated once (its estimation does not depend on the model).  The simulation integrates a
+    model's error over the manoeuvre, so two look-alike terms that lower the equation-error
+    residual alike can predict the outputs differently (bench/results/lookalike_simulation.md).
     progress: an optional callback progress(stage, fraction)."""
-    rows = []
+    from aerosid.vehicles.vehicle import load_vehicle
+
+    if bias not in BIAS_MODES:
+        raise ValueError(f"unknown bias treatment {bias!r}; choose one of {', '.join(BIAS_MODES)}")
     versions = list(versions)
+    if not versions:
+        raise ValueError(f"{run_dir}: no model version to simulate")
+    models = {v: load_identified_model(run_dir, v) for v in versions}
+    first = models[versions[0]]
+    veh = load_vehicle(first.vehicle)
+    raw, est, fd, _, notes = estimate_manoeuvre(run_dir, telemetry, first, veh, windows, "required", progress)
+    att = attitude_on(raw, fd["t_s"].to_numpy(float), str(telemetry))
+    meas, meas_src = measured_outputs(est.preprocessed.frame, fd, veh)
+    rows = []
     for k, v in enumerate(versions):
         if progress is not None:
-            progress(f"simulate {v}", k / max(len(versions), 1))
-        result = validate(run_dir, telemetry, version=v, axes=axes, bias=bias, windows=windows)
-        row = {"version": v}
-        for m in result.outputs:
-            row[f"{m.name}_rms"], row[f"{m.name}_tic"] = m.rms, m.tic
+            progress(f"simulate {v}", k / len(versions))
+        model = models[v]
+        span = spans_of(fd, mach_window_mask(fd["mach"].to_numpy(), veh.mach_reference, model.mach_half_width))
+        use = span >= 0
+        sim_model, _ = with_preflight_identities(model, veh)
+        inputs = prediction_inputs(fd, veh, att[0], att[1], span)
+        pr = predict_axis(sim_model, inputs, meas, veh, "lon", bias)
+        own = list(notes) + list(pr.notes)
+        bad = sim_model.unidentified(AXIS_CHANNELS["lon"])
+        if bad:
+            own.append(f"coefficient(s) {bad} were not identifiable in the run and count as 0")
+        row = {"version": v, "mach_half_width": model.mach_half_width, "notes": " | ".join(own)}
+        f = pr.frame
+        for o in AXIS_OUTPUTS["lon"]:
+            m = fit_metric(o, OUTPUT_UNITS[o], f[f"measured_{o}"][use], f[f"predicted_{o}"][use], source=meas_src[o])
+            row[f"{o}_rms"], row[f"{o}_tic"], row[f"{o}_n"] = m.rms, m.tic, m.n
         rows.append(row)
+    if progress is not None:
+        progress("done", 1.0)
     return pd.DataFrame(rows)
 
 
@@ -420,8 +447,8 @@ def version_comparison_text(frame: pd.DataFrame, telemetry, changes: dict | None
     """compare_versions' frame as a table: RMS per simulated output (angles in deg, rates in
     deg/s), * = the lowest; `changes`: version -> what it changed (printed after it)."""
     outs = [c[:-4] for c in frame.columns if c.endswith("_rms")]
-    lines = [f"simulated on {telemetry} (aerosid validate's output prediction, output offsets; RMS of simulated "
-             "- measured, lower is better, * = lowest)"]
+    lines = [f"simulated on {telemetry} (aerosid validate's longitudinal output prediction, output offsets; RMS "
+             "of simulated - measured, lower is better, * = lowest among the versions scored on all samples)"]
     unit = {"rad": ("deg", math.degrees(1.0)), "rad/s": ("deg/s", math.degrees(1.0))}
     heads, scales = [], []
     for o in outs:
@@ -429,11 +456,20 @@ def version_comparison_text(frame: pd.DataFrame, telemetry, changes: dict | None
         heads.append(f"{o.rsplit('_', 2)[0] if o.endswith(('_rad', '_rad_s', '_m_s2')) else o} [{u}]")
         scales.append(k)
     lines.append(f"  {'version':<9}" + "".join(f"{h:>18}" for h in heads) + "  changes")
-    best = {o: frame[f"{o}_rms"].min() for o in outs}
-    for _, r in frame.iterrows():
-        cells = "".join(f"{r[f'{o}_rms'] * k:>17.4g}{'*' if r[f'{o}_rms'] == best[o] else ' '}"
+    # a version whose simulation left the envelope is scored on fewer samples: not comparable, no star
+    full = {o: frame[f"{o}_n"] == frame[f"{o}_n"].max() if f"{o}_n" in frame else frame[f"{o}_rms"].notna()
+            for o in outs}
+    best = {o: frame.loc[full[o], f"{o}_rms"].min() for o in outs}
+    for i, r in frame.iterrows():
+        cells = "".join(f"{r[f'{o}_rms'] * k:>17.4g}{'*' if full[o][i] and r[f'{o}_rms'] == best[o] else ' '}"
                         for o, k in zip(outs, scales))
         lines.append(f"  {r['version']:<9}{cells}  {(changes or {}).get(r['version'], '')}")
+    if "mach_half_width" in frame and frame["mach_half_width"].astype(str).nunique() > 1:
+        lines.append("  note: the versions were fitted on different Mach windows (--mach-half-width), so each is "
+                     "scored on its own samples")
+    for _, r in frame.iterrows():
+        if r.get("notes"):
+            lines.append(f"  note ({r['version']}): {r['notes']}")
     return "\n".join(lines)
 
 

@@ -194,6 +194,7 @@ def compile_expression(expression: str, signals) -> Callable[[Mapping[str, np.nd
         return lambda values: np.asarray(values[name], dtype=float)
     if isinstance(body, ast.Constant):
         constant = np.asarray(float(body.value), dtype=float)
+        constant.flags.writeable = False  # one array for every call: no caller may change it
         return lambda values: constant
 
     body_fn = _closure(body)

@@ -188,3 +188,8 @@ def test_history_against_a_manoeuvre_simulates_every_version(small_run, tmp_path
     best = frame["alpha_rad_rms"].idxmin()
     line = next(ln for ln in text.splitlines() if ln.strip().startswith(frame.loc[best, "version"]))
     assert f"{np.degrees(frame.loc[best, 'alpha_rad_rms']):.4g}*" in line
+    assert f"{np.degrees(frame.loc[best, 'q_rad_s_rms']):.4g}" in text  # q in deg/s
+    assert (frame["alpha_rad_n"] == direct.outputs[0].n).all()
+    # without the attitude: one clear error before any estimation, not an empty table
+    res = CliRunner().invoke(main, ["history", str(run), "--against", str(small_run["no_attitude"])])
+    assert res.exit_code == 1 and "phi_rad / theta_rad" in res.output and "Traceback" not in res.output

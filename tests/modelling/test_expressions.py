@@ -39,3 +39,43 @@ def test_rejected_with_a_clear_message(text, fragment):
 def test_unknown_name_lists_the_available_signals():
     with pytest.raises(ExpressionError, match="available signals: alpha, mach, q_hat"):
         evaluate("beta", SIG)
+
+
+@pytest.mark.parametrize("text", ["1", "alpha", "alpha*abs(alpha)", "delta_p/2", "-alpha", "alpha**3 - 2*q",
+                                  "log(alpha)", "alpha/(q - q)", "sqrt(alpha - 1)"])
+def test_compiled_terms_are_the_evaluator_bit_for_bit_and_silent(text):
+    """compile_expression (a simulation's inner loop) gives exactly what the tree evaluator gives,
+    for every kind of term, scalars and arrays alike, without a warning where the result is
+    inf or NaN; a constant term's array cannot be changed by a caller."""
+    import warnings
+
+    from aerosid.modelling.expressions import _eval, compile_expression, parse
+
+    names = ("alpha", "q", "delta_p")
+    fn = compile_expression(text, names)
+    tree = parse(text, frozenset(names))
+    for values in ({"alpha": 0.1, "q": -0.02, "delta_p": 0.05},
+                   {"alpha": np.array([0.0, 0.1, -0.2]), "q": np.array([0.0, 1.0, 2.0]), "delta_p": np.zeros(3)}):
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")
+            got = fn(values)
+        with np.errstate(all="ignore"):
+            want = np.asarray(_eval(tree.body, values), dtype=float)
+        assert np.array_equal(got, want, equal_nan=True) and got.dtype == want.dtype
+    if text == "1":
+        with pytest.raises(ValueError):
+            fn({})[...] = 2.0
+
+
+def test_weighted_terms_skip_unidentified_and_zero_values_and_evaluate_sums_them():
+    from aerosid.identification.identified import IdentifiedModel
+    from aerosid.modelling.models import ChannelModel, Term
+
+    cm = ChannelModel("Cm", (Term("Cm_0", "1"), Term("Cm_alpha", "alpha"), Term("Cm_q", "q_hat"),
+                             Term("Cm_delta_p", "delta_p/2")))
+    m = IdentifiedModel({"Cm": cm}, {"Cm_0": 0.01, "Cm_alpha": -0.25, "Cm_q": float("nan"), "Cm_delta_p": 0.0})
+    assert [v for _, v in m.weighted_terms("Cm")] == [0.01, -0.25]
+    assert [v for _, v in m.weighted_terms("Cm", {"Cm_delta_p": 0.04})] == [0.01, -0.25, 0.04]
+    sig = {"alpha": 0.1, "q_hat": 3.0, "delta_p": 0.2}
+    assert float(m.evaluate("Cm", sig)) == 0.01 + -0.25 * 0.1
+    assert float(m.evaluate("Cm", sig, {"Cm_delta_p": 0.04})) == 0.01 + -0.25 * 0.1 + 0.04 * (0.2 / 2)
