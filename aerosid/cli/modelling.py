@@ -287,7 +287,10 @@ def history(run_dir, csv_path, against):
     RMS; the in-sample residual RMS in brackets).  A look-alike of the true
     term lowers the in-sample RMS almost as much; it predicts unseen blocks
     worse.  Also: the parent and the terms added or removed relative to it
-    (R^2, PSE, held-out RMS and the rank in --csv).  Read-only.
+    (R^2, PSE, held-out RMS and the rank in --csv).  With --against TELEMETRY,
+    every version is also simulated on that manoeuvre (as aerosid validate
+    does, longitudinal axis): a missing term shows far more in the simulated
+    alpha than in the residual.  Read-only.
     """
     _check_run_dir(run_dir)
     from aerosid.modelling.versions import history as read_history
