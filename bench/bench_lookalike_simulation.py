@@ -16,7 +16,8 @@ An output-error simulation integrates the model's error over time instead.  Each
 * recorded: the RMS of the predicted minus the measured alpha (and q, a_z) per model.
 
 ``true_better`` = the true term's simulated alpha is closer to the measured one than the
-look-alike's.  Nothing here is tuned: the models are the catalogue's terms, the simulation is
+look-alike's.  ``--effects none``: nothing hidden, "true" = + control_alpha and "wrong" = +
+alpha_nonlinearity, both spurious: how much a term the flight does not have lowers the errors.  Nothing here is tuned: the models are the catalogue's terms, the simulation is
 validate's.
 
     python bench/bench_lookalike_simulation.py --seeds 0-9 --jobs 2
@@ -42,6 +43,9 @@ from bench_accuracy import parse_seeds  # noqa: E402
 from machine import cpu_model  # noqa: E402
 
 WRONG = {"control_alpha": "alpha_nonlinearity", "alpha_nonlinearity": "control_alpha"}
+#: --effects none: nothing hidden; "true" and "wrong" are then these two terms, added to a model that
+#: misses nothing (how far a term the flight does not have lowers the simulated error)
+NONE_TERMS = ("control_alpha", "alpha_nonlinearity")
 OTHER_SEED_OFFSET = 100
 OUTPUTS = ("alpha_rad", "q_rad_s", "az_m_s2")
 
@@ -53,7 +57,7 @@ def _estimated(name: str, seed: int):
     from aerosid.simulation import load_case, simulate
 
     case = load_case("seed-rlv")
-    flight = simulate(case, ((CATALOGUE[name], 1.0),), seed=seed)
+    flight = simulate(case, () if name == "none" else ((CATALOGUE[name], 1.0),), seed=seed)
     est = estimate_flight_data(flight.telemetry, case.vehicle, flight="flight")
     fd = est.flight_data.sort_values(["flight", "t_s"], kind="stable").reset_index(drop=True)
     return fd, est.preprocessed.frame, flight.telemetry
@@ -93,7 +97,8 @@ def one(job: tuple[str, int]) -> dict:
         own = _estimated(name, seed)
         other = _estimated(name, seed + OTHER_SEED_OFFSET)
         variants = {"default": dict(default_models(vehicle))}
-        for tag, term in (("true", name), ("wrong", WRONG[name])):
+        terms = NONE_TERMS if name == "none" else (name, WRONG[name])
+        for tag, term in zip(("true", "wrong"), terms):
             ms = dict(default_models(vehicle))
             ms["Cm"] = ms["Cm"].with_term(parse_term(term, "Cm"))
             variants[tag] = ms
