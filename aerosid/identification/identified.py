@@ -89,10 +89,7 @@ class IdentifiedModel:
     def evaluate(self, channel: str, signals: dict, values: dict | None = None) -> np.ndarray:
         """The channel's coefficient sum_j value_j * term_j(signals); `values` overrides some
         coefficients.  Unidentified coefficients count as 0 (the caller warns)."""
-        total = 0.0
-        for fn, v in self.weighted_terms(channel, values):
-            total = total + v * fn(signals)
-        return np.asarray(total, dtype=float)
+        return np.asarray(weighted_sum(self.weighted_terms(channel, values), signals), dtype=float)
 
     def with_values(self, **values: float) -> "IdentifiedModel":
         unknown = set(values) - set(self.values)
@@ -111,6 +108,15 @@ class IdentifiedModel:
             terms = " + ".join(f"{self.values[t.coefficient]:.5g}*({t.expression})" for t in m.terms)
             lines.append(f"  {ch} = {terms}")
         return "\n".join(lines)
+
+
+def weighted_sum(terms, signals):
+    """sum of value * term(signals) over IdentifiedModel.weighted_terms' pairs, in their order
+    (0.0 for none)."""
+    total = 0.0
+    for fn, v in terms:
+        total = total + v * fn(signals)
+    return total
 
 
 def with_preflight_identities(model: IdentifiedModel, vehicle) -> tuple[IdentifiedModel, list[str]]:

@@ -50,7 +50,7 @@ import numpy as np
 import pandas as pd
 from scipy.optimize import least_squares
 
-from aerosid.identification.identified import IdentifiedModel
+from aerosid.identification.identified import IdentifiedModel, weighted_sum
 from aerosid.identification.inversion import total_angles
 from aerosid.vehicles.rigid_body import body_rate_derivatives, lever_arm_acceleration
 from aerosid.vehicles.vehicle import Vehicle
@@ -166,10 +166,7 @@ class _Plant:
                 "alpha_dot_hat": u["alpha_dot_hat"], "beta_dot_hat": u["beta_dot_hat"], "t": u["t_s"]}
 
     def _coef(self, channel: str, s: dict) -> float:
-        total = 0.0
-        for fn, v in self._terms.get(channel, ()):
-            total = total + v * fn(s)
-        return float(total)
+        return float(weighted_sum(self._terms.get(channel, ()), s))
 
     def rhs(self, x, u: dict):
         """State derivative and the outputs at (x, u)."""

@@ -373,18 +373,11 @@ def validate(run_dir: str | Path, telemetry: str | Path, *, vehicle: str | None 
         inputs = prediction_inputs(fd, veh, att[0], att[1], span)
         meas, meas_src = measured_outputs(est.preprocessed.frame, fd, veh)
         for ax in chosen:
-            bad = sim_model.unidentified(AXIS_CHANNELS[ax])
-            if bad:
-                notes.append(f"{ax} simulation: coefficient(s) {bad} were not identifiable in the run and count as 0")
-            pr = predict_axis(sim_model, inputs, meas, veh, ax, bias)
+            pr, metrics, more = scored_axis(sim_model, inputs, meas, meas_src, veh, ax, bias, use)
             preds.append(pr)
             intercepts.update(pr.intercepts)
-            notes += list(pr.notes)
-            f = pr.frame
-            for o in AXIS_OUTPUTS[ax]:
-                off = float(np.nanmean(f[f"offset_{o}"][use])) if bias != "none" else float("nan")
-                out_metrics.append(fit_metric(o, OUTPUT_UNITS[o], f[f"measured_{o}"][use], f[f"predicted_{o}"][use],
-                                              off, meas_src[o]))
+            notes += more
+            out_metrics += metrics
     worse = [m.name for m in out_metrics if m.nrms > 1]
     if worse:
         notes.append(f"{', '.join(worse)}: predicted worse than the measured mean (RMS error > std): the model "
@@ -393,6 +386,24 @@ def validate(run_dir: str | Path, telemetry: str | Path, *, vehicle: str | None 
     return ValidationResult(str(run_dir), str(telemetry), model, veh.name, bias,
                             (float(mach.min()), float(mach.max())), len(fd), int(use.sum()), coef_metrics,
                             tuple(out_metrics), coef_frame, tuple(preds), intercepts, sources, tuple(notes))
+
+
+def scored_axis(model: IdentifiedModel, inputs: pd.DataFrame, meas: pd.DataFrame, meas_src: dict, veh: Vehicle,
+                axis: str, bias: str, use: np.ndarray) -> tuple:
+    """One axis simulated (predict_axis) and scored on the rows `use`: (the AxisPrediction, a
+    FitMetric per output, notes: unidentified coefficients counted as 0, then the prediction's)."""
+    notes = []
+    bad = model.unidentified(AXIS_CHANNELS[axis])
+    if bad:
+        notes.append(f"{axis} simulation: coefficient(s) {bad} were not identifiable in the run and count as 0")
+    pr = predict_axis(model, inputs, meas, veh, axis, bias)
+    f = pr.frame
+    metrics = []
+    for o in AXIS_OUTPUTS[axis]:
+        off = float(np.nanmean(f[f"offset_{o}"][use])) if bias != "none" else float("nan")
+        metrics.append(fit_metric(o, OUTPUT_UNITS[o], f[f"measured_{o}"][use], f[f"predicted_{o}"][use], off,
+                                  meas_src[o]))
+    return pr, metrics, notes + list(pr.notes)
 
 
 def compare_versions(run_dir: str | Path, telemetry: str | Path, versions, *, bias: str = "offsets",
@@ -427,16 +438,10 @@ def compare_versions(run_dir: str | Path, telemetry: str | Path, versions, *, bi
         use = span >= 0
         sim_model, _ = with_preflight_identities(model, veh)
         inputs = prediction_inputs(fd, veh, att[0], att[1], span)
-        pr = predict_axis(sim_model, inputs, meas, veh, "lon", bias)
-        own = list(notes) + list(pr.notes)
-        bad = sim_model.unidentified(AXIS_CHANNELS["lon"])
-        if bad:
-            own.append(f"coefficient(s) {bad} were not identifiable in the run and count as 0")
-        row = {"version": v, "mach_half_width": model.mach_half_width, "notes": " | ".join(own)}
-        f = pr.frame
-        for o in AXIS_OUTPUTS["lon"]:
-            m = fit_metric(o, OUTPUT_UNITS[o], f[f"measured_{o}"][use], f[f"predicted_{o}"][use], source=meas_src[o])
-            row[f"{o}_rms"], row[f"{o}_tic"], row[f"{o}_n"] = m.rms, m.tic, m.n
+        _, metrics, more = scored_axis(sim_model, inputs, meas, meas_src, veh, "lon", bias, use)
+        row = {"version": v, "mach_half_width": model.mach_half_width, "notes": " | ".join(notes + more)}
+        for m in metrics:
+            row[f"{m.name}_rms"], row[f"{m.name}_tic"], row[f"{m.name}_n"] = m.rms, m.tic, m.n
         rows.append(row)
     if progress is not None:
         progress("done", 1.0)
@@ -453,12 +458,11 @@ def version_comparison_text(frame: pd.DataFrame, telemetry, changes: dict | None
     heads, scales = [], []
     for o in outs:
         u, k = unit.get(OUTPUT_UNITS.get(o, ""), (OUTPUT_UNITS.get(o, ""), 1.0))
-        heads.append(f"{o.rsplit('_', 2)[0] if o.endswith(('_rad', '_rad_s', '_m_s2')) else o} [{u}]")
+        heads.append(f"{o.split('_')[0]} [{u}]")  # alpha_rad -> alpha, q_rad_s -> q, az_m_s2 -> az
         scales.append(k)
     lines.append(f"  {'version':<9}" + "".join(f"{h:>18}" for h in heads) + "  changes")
     # a version whose simulation left the envelope is scored on fewer samples: not comparable, no star
-    full = {o: frame[f"{o}_n"] == frame[f"{o}_n"].max() if f"{o}_n" in frame else frame[f"{o}_rms"].notna()
-            for o in outs}
+    full = {o: frame[f"{o}_n"] == frame[f"{o}_n"].max() for o in outs}
     best = {o: frame.loc[full[o], f"{o}_rms"].min() for o in outs}
     for i, r in frame.iterrows():
         cells = "".join(f"{r[f'{o}_rms'] * k:>17.4g}{'*' if full[o][i] and r[f'{o}_rms'] == best[o] else ' '}"
