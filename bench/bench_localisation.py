@@ -20,6 +20,8 @@ The slow part (simulate + estimation chain, ~2 min per run) is cached in
 
     python bench/bench_localisation.py --seeds 0-9 --jobs 2
     -> bench/results/localisation_runs.csv and bench/results/localisation.md
+    (--effects pitch_control_lag=2,none: an effect at twice its default size; --label NAME:
+    localisation_NAME.md and _runs.csv)
 """
 from __future__ import annotations
 
@@ -55,7 +57,8 @@ def flight(job: tuple[str, int, str]) -> tuple[str, int, float]:
 
     t0 = time.perf_counter()
     case = load_case("seed-rlv")
-    hidden = () if name == "none" else ((HIDDEN[name], 1.0),)
+    base, scale = _effect(name)
+    hidden = () if name == "none" else ((HIDDEN[base], scale),)
     f = simulate(case, (), seed=seed, hidden=hidden)
     run = process_telemetry(f.telemetry, case.vehicle)
     fd = run.flight_data.sort_values(["flight", "t_s"], kind="stable").reset_index(drop=True)
@@ -69,8 +72,15 @@ def flight(job: tuple[str, int, str]) -> tuple[str, int, float]:
     return name, seed, time.perf_counter() - t0
 
 
+def _effect(name: str) -> tuple[str, float]:
+    """``NAME`` or ``NAME=SCALE`` (the effect at SCALE times its default size) -> (NAME, SCALE)."""
+    base, _, scale = name.partition("=")
+    return base, float(scale) if scale else 1.0
+
+
 def _named(name: str, findings: list[dict]) -> dict | None:
     """The finding that names the hidden effect's regressor or shape, if any."""
+    name = _effect(name)[0]
     for f in findings:
         if name == "alpha_cubic" and f["kind"] == "shape" and f["variable"] == "alpha":
             return f
@@ -161,7 +171,8 @@ def _analyse_job(job):
     return analyse(*job)
 
 
-def _report(df: pd.DataFrame, seeds: list[int], wall_s: float) -> str:
+def _report(df: pd.DataFrame, seeds: list[int], wall_s: float, stem: str = "localisation",
+            command: str = "") -> str:
     sys.path.insert(0, str(Path(__file__).parent))
     from machine import cpu_model, loadavg
 
@@ -169,7 +180,7 @@ def _report(df: pd.DataFrame, seeds: list[int], wall_s: float) -> str:
     lines = [f"# Localisation of uncatalogued effects on the real pipeline, {n} seeds per row", "",
              f"{date.today()}, {cpu_model()}, {os.cpu_count()} cores, load {loadavg()}; analysis wall "
              f"{wall_s / 60:.1f} min (simulation + estimation chain cached). "
-             f"`python bench/bench_localisation.py --seeds {seeds[0]}-{seeds[-1]}`.", "",
+             f"`python bench/bench_localisation.py --seeds {seeds[0]}-{seeds[-1]}{command}`.", "",
              "Each run: simulate seed-rlv with one effect that is NOT a diagnosis candidate "
              "(`aerosid simulate --hidden NAME`; Table 2 noise, dropouts, outliers, sync gap), preprocess, "
              "EKF + MBF smoother, flight data, `diagnose` the default models, read `localisation`. "
@@ -198,10 +209,11 @@ def _report(df: pd.DataFrame, seeds: list[int], wall_s: float) -> str:
             f"({after.mean():.0%}, min {after.min():.0%}) "
             f"| {g['model_err_true_term'].mean():.2e} ({g['model_err_drop_true_term'].mean():.0%}) "
             f"| {g['floor'].mean():.2e} | {int(g['catalogue_significant'].sum())}/{len(g)} |")
-    lag = eff[eff["effect"] == "pitch_control_lag"]
-    if "lag_ms" in lag and lag["lag_ms"].notna().any():
-        lines += ["", f"Lag estimates over the named runs (truth 40 ms): derivative fit {lag['lag_ms'].mean():.1f} ± "
-                      f"{lag['lag_ms'].std():.1f} ms, "
+    for name, lag in eff.groupby("effect", sort=False):
+        if _effect(name)[0] != "pitch_control_lag" or "lag_ms" not in lag or not lag["lag_ms"].notna().any():
+            continue
+        lines += ["", f"Lag estimates over the named runs of {name} (truth {40 * _effect(name)[1]:.0f} ms): "
+                      f"derivative fit {lag['lag_ms'].mean():.1f} ± {lag['lag_ms'].std():.1f} ms, "
                       f"shift scan {lag['lag_scan_ms'].mean():.1f} ± {lag['lag_scan_ms'].std():.1f} ms."]
     dr = eff[eff["effect"] == "cm_alpha_drift"]
     if "drift_pct_per_min" in dr and dr["drift_pct_per_min"].notna().any():
@@ -216,7 +228,7 @@ def _report(df: pd.DataFrame, seeds: list[int], wall_s: float) -> str:
         fp = none.loc[none["n_significant_findings"] > 0, ["seed", "findings"]]
         for _, r in fp.iterrows():
             lines.append(f"* seed {r['seed']}: {r['findings']}")
-    lines += ["", "Per-run rows: `bench/results/localisation_runs.csv`."]
+    lines += ["", f"Per-run rows: `bench/results/{stem}_runs.csv`."]
     return "\n".join(lines) + "\n"
 
 
@@ -233,6 +245,7 @@ def main() -> None:
     ap.add_argument("--cache", default=str(CACHE))
     ap.add_argument("--flights-only", action="store_true", help="only simulate + run the chain (fill the cache)")
     ap.add_argument("--out", default=str(Path(__file__).parent / "results"))
+    ap.add_argument("--label", default="", help="write localisation_LABEL.md and _runs.csv (not the bench's own)")
     args = ap.parse_args()
     seeds = _seeds(args.seeds)
     names = args.effects.split(",")
@@ -249,9 +262,12 @@ def main() -> None:
     df["size_ratio"] = [_size(r["effect"], r["seed"], args.cache) for _, r in df.iterrows()]
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    df.to_csv(out / "localisation_runs.csv", index=False)
-    text = _report(df, seeds, time.perf_counter() - t0)
-    (out / "localisation.md").write_text(text)
+    stem = f"localisation_{args.label}" if args.label else "localisation"
+    df.to_csv(out / f"{stem}_runs.csv", index=False)
+    command = (f" --effects {args.effects}" if args.effects != ap.get_default("effects") else "") + (
+        f" --label {args.label}" if args.label else "")
+    text = _report(df, seeds, time.perf_counter() - t0, stem, command)
+    (out / f"{stem}.md").write_text(text)
     print(text)
     print(platform.platform())
 
