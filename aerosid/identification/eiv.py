@@ -13,10 +13,13 @@ recomputed. It does so for lambda in LAMBDAS, averaging REPLICATES draws each, t
 extrapolates each coefficient to lambda = -1, no noise at all (:func:`extrapolate`).
 
 The corrected estimates replace the naive ones. Their sigma is the coloured-residual
-sigma of the naive fit scaled by the correction factor, combined with the spread between
-the quadratic and the linear extrapolant (SimexResult.std_error): without them the
-intervals of the de-attenuated slopes covered 62 % on seed-rlv (band-limited flight data,
-angles inverted from the accelerometers). The draws are seeded, so the result
+sigma of the naive fit scaled by the correction factor, combined with the extrapolation's
+own error (SimexResult.std_error): without them the intervals of the de-attenuated slopes
+covered 62 % on seed-rlv (band-limited flight data, angles inverted from the accelerometers).
+That error is the larger of the spread between the quadratic and the linear extrapolant and
+the correction itself (CORRECTION_SHARE): where the noise is a large share of a regressor
+(alpha-dot above all) the quadratic takes back only part of the attenuation, measured at a
+median 20-60 % (bench/results/eiv_extrapolants.md). The draws are seeded, so the result
 is reproducible.
 
 The gyros. The band-limited rates p, q, r (aerosid.identification.band) are the measured gyros
@@ -60,6 +63,14 @@ from aerosid.identification.derivatives import zero_phase_low_pass
 from aerosid.identification.inversion import total_angles
 
 LAMBDAS = (0.5, 1.0, 1.5, 2.0)
+#: One sigma of the correction's own error, as a share of the correction |corrected - naive|.
+#: Measured where the only angle error is one known draw of the vanes' noise, on 10 JSBSim
+#: aircraft x 3 seeds (bench/bench_eiv_extrapolants.py, bench/results/eiv_extrapolants.md): the
+#: quadratic extrapolant takes back a median 20-60 % of the attenuation (c172x's C_m_alpha all
+#: of it), so what it leaves is typically 0.5-2 times the correction it made; the exact
+#: extrapolant for linear columns (corrected least squares) over-corrects and is unstable where
+#: the noise is a large share of alpha-dot, so the estimate stays the quadratic's.
+CORRECTION_SHARE = 1.0
 REPLICATES = 40  # Monte-Carlo noise of the correction: 10 left +-8 % scatter on seed-rlv C_m_alpha, 60 +-5 %
 SEED = 20261122
 #: The body-rate columns the gyro part of the correction adds noise to.
@@ -212,10 +223,13 @@ class SimexResult:
     def std_error(self, naive_std_error: np.ndarray) -> np.ndarray:
         """The corrected estimates' sigma: the naive fit's sigma scaled by the correction
         factor |corrected / naive| (kept within [1, 3]: a de-attenuated slope carries its
-        relative uncertainty along), combined with the extrapolation's own spread."""
+        relative uncertainty along), combined with the extrapolation's own error: the larger of
+        its spread and CORRECTION_SHARE x the correction |corrected - naive| (the quadratic
+        leaves about as much of a large attenuation as it removes)."""
         with np.errstate(divide="ignore", invalid="ignore"):
             ratio = np.clip(np.nan_to_num(np.abs(self.corrected / self.naive), nan=1.0, posinf=3.0), 1.0, 3.0)
-        return np.hypot(np.asarray(naive_std_error, float) * ratio, self.spread)
+        own = np.maximum(self.spread, CORRECTION_SHARE * np.nan_to_num(np.abs(self.corrected - self.naive)))
+        return np.hypot(np.asarray(naive_std_error, float) * ratio, own)
 
 
 def extrapolate(lams: np.ndarray, est: np.ndarray) -> float:
