@@ -13,8 +13,8 @@ on a flight whose only angle error is known exactly:
   renoised  the same, with one fresh draw of the vanes' noise (the flight data's
             eiv_sigma_alpha_rad, eiv_sigma_beta_rad, through the same low-pass, as SIMEX draws it)
             added to the clean angles: naive least squares, attenuated;
-  quadratic SIMEX on the renoised flight, exactly as aerosid.identification.eiv corrects (lambda
-            0.5..2, 40 replicates, the quadratic extrapolant);
+  quadratic SIMEX on the renoised flight as aerosid.identification.eiv corrects the angles (lambda
+            0.5..2, 40 replicates, the quadratic extrapolant; on the Mach window, cut first);
   moment    the exact extrapolant for linear columns: X^T X and X^T y averaged over the same
             replicates, extrapolated linearly to lambda = -1, then solved (corrected least squares).
 
@@ -46,35 +46,44 @@ REPLICATES = 40
 TARGETS = ("Cm_alpha", "Cm_delta", "damping")
 
 
-def _fits(f0: pd.DataFrame, vehicle) -> dict[str, np.ndarray]:
-    """naive, quadratic SIMEX and moment-corrected estimates of the default C_m model on f0."""
+def _fits(frame: pd.DataFrame, vehicle, corrected: bool = True) -> dict[str, np.ndarray]:
+    """naive (and, with `corrected`, quadratic SIMEX and moment-corrected) estimates of the default
+    C_m model on the frame's Mach window (cut first, as identify does: the derivatives, the noise
+    draws and their low-pass see the same rows)."""
     from aerosid.identification.band import segment_keys
     from aerosid.identification.eiv import SEED, extrapolate, with_angle_noise
     from aerosid.identification.identify import angle_cutoff_hz, mach_window_mask
     from aerosid.modelling.models import default_models, vehicle_signals
 
     model = default_models(vehicle)["Cm"]
+    f0 = frame.loc[mach_window_mask(frame["mach"].to_numpy(float), vehicle.mach_reference, 0.5)]
+    f0 = f0.reset_index(drop=True)
     y = f0["Cm"].to_numpy(float)
 
-    def design(frame):
-        return model.regressors(vehicle_signals(frame, vehicle)).to_numpy(float)
+    def design(f):
+        return model.regressors(vehicle_signals(f, vehicle)).to_numpy(float)
 
     X0 = design(f0)
-    ok = mach_window_mask(f0["mach"].to_numpy(float), vehicle.mach_reference, 0.5)
-    ok &= np.all(np.isfinite(X0), axis=1) & np.isfinite(y)
+    ok = np.all(np.isfinite(X0), axis=1) & np.isfinite(y)
+    naive = np.linalg.lstsq(X0[ok], y[ok], rcond=None)[0]
+    if not corrected:
+        return {"naive": naive, "names": list(model.names)}
     rng = np.random.default_rng(SEED)
     groups = segment_keys(f0)
     sig = (f0["eiv_sigma_alpha_rad"].to_numpy(float), f0["eiv_sigma_beta_rad"].to_numpy(float))
     cut = angle_cutoff_hz(f0, vehicle)
+    if not np.all(np.isfinite(np.concatenate(sig))):
+        raise ValueError("the flight data's eiv_sigma_alpha_rad/eiv_sigma_beta_rad have non-finite values")
     M = [X0[ok].T @ X0[ok]]
     v = [X0[ok].T @ y[ok]]
-    th = [np.linalg.solve(M[0], v[0])]
+    th = [naive]
     for lam in LAMBDAS:
         Ms, vs, ts = 0.0, 0.0, 0.0
         for _ in range(REPLICATES):
             X = design(with_angle_noise(f0, rng, groups, tuple(s * np.sqrt(lam) for s in sig), cut))[ok]
             Mb, vb = X.T @ X, X.T @ y[ok]
-            Ms, vs, ts = Ms + Mb / REPLICATES, vs + vb / REPLICATES, ts + np.linalg.solve(Mb, vb) / REPLICATES
+            b = np.linalg.lstsq(X, y[ok], rcond=None)[0]
+            Ms, vs, ts = Ms + Mb / REPLICATES, vs + vb / REPLICATES, ts + b / REPLICATES
         M.append(Ms), v.append(vs), th.append(ts)
     lams = np.array((0.0, *LAMBDAS))
     M, v, th = np.array(M), np.array(v), np.array(th)
@@ -82,18 +91,19 @@ def _fits(f0: pd.DataFrame, vehicle) -> dict[str, np.ndarray]:
     at = np.array([-1.0, 1.0])
     M1 = (at @ np.linalg.lstsq(line, M.reshape(len(lams), -1), rcond=None)[0]).reshape(M.shape[1:])
     v1 = at @ np.linalg.lstsq(line, v, rcond=None)[0]
-    return {"naive": th[0], "quadratic": np.array([extrapolate(lams, th[:, j]) for j in range(th.shape[1])]),
+    return {"naive": naive, "quadratic": np.array([extrapolate(lams, th[:, j]) for j in range(th.shape[1])]),
             "moment": np.linalg.solve(M1, v1), "names": list(model.names)}
 
 
 def _targets(names: list[str], b: np.ndarray) -> dict[str, float]:
     d = dict(zip(names, b))
-    return {"Cm_alpha": d["Cm_alpha"], "Cm_delta": d["Cm_delta_p"], "damping": d["Cm_q"] + d.get("Cm_alpha_dot", 0.0)}
+    return {"Cm_alpha": d.get("Cm_alpha", np.nan), "Cm_delta": d.get("Cm_delta_p", np.nan),
+            "damping": d.get("Cm_q", np.nan) + d.get("Cm_alpha_dot", 0.0)}
 
 
 def one(vehicle: str, seed: int) -> list[dict]:
     from aerosid.identification.band import segment_keys
-    from aerosid.identification.eiv import with_angle_noise
+    from aerosid.identification.eiv import with_angle_noise, with_angles_moved
     from aerosid.identification.identify import angle_cutoff_hz
 
     data = attribution_cache.load(vehicle, seed)
@@ -101,13 +111,14 @@ def one(vehicle: str, seed: int) -> list[dict]:
     truth = truth_targets(data["coefficients"])
     lp = band_limited_truth(data, {"alpha": T["alpha_rad"], "beta": T["beta_rad"]})
     order = np.lexsort((fd["t_s"].to_numpy(float), fd["flight"].astype(str).to_numpy()))
-    clean = fd.copy()
-    clean["alpha_rad"], clean["beta_rad"] = lp["alpha"], lp["beta"]
+    # the true angles in the flight data's own row order (alpha_r, phi_r recomputed), then sorted
+    clean = with_angles_moved(fd, lp["alpha"] - fd["alpha_rad"].to_numpy(float),
+                              lp["beta"] - fd["beta_rad"].to_numpy(float))
     clean = clean.iloc[order].reset_index(drop=True)
     sig = (clean["eiv_sigma_alpha_rad"].to_numpy(float), clean["eiv_sigma_beta_rad"].to_numpy(float))
     renoised = with_angle_noise(clean, np.random.default_rng(1000 + seed), segment_keys(clean), sig,
                                 angle_cutoff_hz(clean, veh))
-    c = _fits(clean, veh)
+    c = _fits(clean, veh, corrected=False)
     r = _fits(renoised, veh)
     rows = []
     for tag, b in (("clean", c["naive"]), ("renoised", r["naive"]), ("quadratic", r["quadratic"]),
@@ -118,7 +129,7 @@ def one(vehicle: str, seed: int) -> list[dict]:
     return rows
 
 
-def report(df: pd.DataFrame, seeds: list[int], wall_s: float, command: str) -> str:
+def report(df: pd.DataFrame, wall_s: float, command: str) -> str:
     sys.path.insert(0, str(Path(__file__).parent))
     from machine import cpu_model
 
@@ -164,8 +175,9 @@ def main() -> None:
                 print(f"{v} seed {s}", flush=True)
     df = pd.DataFrame(rows)
     out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
     df.to_csv(out / "eiv_extrapolants_runs.csv", index=False)
-    text = report(df, seeds, time.perf_counter() - t0,
+    text = report(df, time.perf_counter() - t0,
                   f"python bench/bench_eiv_extrapolants.py --vehicles {args.vehicles} --seeds {args.seeds}")
     (out / "eiv_extrapolants.md").write_text(text)
     print(text)

@@ -57,8 +57,7 @@ def flight(job: tuple[str, int, str]) -> tuple[str, int, float]:
 
     t0 = time.perf_counter()
     case = load_case("seed-rlv")
-    base, scale = _effect(name)
-    hidden = () if name == "none" else ((HIDDEN[base], scale),)
+    hidden = () if name == "none" else ((HIDDEN[_effect(name)[0]], _effect(name)[1]),)
     f = simulate(case, (), seed=seed, hidden=hidden)
     run = process_telemetry(f.telemetry, case.vehicle)
     fd = run.flight_data.sort_values(["flight", "t_s"], kind="stable").reset_index(drop=True)
@@ -73,9 +72,12 @@ def flight(job: tuple[str, int, str]) -> tuple[str, int, float]:
 
 
 def _effect(name: str) -> tuple[str, float]:
-    """``NAME`` or ``NAME=SCALE`` (the effect at SCALE times its default size) -> (NAME, SCALE)."""
-    base, _, scale = name.partition("=")
-    return base, float(scale) if scale else 1.0
+    """``NAME`` or ``NAME=SCALE`` (the effect at SCALE times its default size) -> (NAME, SCALE)
+    (aerosid.simulation.hidden.parse_hidden_spec: an unknown name or a bad scale is refused)."""
+    from aerosid.simulation.hidden import parse_hidden_spec
+
+    effect, scale = parse_hidden_spec(name)
+    return effect.name, scale
 
 
 def _named(name: str, findings: list[dict]) -> dict | None:
@@ -129,6 +131,7 @@ def analyse(name: str, seed: int, cache: str) -> dict:
                first_finding=(f"{first['kind']}:{first['variable']}" if first else ""),
                suggested=hit["suggested_expression"] if hit else "", p_value=hit["p_value"] if hit else np.nan,
                message=hit["message"] if hit else "")
+    row["lag_truth_ms"] = 1e3 * h["lag_s"] if "lag_s" in h else np.nan
     if hit and hit["kind"] == "lag":
         row["lag_ms"] = 1e3 * hit["evidence"]["lag_s"]
         row["lag_scan_ms"] = 1e3 * hit["evidence"]["lag_scan_s"]
@@ -212,12 +215,18 @@ def _report(df: pd.DataFrame, seeds: list[int], wall_s: float, stem: str = "loca
     for name, lag in eff.groupby("effect", sort=False):
         if _effect(name)[0] != "pitch_control_lag" or "lag_ms" not in lag or not lag["lag_ms"].notna().any():
             continue
-        lines += ["", f"Lag estimates over the named runs of {name} (truth {40 * _effect(name)[1]:.0f} ms): "
+        which = "" if name == "pitch_control_lag" else f" of {name}"
+        lines += ["", f"Lag estimates over the named runs{which} (truth {lag['lag_truth_ms'].iloc[0]:.0f} ms): "
                       f"derivative fit {lag['lag_ms'].mean():.1f} ± {lag['lag_ms'].std():.1f} ms, "
                       f"shift scan {lag['lag_scan_ms'].mean():.1f} ± {lag['lag_scan_ms'].std():.1f} ms."]
-    dr = eff[eff["effect"] == "cm_alpha_drift"]
-    if "drift_pct_per_min" in dr and dr["drift_pct_per_min"].notna().any():
-        lines += ["", f"Drift estimates over the runs that named t (truth -8 % over 90 s = -5.3 %/min of Cm_alpha): "
+    for name, dr in eff.groupby("effect", sort=False):
+        if _effect(name)[0] != "cm_alpha_drift" or "drift_pct_per_min" not in dr \
+                or not dr["drift_pct_per_min"].notna().any():
+            continue
+        k = _effect(name)[1]
+        which = "" if name == "cm_alpha_drift" else f" of {name}"
+        lines += ["", f"Drift estimates over the runs{which} that named t (truth {-8 * k:.0f} % over 90 s = "
+                      f"{-5.3 * k:.1f} %/min of Cm_alpha): "
                       f"{dr['drift_pct_per_min'].mean():.1f} ± {dr['drift_pct_per_min'].std():.1f} %/min."]
     none = df[df["effect"] == "none"]
     if len(none):
@@ -249,6 +258,9 @@ def main() -> None:
     args = ap.parse_args()
     seeds = _seeds(args.seeds)
     names = args.effects.split(",")
+    for n in names:  # refused here, not inside a worker
+        if n != "none":
+            _effect(n)
     jobs = [(n, s, args.cache) for s in seeds for n in names]
     with ProcessPoolExecutor(args.jobs) as pool:
         for n, s, sec in pool.map(flight, jobs):

@@ -52,7 +52,7 @@ def test_pitch_derivatives_within_the_bars_with_intervals(run, flight):
     truth = flight.coefficients["Cm_q_plus_alpha_dot"]
     assert abs(est / truth - 1) <= DAMPING_BAR, (est, truth)
     # the sum is better determined than the worse of its collinear parts (with the vane-noise
-    # correction's own spread in each part's sigma, not always better than the better one)
+    # correction's own error in each part's sigma, not always better than the better one)
     assert lo < est < hi and se < max(tab.loc["Cm_q", "std_error"], tab.loc["Cm_alpha_dot", "std_error"])
 
 

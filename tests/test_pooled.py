@@ -79,7 +79,7 @@ def test_pooled_coefficients_lie_between_or_near_the_single_flight_ones(in_memor
         lo = min(t.loc[name, "estimate"] for t in per)
         hi = max(t.loc[name, "estimate"] for t in per)
         assert lo - 2 * row["std_error"] <= row["estimate"] <= hi + 2 * row["std_error"], (name, lo, hi, row)
-        # (the errors-in-variables correction's own spread, in sigma, does not shrink with pooling as
+        # (the errors-in-variables correction's own error, in sigma, does not shrink with pooling as
         # the fit's does: up to 1.2x the worse manoeuvre's measured on Cn_beta)
         assert row["std_error"] < 1.25 * max(t.loc[name, "std_error"] for t in per), name
         checked += 1

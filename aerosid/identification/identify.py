@@ -255,7 +255,8 @@ def _eiv_corrected(fd: pd.DataFrame, vehicle: Vehicle, models: dict, fits: dict,
     else:
         head = (f"estimates corrected for {what} (SIMEX, median sigma alpha {float(np.median(sigma[0])):.2g} rad, "
                 f"beta {float(np.median(sigma[1])):.2g} rad)" + (f" and {rates}" if rates else ""))
-    note = head + ("; sigma scaled by the correction and combined with the extrapolation's spread; residual "
+    note = head + ("; sigma scaled by the correction and combined with the correction's own error (at least the "
+                   "correction itself: SIMEX takes back only part of a large attenuation); residual "
                    "statistics are the uncorrected fit's")
     return {ch: with_corrected_estimate(f, corrected[ch].corrected, note, corrected[ch].std_error(f.std_error))
             if ch in corrected else f for ch, f in fits.items()}
