@@ -22,6 +22,10 @@ recovered = (quadratic - renoised) / (clean - renoised): the share of the attenu
 takes back; shortfall/correction = (clean - quadratic) / (quadratic - renoised).  Errors are %
 of the linear truth (C_m_alpha, C_m_delta_p, damping = C_m_q + C_m_alpha_dot).  No gyro noise is
 added (the rates are the flight's own in every variant).
+
+--rlv-seeds: the same on seed-rlv (angles inverted from the force database; the noise SIMEX
+draws for them, per sample, through the band), simulated and estimated here, every non-constant
+term of its C_m, C_n and C_l models, quadratic only; the table gives medians over the seeds.
 """
 from __future__ import annotations
 
@@ -156,11 +160,79 @@ def report(df: pd.DataFrame, wall_s: float, command: str) -> str:
     return "\n".join(lines) + "\n"
 
 
+def rlv_rows(seed: int) -> list[dict]:
+    """The controlled test on one seed-rlv flight (aerosid's own simulator, inverted angles)."""
+    from aerosid.ebm import process_telemetry
+    from aerosid.identification.band import segment_keys
+    from aerosid.identification.derivatives import zero_phase_low_pass
+    from aerosid.identification.eiv import simex_estimates, with_angle_noise, with_angles_moved
+    from aerosid.identification.identify import angle_cutoff_hz, mach_window_mask
+    from aerosid.modelling.models import default_models, vehicle_signals
+    from aerosid.simulation import load_case, simulate
+
+    case = load_case("seed-rlv")
+    veh = case.vehicle
+    flight = simulate(case, (), seed=seed)
+    fd = process_telemetry(flight.telemetry, veh).flight_data
+    tr = flight.truth
+    fd = fd.sort_values(["flight", "t_s"], kind="stable").reset_index(drop=True)
+    fd = fd.loc[mach_window_mask(fd["mach"].to_numpy(), veh.mach_reference, 0.5)].reset_index(drop=True)
+    t = fd["t_s"].to_numpy(float)
+    groups = segment_keys(fd)
+    true_a = np.interp(t, tr["t_s"], tr["alpha_rad"])
+    true_b = np.interp(t, tr["t_s"], tr["beta_rad"])
+    for g in pd.unique(groups):  # the band's low-pass, per segment, as the flight data's angles
+        i = np.flatnonzero(groups == g)
+        fs, band = 1.0 / float(np.median(np.diff(t[i]))), float(np.median(fd["band_hz"].to_numpy()[i]))
+        true_a[i], true_b[i] = zero_phase_low_pass(true_a[i], fs, band), zero_phase_low_pass(true_b[i], fs, band)
+    clean = with_angles_moved(fd, true_a - fd["alpha_rad"].to_numpy(), true_b - fd["beta_rad"].to_numpy())
+    sig = (fd["eiv_sigma_alpha_rad"].to_numpy(float), fd["eiv_sigma_beta_rad"].to_numpy(float))
+    cut = angle_cutoff_hz(fd, veh)
+    renoised = with_angle_noise(clean, np.random.default_rng(500 + seed), groups, sig, cut)
+    models = default_models(veh)
+    chans = [c for c in ("Cm", "Cn", "Cl") if c in models]
+
+    def design(frame):
+        s = vehicle_signals(frame, veh)
+        return {c: models[c].regressors(s).to_numpy(float) for c in chans}
+
+    X_clean = design(clean)
+    res = simex_estimates(renoised, {c: renoised[c].to_numpy(float) for c in chans}, design, sig, cut)
+    rows = []
+    for c in chans:
+        b_clean = np.linalg.lstsq(X_clean[c], clean[c].to_numpy(float), rcond=None)[0]
+        for j, name in enumerate(models[c].names):
+            if name.endswith("_0"):
+                continue
+            r = res[c]
+            rows.append({"seed": seed, "coefficient": name, "clean": b_clean[j], "renoised": r.naive[j],
+                         "quadratic": r.corrected[j], "spread": r.spread[j]})
+    return rows
+
+
+def rlv_report(df: pd.DataFrame) -> str:
+    d = df.copy()
+    d["attenuation_pct"] = 100 * (d["renoised"] - d["clean"]) / d["clean"].abs()
+    d["recovered"] = (d["quadratic"] - d["renoised"]) / (d["clean"] - d["renoised"])
+    d["shortfall_per_correction"] = (d["clean"] - d["quadratic"]) / (d["quadratic"] - d["renoised"])
+    d["z_spread"] = (d["quadratic"] - d["clean"]).abs() / d["spread"]
+    med = d.groupby("coefficient", sort=False)[["attenuation_pct", "recovered", "shortfall_per_correction",
+                                                 "z_spread"]].median()
+    lines = ["", f"## seed-rlv: angles inverted from the force database ({d['seed'].nunique()} seeds, medians)", "",
+             "| coefficient | attenuation by the noise [% of clean] | recovered by SIMEX | shortfall / correction "
+             "| abs(quadratic - clean) / spread |", "|---|---|---|---|---|"]
+    for name, r in med.iterrows():
+        lines.append(f"| {name} | {r['attenuation_pct']:+.1f} | {r['recovered']:.0%} | {r['shortfall_per_correction']:+.2f} "
+                     f"| {r['z_spread']:.2f} |")
+    return "\n".join(lines) + "\n"
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--vehicles", default="c172x,pa28,OV10,T37,F4N,c172p,c182,sgs126,minisgs,J3Cub")
     ap.add_argument("--seeds", default="0-2")
     ap.add_argument("--out", default=str(Path(__file__).parent / "results"))
+    ap.add_argument("--rlv-seeds", default="0-4", help="seed-rlv flights for the inverted angles ('' to skip)")
     args = ap.parse_args()
     seeds = parse_seeds(args.seeds)
     t0 = time.perf_counter()
@@ -173,12 +245,17 @@ def main() -> None:
                     attribution_cache.build(v, s)
                 rows += one(v, s)
                 print(f"{v} seed {s}", flush=True)
+        rlv = [r for s in (parse_seeds(args.rlv_seeds) if args.rlv_seeds else []) for r in rlv_rows(s)]
     df = pd.DataFrame(rows)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     df.to_csv(out / "eiv_extrapolants_runs.csv", index=False)
     text = report(df, time.perf_counter() - t0,
-                  f"python bench/bench_eiv_extrapolants.py --vehicles {args.vehicles} --seeds {args.seeds}")
+                  f"python bench/bench_eiv_extrapolants.py --vehicles {args.vehicles} --seeds {args.seeds} "
+                  f"--rlv-seeds {args.rlv_seeds}")
+    if rlv:
+        pd.DataFrame(rlv).to_csv(out / "eiv_extrapolants_rlv_runs.csv", index=False)
+        text += rlv_report(pd.DataFrame(rlv))
     (out / "eiv_extrapolants.md").write_text(text)
     print(text)
 

@@ -17,7 +17,8 @@ sigma of the naive fit scaled by the correction factor, combined with the extrap
 own error (SimexResult.std_error): without them the intervals of the de-attenuated slopes
 covered 62 % on seed-rlv (band-limited flight data, angles inverted from the accelerometers).
 That error is the larger of the spread between the quadratic and the linear extrapolant and
-the correction itself (CORRECTION_SHARE): where the noise is a large share of a regressor
+a share of the correction itself (CORRECTION_SHARE: 1 for vane angles, 0.6 for angles inverted from
+the force database): where the noise is a large share of a regressor
 (alpha-dot above all) the quadratic takes back only part of the attenuation, measured at a
 median 20-60 % (bench/results/eiv_extrapolants.md). The draws are seeded, so the result
 is reproducible.
@@ -63,16 +64,19 @@ from aerosid.identification.derivatives import zero_phase_low_pass
 from aerosid.identification.inversion import total_angles
 
 LAMBDAS = (0.5, 1.0, 1.5, 2.0)
-#: One sigma of the correction's own error, as a share of the correction |corrected - naive|.
-#: Measured where the only angle error is one known draw of the vanes' noise, on 10 JSBSim
-#: aircraft x 3 seeds (bench/bench_eiv_extrapolants.py, bench/results/eiv_extrapolants.md): the
-#: quadratic extrapolant takes back a median 20-60 % of the attenuation (c172x's C_m_alpha all
-#: of it): what it leaves is a median 1.4 times the correction it made, more than 2 times on 7 of
-#: the 24 rows (there a 1.96-sigma interval still falls short: the share is the central
-#: measurement, not a bound; the estimator-bias check, bias_check.py, adds its own part); the exact
-#: extrapolant for linear columns (corrected least squares) over-corrects and is unstable where
-#: the noise is a large share of alpha-dot, so the estimate stays the quadratic's.
-CORRECTION_SHARE = 1.0
+#: One sigma of the correction's own error, as a share of the correction |corrected - naive|, by
+#: where the angles come from.  Measured where the only angle error is one known draw of the
+#: noise SIMEX assumes (bench/bench_eiv_extrapolants.py, bench/results/eiv_extrapolants.md):
+#: "vanes", 10 JSBSim aircraft x 3 seeds: the quadratic extrapolant takes back a median 20-60 % of
+#: the attenuation (c172x's C_m_alpha all of it); what it leaves is a median 1.4 times the
+#: correction it made, more than 2 times on 7 of the 24 rows (there a 1.96-sigma interval still
+#: falls short: the share is a central value, not a bound; the estimator-bias check,
+#: bias_check.py, adds its own part).  "inverted" (alpha, beta from the force database, seed-rlv,
+#: 5 seeds): on the terms the noise attenuates most (C_n_beta, C_n_delta_y, C_l_alpha_r by
+#: 2-24 %) it leaves a median 0.5-0.6 times its correction, and over-corrects the others.  The
+#: exact extrapolant for linear columns (corrected least squares) over-corrects and is unstable
+#: where the noise is a large share of alpha-dot, so the estimate stays the quadratic's.
+CORRECTION_SHARE = {"vanes": 1.0, "inverted": 0.6}
 REPLICATES = 40  # Monte-Carlo noise of the correction: 10 left +-8 % scatter on seed-rlv C_m_alpha, 60 +-5 %
 SEED = 20261122
 #: The body-rate columns the gyro part of the correction adds noise to.
@@ -217,23 +221,24 @@ def simex_estimates(fd: pd.DataFrame, y_by_channel: dict[str, np.ndarray], desig
 class SimexResult:
     """corrected: the estimates extrapolated to no angle noise; spread: how much the answer
     depends on the extrapolant (:func:`extrapolation_spread`); naive: the uncorrected estimates.
-    The extrapolation's 1-sigma is the larger of spread and CORRECTION_SHARE x |corrected - naive|
-    (:meth:`std_error`)."""
+    The extrapolation's 1-sigma is the larger of spread and a share of |corrected - naive|
+    (:meth:`std_error`, CORRECTION_SHARE)."""
 
     corrected: np.ndarray
     spread: np.ndarray
     naive: np.ndarray
 
-    def std_error(self, naive_std_error: np.ndarray) -> np.ndarray:
+    def std_error(self, naive_std_error: np.ndarray, correction_share: float = CORRECTION_SHARE["vanes"]
+                  ) -> np.ndarray:
         """The corrected estimates' sigma: the naive fit's sigma scaled by the correction
         factor |corrected / naive| (kept within [1, 3]: a de-attenuated slope carries its
         relative uncertainty along), combined with the extrapolation's own error: the larger of
-        its spread and CORRECTION_SHARE x the correction |corrected - naive| (the quadratic
-        leaves about as much of a large attenuation as it removes)."""
+        its spread and correction_share x the correction |corrected - naive| (the quadratic
+        leaves a part of a large attenuation: CORRECTION_SHARE, by the angles' source)."""
         with np.errstate(divide="ignore", invalid="ignore"):
             ratio = np.clip(np.nan_to_num(np.abs(self.corrected / self.naive), nan=1.0, posinf=3.0), 1.0, 3.0)
         correction = np.abs(np.asarray(self.corrected, float) - np.asarray(self.naive, float))
-        own = np.maximum(self.spread, CORRECTION_SHARE * np.where(np.isnan(correction), 0.0, correction))
+        own = np.maximum(self.spread, correction_share * np.where(np.isnan(correction), 0.0, correction))
         return np.hypot(np.asarray(naive_std_error, float) * ratio, own)
 
 

@@ -14,7 +14,7 @@ import numpy as np
 import pandas as pd
 
 from aerosid.modelling.aeromodel import AeroModel
-from aerosid.identification.eiv import simex_estimates
+from aerosid.identification.eiv import CORRECTION_SHARE, simex_estimates
 from aerosid.identification.crb import identification_bounds
 from aerosid.modelling.models import ChannelModel, default_models, signals_from_flight_data, vehicle_signals
 from aerosid.plausibility.estimates import preflight_departure
@@ -255,10 +255,11 @@ def _eiv_corrected(fd: pd.DataFrame, vehicle: Vehicle, models: dict, fits: dict,
     else:
         head = (f"estimates corrected for {what} (SIMEX, median sigma alpha {float(np.median(sigma[0])):.2g} rad, "
                 f"beta {float(np.median(sigma[1])):.2g} rad)" + (f" and {rates}" if rates else ""))
-    note = head + ("; sigma scaled by the correction and combined with the correction's own error (at least the "
-                   "correction itself: SIMEX takes back only part of a large attenuation); residual "
+    share = CORRECTION_SHARE["vanes" if vehicle.air_data_source == "vanes" else "inverted"]
+    note = head + (f"; sigma scaled by the correction and combined with the correction's own error (at least "
+                   f"{share:g} x the correction: SIMEX takes back only part of a large attenuation); residual "
                    "statistics are the uncorrected fit's")
-    return {ch: with_corrected_estimate(f, corrected[ch].corrected, note, corrected[ch].std_error(f.std_error))
+    return {ch: with_corrected_estimate(f, corrected[ch].corrected, note, corrected[ch].std_error(f.std_error, share))
             if ch in corrected else f for ch, f in fits.items()}
 
 

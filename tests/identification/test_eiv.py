@@ -41,8 +41,8 @@ def test_simex_sigma_counts_what_the_quadratic_leaves_of_a_large_attenuation():
     """Vane noise as large as the excursion (naive slope attenuated by about 55 %), six seeds:
     the quadratic extrapolant takes back only part of it, so the truth lies further than
     1.96 x the quadratic-vs-linear spread from the corrected slope on several seeds (the old
-    sigma missed); the sigma that counts the correction's own error (CORRECTION_SHARE x
-    |corrected - naive|) covers it on every seed."""
+    sigma missed); the sigma that counts the correction's own error (the vanes' CORRECTION_SHARE x
+    |corrected - naive|, std_error's default) covers it on every seed."""
     from aerosid.identification.eiv import CORRECTION_SHARE
 
     t = np.arange(6000) * 0.01
@@ -56,7 +56,7 @@ def test_simex_sigma_counts_what_the_quadratic_leaves_of_a_large_attenuation():
         naive, corrected = res.naive[1], res.corrected[1]
         assert naive > -1.8 * 0.6 and corrected < naive  # attenuated by > 40 %; corrected the right way
         se = res.std_error(np.array([0.0, 1e-6]))[1]
-        assert se >= CORRECTION_SHARE * abs(corrected - naive) - 1e-12
+        assert se >= CORRECTION_SHARE["vanes"] * abs(corrected - naive) - 1e-12
         old_missed += abs(corrected + 1.8) > 1.96 * res.spread[1]
         new_z.append(abs(corrected + 1.8) / se)
     assert old_missed >= 2  # the spread alone misses (3 of the 6 when written)
