@@ -35,7 +35,7 @@ systematic error: the covariance takes b_s b_s^T, b_s = b sqrt(max(1 - s^2 / (PA
 Monte-Carlo variance, so a bias that is only noise adds little).  A flight whose noise is small
 next to its excitation gets almost nothing; the warnings name the estimates whose sigma it moves by
 more than NAMED_GROWTH (5 %).  Part of what it measures, SIMEX's under-correction of a large
-attenuation, is also in SIMEX's own sigma (eiv.CORRECTION_SHARE x the correction, since
+attenuation, is also in SIMEX's own sigma (a share of the correction, eiv.CORRECTION_SHARE, since
 2026-11-27): the two add in quadrature, so where both are large the sigma can count that part
 up to twice (at most a factor sqrt(2)); kept, as the check does not see the under-correction on
 every flight (F4N's C_m_alpha) and the correction's term does not see the gyros' or surfaces'.  Where a prior follows (C_m of an aircraft), counting b in full is

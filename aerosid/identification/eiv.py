@@ -18,9 +18,9 @@ own error (SimexResult.std_error): without them the intervals of the de-attenuat
 covered 62 % on seed-rlv (band-limited flight data, angles inverted from the accelerometers).
 That error is the larger of the spread between the quadratic and the linear extrapolant and
 a share of the correction itself (CORRECTION_SHARE: 1 for vane angles, 0.6 for angles inverted from
-the force database): where the noise is a large share of a regressor
-(alpha-dot above all) the quadratic takes back only part of the attenuation, measured at a
-median 20-60 % (bench/results/eiv_extrapolants.md). The draws are seeded, so the result
+the force database): where the noise is a large share of a regressor (alpha-dot above all) the
+quadratic takes back only part of the attenuation of the vanes' angles (a median 20-60 %,
+bench/results/eiv_extrapolants.md), and leaves or overshoots less of the inverted angles'. The draws are seeded, so the result
 is reproducible.
 
 The gyros. The band-limited rates p, q, r (aerosid.identification.band) are the measured gyros
@@ -65,18 +65,20 @@ from aerosid.identification.inversion import total_angles
 
 LAMBDAS = (0.5, 1.0, 1.5, 2.0)
 #: One sigma of the correction's own error, as a share of the correction |corrected - naive|, by
-#: where the angles come from.  Measured where the only angle error is one known draw of the
-#: noise SIMEX assumes (bench/bench_eiv_extrapolants.py, bench/results/eiv_extrapolants.md):
-#: "vanes", 10 JSBSim aircraft x 3 seeds: the quadratic extrapolant takes back a median 20-60 % of
-#: the attenuation (c172x's C_m_alpha all of it); what it leaves is a median 1.4 times the
-#: correction it made, more than 2 times on 7 of the 24 rows (there a 1.96-sigma interval still
-#: falls short: the share is a central value, not a bound; the estimator-bias check,
-#: bias_check.py, adds its own part).  "inverted" (alpha, beta from the force database, seed-rlv,
-#: 5 seeds): on the terms the noise attenuates most (C_n_beta, C_n_delta_y, C_l_alpha_r by
-#: 2-24 %) it leaves a median 0.5-0.6 times its correction, and over-corrects the others.  The
-#: exact extrapolant for linear columns (corrected least squares) over-corrects and is unstable
-#: where the noise is a large share of alpha-dot, so the estimate stays the quadratic's.
-CORRECTION_SHARE = {"vanes": 1.0, "inverted": 0.6}
+#: the vehicle's air_data_source (where the angles come from).  Measured where the only angle
+#: error is one known draw of the noise SIMEX assumes (bench/bench_eiv_extrapolants.py,
+#: bench/results/eiv_extrapolants.md), over the runs the noise attenuates by >= 3 %, as
+#: |shortfall / correction| = |clean - quadratic| / |quadratic - naive|:
+#: "vanes" (10 JSBSim aircraft x 3 seeds, C_m, 60 runs): median 1.2, 68th percentile 2.0, > 1 in
+#: 60 % of the runs (c172x's C_m_alpha: none left, T37's and F4N's: most); "database" (angles
+#: inverted from the force database, seed-rlv x 5 seeds, C_m, C_n, C_l, 25 runs): median 0.38,
+#: 68th percentile 0.57, > 1 in 8 %.  The values are round choices inside those ranges (the vanes'
+#: 1 below its median: a constant cannot know the flight, and where the quadratic leaves more
+#: than about twice its correction a 1.96-sigma interval still falls short; the estimator-bias
+#: check, bias_check.py, adds its own part).  The exact extrapolant for linear columns (corrected
+#: least squares) over-corrects and is unstable where the noise is a large share of alpha-dot, so
+#: the estimate stays the quadratic's.
+CORRECTION_SHARE = {"vanes": 1.0, "database": 0.6}
 REPLICATES = 40  # Monte-Carlo noise of the correction: 10 left +-8 % scatter on seed-rlv C_m_alpha, 60 +-5 %
 SEED = 20261122
 #: The body-rate columns the gyro part of the correction adds noise to.
@@ -228,8 +230,7 @@ class SimexResult:
     spread: np.ndarray
     naive: np.ndarray
 
-    def std_error(self, naive_std_error: np.ndarray, correction_share: float = CORRECTION_SHARE["vanes"]
-                  ) -> np.ndarray:
+    def std_error(self, naive_std_error: np.ndarray, *, correction_share: float) -> np.ndarray:
         """The corrected estimates' sigma: the naive fit's sigma scaled by the correction
         factor |corrected / naive| (kept within [1, 3]: a de-attenuated slope carries its
         relative uncertainty along), combined with the extrapolation's own error: the larger of

@@ -255,12 +255,21 @@ def _eiv_corrected(fd: pd.DataFrame, vehicle: Vehicle, models: dict, fits: dict,
     else:
         head = (f"estimates corrected for {what} (SIMEX, median sigma alpha {float(np.median(sigma[0])):.2g} rad, "
                 f"beta {float(np.median(sigma[1])):.2g} rad)" + (f" and {rates}" if rates else ""))
-    share = CORRECTION_SHARE["vanes" if vehicle.air_data_source == "vanes" else "inverted"]
-    note = head + (f"; sigma scaled by the correction and combined with the correction's own error (at least "
-                   f"{share:g} x the correction: SIMEX takes back only part of a large attenuation); residual "
+    share = correction_share(vehicle, angles=sigma is not None)
+    part = "the correction itself" if share == 1 else f"{share:.0%} of the correction"
+    note = head + (f"; sigma scaled by the correction and combined with the correction's own error (at least {part}: "
+                   "SIMEX's quadratic extrapolant leaves part of a large attenuation, or overshoots it); residual "
                    "statistics are the uncorrected fit's")
-    return {ch: with_corrected_estimate(f, corrected[ch].corrected, note, corrected[ch].std_error(f.std_error, share))
+    return {ch: with_corrected_estimate(f, corrected[ch].corrected, note,
+                                        corrected[ch].std_error(f.std_error, correction_share=share))
             if ch in corrected else f for ch, f in fits.items()}
+
+
+def correction_share(vehicle: Vehicle, angles: bool = True) -> float:
+    """The share of SIMEX's correction counted as its own 1-sigma (aerosid.identification.eiv
+    CORRECTION_SHARE) for the vehicle's angle source; a source nobody measured raises KeyError.
+    angles=False (the rates' noise alone, gyro_eiv without angle noise): the vanes' larger share."""
+    return CORRECTION_SHARE[vehicle.air_data_source if angles else "vanes"]
 
 
 def angle_cutoff_hz(fd: pd.DataFrame, vehicle: Vehicle) -> float | None:

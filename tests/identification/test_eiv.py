@@ -6,7 +6,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from aerosid.identification.eiv import filtered_noise, simex_estimates
+from aerosid.identification.eiv import CORRECTION_SHARE, filtered_noise, simex_estimates
 
 
 def _frame(alpha: np.ndarray, t: np.ndarray) -> pd.DataFrame:
@@ -33,7 +33,7 @@ def test_simex_recovers_a_slope_attenuated_by_filtered_vane_noise(sigma):
     assert naive > -1.8 * 0.9  # attenuated by the noise (the test can fail)
     assert abs(corrected / -1.8 - 1) < 0.4 * abs(naive / -1.8 - 1)  # most of the attenuation removed
     # the corrected sigma grows with the correction and covers what is left of the bias
-    se = res.std_error(np.array([0.0, 1e-6]))
+    se = res.std_error(np.array([0.0, 1e-6]), correction_share=CORRECTION_SHARE["vanes"])
     assert abs(corrected + 1.8) <= 2.5 * se[1]
 
 
@@ -42,8 +42,7 @@ def test_simex_sigma_counts_what_the_quadratic_leaves_of_a_large_attenuation():
     the quadratic extrapolant takes back only part of it, so the truth lies further than
     1.96 x the quadratic-vs-linear spread from the corrected slope on several seeds (the old
     sigma missed); the sigma that counts the correction's own error (the vanes' CORRECTION_SHARE x
-    |corrected - naive|, std_error's default) covers it on every seed."""
-    from aerosid.identification.eiv import CORRECTION_SHARE
+    |corrected - naive|) covers it on every seed."""
 
     t = np.arange(6000) * 0.01
     alpha = 0.01 * np.sin(2 * np.pi * 0.3 * t) + 0.006 * np.sin(2 * np.pi * 0.9 * t + 1.0)
@@ -55,12 +54,26 @@ def test_simex_sigma_counts_what_the_quadratic_leaves_of_a_large_attenuation():
         res = simex_estimates(fd, {"Cm": y}, _design, 0.05, 2.0)["Cm"]
         naive, corrected = res.naive[1], res.corrected[1]
         assert naive > -1.8 * 0.6 and corrected < naive  # attenuated by > 40 %; corrected the right way
-        se = res.std_error(np.array([0.0, 1e-6]))[1]
+        se = res.std_error(np.array([0.0, 1e-6]), correction_share=CORRECTION_SHARE["vanes"])[1]
         assert se >= CORRECTION_SHARE["vanes"] * abs(corrected - naive) - 1e-12
         old_missed += abs(corrected + 1.8) > 1.96 * res.spread[1]
         new_z.append(abs(corrected + 1.8) / se)
     assert old_missed >= 2  # the spread alone misses (3 of the 6 when written)
     assert max(new_z) <= 1.96  # the new sigma covers every seed (largest z 1.69 when written)
+
+
+def test_the_correction_share_follows_the_angle_source():
+    """Vanes 1, angles inverted from the force database 0.6 (eiv.CORRECTION_SHARE), the rates'
+    noise alone the vanes' share; a source nobody measured is refused, not given a share."""
+    from types import SimpleNamespace
+
+    from aerosid.identification.identify import correction_share
+
+    assert correction_share(SimpleNamespace(air_data_source="vanes")) == 1.0
+    assert correction_share(SimpleNamespace(air_data_source="database")) == 0.6
+    assert correction_share(SimpleNamespace(air_data_source="database"), angles=False) == 1.0
+    with pytest.raises(KeyError):
+        correction_share(SimpleNamespace(air_data_source="laser"))
 
 
 def test_simex_without_noise_changes_nothing():
@@ -69,7 +82,7 @@ def test_simex_without_noise_changes_nothing():
     y = 0.1 - 1.8 * alpha
     out = simex_estimates(_frame(alpha, t), {"Cm": y}, _design, 0.0, 2.0)["Cm"]
     assert out.corrected == pytest.approx([0.1, -1.8], rel=1e-9)
-    assert out.std_error(np.array([1e-3, 2e-3])) == pytest.approx([1e-3, 2e-3], rel=1e-6)
+    assert out.std_error(np.array([1e-3, 2e-3]), correction_share=1.0) == pytest.approx([1e-3, 2e-3], rel=1e-6)
 
 
 # --------------------------------------------------------------------------- the gyros' part
@@ -118,7 +131,7 @@ def test_gyro_simex_corrects_the_known_attenuation_of_a_band_limited_rate(seed, 
     err = np.abs(res.corrected - beta_true)
     naive_err = np.abs(naive.estimate - beta_true)
     assert err[2] < 0.3 * naive_err[2] and err[1] < 0.5 * naive_err[1]  # most of the attenuation removed
-    assert np.all(err[1:] <= 2.5 * res.std_error(naive.std_error)[1:])  # inside the reported interval
+    assert np.all(err[1:] <= 2.5 * res.std_error(naive.std_error, correction_share=1.0)[1:])  # inside the interval
 
 
 def test_gyro_simex_with_zero_or_no_rate_noise_is_the_angle_only_correction():
