@@ -38,8 +38,9 @@ more than NAMED_GROWTH (5 %).  Part of what it measures, SIMEX's under-correctio
 attenuation, is also in SIMEX's own sigma (a share of the correction, eiv.CORRECTION_SHARE, since
 2026-11-27): the two add in quadrature, so where both are large the sigma can count that part
 up to twice (at most a factor sqrt(2)); kept, as the check does not see the under-correction on
-every flight (F4N's C_m_alpha) and the correction's term does not see the gyros' or surfaces'.  Where a prior follows (C_m of an aircraft), counting b in full is
-conservative: the prior passes only part of the pre-prior estimator's bias into its posterior.
+every flight (F4N's C_m_alpha) and the correction's term does not see the gyros' or surfaces'.
+Where a prior follows (C_m of an aircraft), counting b in full is conservative: the prior passes
+only part of the pre-prior estimator's bias into its posterior.
 """
 from __future__ import annotations
 

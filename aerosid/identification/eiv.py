@@ -17,11 +17,11 @@ sigma of the naive fit scaled by the correction factor, combined with the extrap
 own error (SimexResult.std_error): without them the intervals of the de-attenuated slopes
 covered 62 % on seed-rlv (band-limited flight data, angles inverted from the accelerometers).
 That error is the larger of the spread between the quadratic and the linear extrapolant and
-a share of the correction itself (CORRECTION_SHARE: 1 for vane angles, 0.6 for angles inverted from
-the force database): where the noise is a large share of a regressor (alpha-dot above all) the
-quadratic takes back only part of the attenuation of the vanes' angles (a median 20-60 %,
-bench/results/eiv_extrapolants.md), and leaves or overshoots less of the inverted angles'. The draws are seeded, so the result
-is reproducible.
+a share of the correction itself (CORRECTION_SHARE: 1 for vane angles, 0.6 for angles
+inverted from the force database): where the noise is a large share of a regressor
+(alpha-dot above all) the quadratic takes back only part of the attenuation of the vanes'
+angles (a median 20-60 %, bench/results/eiv_extrapolants.md), and leaves or overshoots less
+of the inverted angles'. The draws are seeded, so the result is reproducible.
 
 The gyros. The band-limited rates p, q, r (aerosid.identification.band) are the measured gyros
 through the common low-pass, so they carry the gyros' white noise through that low-pass, and so
