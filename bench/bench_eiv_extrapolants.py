@@ -43,10 +43,8 @@ import pandas as pd
 sys.path.insert(0, str(Path(__file__).parent))
 import attribution_cache  # noqa: E402
 from bench_accuracy import parse_seeds  # noqa: E402
-from bench_attribution import band_limited_truth, truth_targets  # noqa: E402
+from bench_attribution import band_limited_truth, targets, truth_targets  # noqa: E402
 
-LAMBDAS = (0.5, 1.0, 1.5, 2.0)
-REPLICATES = 40
 TARGETS = ("Cm_alpha", "Cm_delta", "damping")
 
 
@@ -55,7 +53,7 @@ def _fits(frame: pd.DataFrame, vehicle, corrected: bool = True) -> dict[str, np.
     C_m model on the frame's Mach window (cut first, as identify does: the derivatives, the noise
     draws and their low-pass see the same rows)."""
     from aerosid.identification.band import segment_keys
-    from aerosid.identification.eiv import SEED, extrapolate, with_angle_noise
+    from aerosid.identification.eiv import LAMBDAS, REPLICATES, SEED, extrapolate, with_angle_noise
     from aerosid.identification.identify import angle_cutoff_hz, mach_window_mask
     from aerosid.modelling.models import default_models, vehicle_signals
 
@@ -99,12 +97,6 @@ def _fits(frame: pd.DataFrame, vehicle, corrected: bool = True) -> dict[str, np.
             "moment": np.linalg.solve(M1, v1), "names": list(model.names)}
 
 
-def _targets(names: list[str], b: np.ndarray) -> dict[str, float]:
-    d = dict(zip(names, b))
-    return {"Cm_alpha": d.get("Cm_alpha", np.nan), "Cm_delta": d.get("Cm_delta_p", np.nan),
-            "damping": d.get("Cm_q", np.nan) + d.get("Cm_alpha_dot", 0.0)}
-
-
 def one(vehicle: str, seed: int) -> list[dict]:
     from aerosid.identification.band import segment_keys
     from aerosid.identification.eiv import with_angle_noise, with_angles_moved
@@ -127,7 +119,7 @@ def one(vehicle: str, seed: int) -> list[dict]:
     rows = []
     for tag, b in (("clean", c["naive"]), ("renoised", r["naive"]), ("quadratic", r["quadratic"]),
                    ("moment", r["moment"])):
-        est = _targets(c["names"], b)
+        est = targets(dict(zip(c["names"], b)))
         rows.append({"vehicle": vehicle, "seed": seed, "fit": tag,
                      **{f"{k}_pct": 100 * (est[k] / truth[k] - 1) for k in TARGETS}})
     return rows

@@ -57,7 +57,11 @@ def flight(job: tuple[str, int, str]) -> tuple[str, int, float]:
 
     t0 = time.perf_counter()
     case = load_case("seed-rlv")
-    hidden = () if name == "none" else ((HIDDEN[_effect(name)[0]], _effect(name)[1]),)
+    if name == "none":
+        hidden = ()
+    else:
+        effect, scale = _effect(name)
+        hidden = ((HIDDEN[effect], scale),)
     f = simulate(case, (), seed=seed, hidden=hidden)
     run = process_telemetry(f.telemetry, case.vehicle)
     fd = run.flight_data.sort_values(["flight", "t_s"], kind="stable").reset_index(drop=True)
