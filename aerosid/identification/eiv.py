@@ -34,13 +34,16 @@ signal band, aerosid.estimation.init). On the simulators it was within 4.5 % of 
 actually added, against 9 % for the band module's first-difference estimate. Only the
 regressors get the noise; the response is left alone. Its noise (the derivative of the
 band-limited gyro noise) has no correlation with the rates' noise at zero lag, and it costs
-<= 0.4 % (finding 4). The rates' draws are common random numbers across lambda: replicate b adds
-the same noise, scaled by sqrt(lambda), at every lambda. With independent draws, the Monte-Carlo
-error of 40 replicates passed for a curvature. The quadratic amplified it, and on OV10 it moved
-C_m_alpha by -3.8 % where the gyro noise makes -1.4 %. The rates' draws come from their own
-generator. Without gyro noise (identify(gyro_eiv=False), or flight data without or with zero
-eiv_sigma_p/q/r), the result is bit-identical to the angle-only correction (tested). Extra cost
-about 5 % of identify (each replicate's gyro noise is filtered once and scaled per lambda).
+<= 0.4 % (finding 4). The rates' draws come from their own generator. Without gyro noise
+(identify(gyro_eiv=False), or flight data without or with zero eiv_sigma_p/q/r), the result is
+bit-identical to the angle-only correction (tested).
+
+The draws. Every draw, the angles' and the rates', is a common random number across lambda and
+comes in an antithetic pair (:func:`simex_frames`): pair k adds the same noise, times +sqrt(lambda)
+and -sqrt(lambda), at every lambda. With independent draws the Monte-Carlo error of 40 replicates
+passed for a curvature the quadratic amplified: the rates' part moved OV10's C_m_alpha by -3.8 %
+where the gyro noise makes -1.4 %, and the angles' part made the corrected F4N C_n_r depend on the
+draws' seed by 14 % (bench/results/simex_draws.md).
 
 Measured on 10 cached JSBSim flights each (bench/results/gyro_simex.md; mean error % of the
 truth). The gyro part moves C_m_alpha toward the answer with the true rates: the
@@ -79,7 +82,7 @@ LAMBDAS = (0.5, 1.0, 1.5, 2.0)
 #: least squares) over-corrects and is unstable where the noise is a large share of alpha-dot, so
 #: the estimate stays the quadratic's.
 CORRECTION_SHARE = {"vanes": 1.0, "database": 0.6}
-REPLICATES = 40  # Monte-Carlo noise of the correction: 10 left +-8 % scatter on seed-rlv C_m_alpha, 60 +-5 %
+REPLICATES = 40  # refits per lambda, in antithetic pairs (even): simex_frames
 SEED = 20261122
 #: The body-rate columns the gyro part of the correction adds noise to.
 RATE_COLUMNS = ("p_rad_s", "q_rad_s", "r_rad_s")
@@ -154,14 +157,42 @@ def with_rate_noise(fd: pd.DataFrame, noise: np.ndarray, copy: bool = True) -> p
     return f
 
 
-#: The gyro draws (REPLICATES x N x 3) are kept for the next lambda below this size [bytes],
-#: else drawn again from the same seeds (the same numbers either way).
-RATE_CACHE_BYTES = 256e6
+def simex_frames(fd: pd.DataFrame, sigma_rad, cutoff_hz: float | None, rate_sigma: tuple | None = None,
+                 rate_cutoff_hz=None, seed: int = SEED):
+    """The remeasured flight data SIMEX refits: yields (lambda, frame) REPLICATES times for each
+    lambda in LAMBDAS, the frame being ``fd`` with extra noise of variance lambda x sigma^2 on
+    the angles (sigma_rad: as angle_noise; None: the angles are exact) and, given rate_sigma, on
+    p, q, r (rate_noise; None: the rates are exact).
+
+    The draws are antithetic common random numbers: pair k draws one unit of noise, from its own
+    generator seeded (seed, k) for the angles and (seed + 1, k) for the rates, and adds
+    +sqrt(lambda) and -sqrt(lambda) times it at every lambda.  So the Monte-Carlo error of the
+    curve is smooth in lambda (common numbers), and within each pair the terms odd in the noise
+    cancel (antithetic): with independent draws at each lambda, 40 replicates left the
+    corrected F4N C_n_r depending on the draws' seed by 14 % (1 sd over three seeds), C_m_alpha
+    by 0.3-0.9 %; with these 0.2 % and 0.1-0.6 % (bench/results/simex_draws.md).  Without
+    rate_sigma the angles' frames are the same whatever the rates' generator would draw."""
+    groups = segment_keys(fd)
+    t = fd["t_s"].to_numpy(float)
+    for k in range(REPLICATES // 2):
+        d_angles = (angle_noise(np.random.default_rng([seed, k]), groups, t, sigma_rad, cutoff_hz)
+                    if sigma_rad is not None else None)
+        d_rates = (rate_noise(np.random.default_rng([seed + 1, k]), groups, t, rate_sigma, rate_cutoff_hz)
+                   if rate_sigma is not None else None)
+        for lam in LAMBDAS:
+            for sign in (1.0, -1.0):
+                scale = sign * np.sqrt(lam)
+                f = fd
+                if d_angles is not None:
+                    f = with_angles_moved(f, scale * d_angles[0], scale * d_angles[1])
+                if d_rates is not None:
+                    f = with_rate_noise(f, scale * d_rates, copy=f is fd)
+                yield lam, f
 
 
 def simex_estimates(fd: pd.DataFrame, y_by_channel: dict[str, np.ndarray], design, sigma_rad,
                     cutoff_hz: float | None, rate_sigma: tuple | None = None,
-                    rate_cutoff_hz=None) -> dict[str, "SimexResult"]:
+                    rate_cutoff_hz=None, seed: int = SEED) -> dict[str, "SimexResult"]:
     """Corrected coefficient vectors per channel, with their sigma's ingredients.
 
     fd: the flight data of the fit (sorted as fitted). y_by_channel: the responses.
@@ -171,52 +202,25 @@ def simex_estimates(fd: pd.DataFrame, y_by_channel: dict[str, np.ndarray], desig
     sigma_r) [rad/s] of the gyros' white noise, None: the rates are exact (the angle-only
     correction, bit-identical to it); rate_cutoff_hz: the band the rates went through (a
     number, or one per sample).  Both noises are added in the same draws (one lambda scales
-    every variance), the rates' from their own generator so the angles' draws do not change;
-    the rates' draws are common random numbers (replicate b adds the same noise, scaled by
-    sqrt(lambda), at every lambda), so the curve's Monte-Carlo error does not pass for a
-    curvature the quadratic extrapolant would amplify.
+    every variance): :func:`simex_frames`, seeded by ``seed``.
     """
-    rng = np.random.default_rng(SEED)
-    groups = segment_keys(fd)
-
     def fit_all(frame: pd.DataFrame) -> dict[str, np.ndarray]:
         X = design(frame)
         return {ch: np.linalg.lstsq(X[ch], y, rcond=None)[0] for ch, y in y_by_channel.items()}
 
     naive = fit_all(fd)
-    curves = {ch: [b] for ch, b in naive.items()}
-    t = fd["t_s"].to_numpy(float)
-    cache: dict[int, np.ndarray] = {}
-    keep = REPLICATES * len(fd) * 3 * 8 <= RATE_CACHE_BYTES
-
-    def gyro_draw(b: int) -> np.ndarray:
-        """Replicate b's gyro noise at lambda = 1 (common random numbers: seeded by b)."""
-        if b in cache:
-            return cache[b]
-        noise = rate_noise(np.random.default_rng([SEED + 1, b]), groups, t, rate_sigma, rate_cutoff_hz)
-        if keep:
-            cache[b] = noise
-        return noise
-
-    for lam in LAMBDAS:
-        acc = {ch: np.zeros_like(b) for ch, b in naive.items()}
-        for b in range(REPLICATES):
-            f = fd
-            if sigma_rad is not None:
-                scaled = (tuple(np.asarray(x) * np.sqrt(lam) for x in sigma_rad) if isinstance(sigma_rad, tuple)
-                          else sigma_rad * np.sqrt(lam))
-                f = with_angle_noise(f, rng, groups, scaled, cutoff_hz)
-            if rate_sigma is not None:  # the same draw at every lambda, scaled (the low-pass is linear)
-                f = with_rate_noise(f, np.sqrt(lam) * gyro_draw(b), copy=f is fd)
-            for ch, est in fit_all(f).items():
-                acc[ch] += est / REPLICATES
-        for ch in curves:
-            curves[ch].append(acc[ch])
+    sums = {lam: {ch: np.zeros_like(b) for ch, b in naive.items()} for lam in LAMBDAS}
+    for lam, f in simex_frames(fd, sigma_rad, cutoff_hz, rate_sigma, rate_cutoff_hz, seed):
+        for ch, est in fit_all(f).items():
+            sums[lam][ch] += est
     lams = np.array((0.0, *LAMBDAS))
-    return {ch: SimexResult(np.array([extrapolate(lams, E[:, j]) for j in range(E.shape[1])]),
-                            np.array([extrapolation_spread(lams, E[:, j]) for j in range(E.shape[1])]),
-                            E[0].copy())
-            for ch, E in ((ch, np.array(rows)) for ch, rows in curves.items())}
+    out = {}
+    for ch, b in naive.items():
+        E = np.array([b, *(sums[lam][ch] / REPLICATES for lam in LAMBDAS)])
+        out[ch] = SimexResult(np.array([extrapolate(lams, E[:, j]) for j in range(E.shape[1])]),
+                              np.array([extrapolation_spread(lams, E[:, j]) for j in range(E.shape[1])]),
+                              E[0].copy())
+    return out
 
 
 @dataclass(frozen=True)
