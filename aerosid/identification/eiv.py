@@ -9,7 +9,8 @@ JSBSim c172x flight this moved C_m_alpha by about -6 %.
 SIMEX (Cook & Stefanski 1994) measures the attenuation on the data themselves. It
 refits with extra noise of variance lambda sigma^2 added to the raw vane angles,
 passed through the same low-pass as the vanes, with every derived signal
-recomputed. It does so for lambda in LAMBDAS, averaging REPLICATES draws each, then
+recomputed. It does so for lambda in LAMBDAS, averaging REPLICATES refits each (REPLICATES / 2
+draws in antithetic pairs, common to every lambda: :func:`simex_frames`), then
 extrapolates each coefficient to lambda = -1, no noise at all (:func:`extrapolate`).
 
 The corrected estimates replace the naive ones. Their sigma is the coloured-residual
@@ -20,7 +21,7 @@ That error is the larger of the spread between the quadratic and the linear extr
 a share of the correction itself (CORRECTION_SHARE: 1 for vane angles, 0.6 for angles
 inverted from the force database): where the noise is a large share of a regressor
 (alpha-dot above all) the quadratic takes back only part of the attenuation of the vanes'
-angles (a median 20-60 %, bench/results/eiv_extrapolants.md), and leaves or overshoots less
+angles (from a few % to all of it by flight, bench/results/eiv_extrapolants.md), and leaves or overshoots less
 of the inverted angles'. The draws are seeded, so the result is reproducible.
 
 The gyros. The band-limited rates p, q, r (aerosid.identification.band) are the measured gyros
@@ -43,7 +44,7 @@ comes in an antithetic pair (:func:`simex_frames`): pair k adds the same noise, 
 and -sqrt(lambda), at every lambda. With independent draws the Monte-Carlo error of 40 replicates
 passed for a curvature the quadratic amplified: the rates' part moved OV10's C_m_alpha by -3.8 %
 where the gyro noise makes -1.4 %, and the angles' part made the corrected F4N C_n_r depend on the
-draws' seed by 14 % (bench/results/simex_draws.md).
+draws' seed by 14 % (bench/results/simex_mc.md).
 
 Measured on 10 cached JSBSim flights each (bench/results/gyro_simex.md; mean error % of the
 truth). The gyro part moves C_m_alpha toward the answer with the true rates: the
@@ -72,17 +73,22 @@ LAMBDAS = (0.5, 1.0, 1.5, 2.0)
 #: error is one known draw of the noise SIMEX assumes (bench/bench_eiv_extrapolants.py,
 #: bench/results/eiv_extrapolants.md), over the runs the noise attenuates by >= 3 %, as
 #: |shortfall / correction| = |clean - quadratic| / |quadratic - naive|:
-#: "vanes" (10 JSBSim aircraft x 3 seeds, C_m, 60 runs): median 1.2, 68th percentile 2.0, > 1 in
-#: 60 % of the runs (c172x's C_m_alpha: none left, T37's and F4N's: most); "database" (angles
-#: inverted from the force database, seed-rlv x 5 seeds, C_m, C_n, C_l, 25 runs): median 0.38,
-#: 68th percentile 0.57, > 1 in 8 %.  The values are round choices inside those ranges (the vanes'
-#: 1 below its median: a constant cannot know the flight, and where the quadratic leaves more
-#: than about twice its correction a 1.96-sigma interval still falls short; the estimator-bias
-#: check, bias_check.py, adds its own part).  The exact extrapolant for linear columns (corrected
+#: "vanes" (10 JSBSim aircraft x 3 seeds, C_m, 60 runs): median 1.45, 68th percentile 2.26, > 1 in
+#: 70 % of the runs (c172x's C_m_alpha: none left, T37's and F4N's: most); "database" (angles
+#: inverted from the force database, seed-rlv x 5 seeds, C_m, C_n, C_l, 25 runs): median 0.37,
+#: 68th percentile 0.48, > 1 in 8 % (with simex_frames' draws, 2026-11-28; 1.2 / 2.0 and
+#: 0.38 / 0.57 with the earlier independent draws, whose Monte-Carlo error inflated the
+#: corrections).  The values are round choices inside those ranges (the vanes' 1 below its
+#: median: a constant cannot know the flight, and where the quadratic leaves more than about
+#: twice its correction a 1.96-sigma interval still falls short -- F4N's C_m_alpha correction
+#: is 0.4 % of an 8 % attenuation, which no share of it covers; the estimator-bias check,
+#: bias_check.py, adds its own part).  The exact extrapolant for linear columns (corrected
 #: least squares) over-corrects and is unstable where the noise is a large share of alpha-dot, so
 #: the estimate stays the quadratic's.
 CORRECTION_SHARE = {"vanes": 1.0, "database": 0.6}
 REPLICATES = 40  # refits per lambda, in antithetic pairs (even): simex_frames
+if REPLICATES % 2:
+    raise ValueError(f"eiv.REPLICATES must be even (antithetic pairs), not {REPLICATES}")
 SEED = 20261122
 #: The body-rate columns the gyro part of the correction adds noise to.
 RATE_COLUMNS = ("p_rad_s", "q_rad_s", "r_rad_s")
@@ -165,19 +171,21 @@ def simex_frames(fd: pd.DataFrame, sigma_rad, cutoff_hz: float | None, rate_sigm
     p, q, r (rate_noise; None: the rates are exact).
 
     The draws are antithetic common random numbers: pair k draws one unit of noise, from its own
-    generator seeded (seed, k) for the angles and (seed + 1, k) for the rates, and adds
+    generator seeded (seed, k) for the angles and (seed, k, 1) for the rates, and adds
     +sqrt(lambda) and -sqrt(lambda) times it at every lambda.  So the Monte-Carlo error of the
     curve is smooth in lambda (common numbers), and within each pair the terms odd in the noise
     cancel (antithetic): with independent draws at each lambda, 40 replicates left the
     corrected F4N C_n_r depending on the draws' seed by 14 % (1 sd over three seeds), C_m_alpha
-    by 0.3-0.9 %; with these 0.2 % and 0.1-0.6 % (bench/results/simex_draws.md).  Without
-    rate_sigma the angles' frames are the same whatever the rates' generator would draw."""
+    by 0.35-0.9 %; with these 0.16 % and 0.14-0.6 % (bench/results/simex_mc.md).  Without
+    rate_sigma the angles' frames are the same whatever the rates' generator would draw.  The
+    frames share no arrays with ``fd`` or with each other, except that ``fd`` itself is yielded
+    when there is no noise to add: read them, do not write them."""
     groups = segment_keys(fd)
     t = fd["t_s"].to_numpy(float)
     for k in range(REPLICATES // 2):
         d_angles = (angle_noise(np.random.default_rng([seed, k]), groups, t, sigma_rad, cutoff_hz)
                     if sigma_rad is not None else None)
-        d_rates = (rate_noise(np.random.default_rng([seed + 1, k]), groups, t, rate_sigma, rate_cutoff_hz)
+        d_rates = (rate_noise(np.random.default_rng([seed, k, 1]), groups, t, rate_sigma, rate_cutoff_hz)
                    if rate_sigma is not None else None)
         for lam in LAMBDAS:
             for sign in (1.0, -1.0):

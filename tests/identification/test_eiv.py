@@ -87,34 +87,47 @@ def test_simex_without_noise_changes_nothing():
 
 
 def test_simex_draws_come_in_antithetic_pairs_common_to_every_lambda():
-    """simex_frames: pair k moves the angles by +sqrt(lambda) d_k and -sqrt(lambda) d_k, with the
-    same d_k at every lambda (common random numbers), REPLICATES frames per lambda."""
+    """simex_frames: pair k moves alpha, beta and the rates by +sqrt(lambda) d_k and -sqrt(lambda) d_k,
+    with the same d_k at every lambda (common random numbers), REPLICATES frames per lambda; the
+    angles' draws are the same with or without the rates' (their own generators); fd is untouched."""
     from aerosid.identification.eiv import LAMBDAS, REPLICATES, simex_frames
 
     t = np.arange(2000) * 0.01
     alpha = 0.01 * np.sin(2 * np.pi * 0.3 * t)
-    fd = _frame(alpha, t)
-    moves: dict[float, list] = {lam: [] for lam in LAMBDAS}
-    for lam, f in simex_frames(fd, 0.02, 2.0):
-        moves[lam].append((f["alpha_rad"].to_numpy() - alpha) / np.sqrt(lam))
-    for lam in LAMBDAS:
-        m = np.array(moves[lam])
-        assert len(m) == REPLICATES
-        np.testing.assert_allclose(m[0::2], -m[1::2], atol=1e-15)  # antithetic
-        np.testing.assert_allclose(m, np.array(moves[LAMBDAS[0]]), atol=1e-12)  # common to every lambda
-        assert 0.002 < np.std(m[0]) < 0.02  # the vanes' 0.02 through the 2 Hz low-pass (100 Hz samples)
+    q = 0.02 * np.sin(2 * np.pi * 0.5 * t)
+    fd = _rate_frame(t, q, alpha)
+    before = fd.copy()
+    cols = ("alpha_rad", "beta_rad", "q_rad_s")
+    sig = np.full(t.size, 0.01)
+    with_rates = list(simex_frames(fd, 0.02, 2.0, (0 * sig, sig, 0 * sig), 2.0))
+    angles_only = list(simex_frames(fd, 0.02, 2.0))
+    pd.testing.assert_frame_equal(fd, before)
+    for (lam, f), (lam2, g) in zip(with_rates, angles_only):
+        assert lam == lam2
+        np.testing.assert_array_equal(f["alpha_rad"].to_numpy(), g["alpha_rad"].to_numpy())
+    for col in cols:
+        moves: dict[float, list] = {lam: [] for lam in LAMBDAS}
+        for lam, f in with_rates:
+            moves[lam].append((f[col].to_numpy() - fd[col].to_numpy()) / np.sqrt(lam))
+        for lam in LAMBDAS:
+            m = np.array(moves[lam])
+            assert len(m) == REPLICATES
+            np.testing.assert_allclose(m[0::2], -m[1::2], atol=1e-15)  # antithetic
+            np.testing.assert_allclose(m, np.array(moves[LAMBDAS[0]]), atol=1e-12)  # common to every lambda
+            # the noise through the 2 Hz low-pass at 100 Hz samples: about 0.2 x its white sigma
+            assert 0.1 * (0.01 if col == "q_rad_s" else 0.02) < np.std(m[0]) < (0.01 if col == "q_rad_s" else 0.02)
 
 
 def test_simex_correction_hardly_depends_on_the_draws_seed():
     """A sideslip-like regressor with a little vane noise, correlated with an exact rate (the
     yaw channel of a fast jet, where the correction is small and the Monte-Carlo error was most
-    of it).  Over six seeds of the draws the corrected slopes spread 5e-5 (C_n_beta) and 6e-6
-    (C_n_r) when written; independent draws at each lambda, as before, spread 4.9e-4 and 1.8e-4
+    of it).  Over six seeds of the draws the corrected slopes spread 5.5e-5 (C_n_beta) and 6.6e-6
+    (C_n_r) when written; independent draws at each lambda, as before, spread 5.0e-4 and 1.8e-4
     (measured with the same six seeds), 22 % of C_n_beta's correction."""
     t = np.arange(6000) * 0.01
     beta = 0.004 * np.sin(2 * np.pi * 0.5 * t) + 0.002 * np.sin(2 * np.pi * 1.1 * t + 0.4)
     r = 0.012 * np.sin(2 * np.pi * 0.5 * t + 1.2) + 0.003 * np.sin(2 * np.pi * 0.2 * t)
-    rng = np.random.default_rng(0)
+    rng = np.random.default_rng(1234)  # not one of the draws' seeds below
     y = 0.12 * beta - 0.15 * r + 2e-4 * rng.standard_normal(t.size)
     fd = _frame(0 * t, t).assign(beta_rad=beta + filtered_noise(rng, np.zeros(t.size), t, 0.0026, 1.4), r=r)
 

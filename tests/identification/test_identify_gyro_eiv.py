@@ -45,7 +45,14 @@ def test_zero_gyro_noise_and_the_switch_off_are_bit_identical_to_the_angle_only_
     on = identify(noisy, veh, models, gyro_eiv=True)  # the comparison above can fail: the gyro noise moves the rate terms
     est_on = on.table().set_index("coefficient")["estimate"]
     est_off = before.table().set_index("coefficient")["estimate"]
-    assert abs(est_on["Cm_q"] / est_off["Cm_q"] - 1) > 1e-3
+    # the move undoes the attenuation the rate noise makes: about var(noise through the band) / var(q)
+    # (one noisy regressor's closed form; 8.6e-4 against 6.8e-4 when written, the earlier
+    # independent draws' Monte-Carlo error gave more), in the de-attenuating direction
+    from aerosid.identification.band import band_noise_gain
+
+    fs = 1.0 / float(np.median(np.diff(noisy["t_s"].to_numpy(float))))
+    expected = (band_noise_gain(fs, 2.0) * MEASURED_NOISE.rates_rad_s / noisy["q_rad_s"].std()) ** 2
+    assert 0.5 * expected < est_on["Cm_q"] / est_off["Cm_q"] - 1 < 2.0 * expected
     assert "gyro noise in the band-limited rates" in " ".join(on.table()["warnings"])
 
 
