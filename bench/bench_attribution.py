@@ -243,8 +243,8 @@ SIMEX_LAMBDAS = (0.0, 0.5, 1.0, 1.5, 2.0)
 def simex_curve(data: dict, replicates: int = 30, seed: int = 1) -> dict:
     """SIMEX's premise checked where alpha's noise is the only error: every other group is
     the band-limited truth; the naive C_m_alpha [% of the truth] with extra vane-like noise
-    of variance lambda sigma^2 (aerosid.identification.eiv.with_angle_noise, as identify adds it), averaged
-    over `replicates` draws, against the answer with the true alpha (lambda = -1, what the
+    of variance lambda sigma^2 (aerosid.identification.eiv.with_angle_noise, the noise identify adds; independent
+    draws at each lambda, not identify's antithetic pairs), averaged over `replicates` draws, against the answer with the true alpha (lambda = -1, what the
     extrapolation must reach) and aerosid.identification.eiv.extrapolate's quadratic."""
     from aerosid.identification.eiv import extrapolate, with_angle_noise
     from aerosid.identification.identify import angle_cutoff_hz

@@ -13,8 +13,9 @@ on a flight whose only angle error is known exactly:
   renoised  the same, with one fresh draw of the vanes' noise (the flight data's
             eiv_sigma_alpha_rad, eiv_sigma_beta_rad, through the same low-pass, as SIMEX draws it)
             added to the clean angles: naive least squares, attenuated;
-  quadratic SIMEX on the renoised flight as aerosid.identification.eiv corrects the angles (lambda
-            0.5..2, 40 replicates, the quadratic extrapolant; on the Mach window, cut first);
+  quadratic SIMEX on the renoised flight as aerosid.identification.eiv corrects the angles (its own
+            draws, eiv.simex_frames: lambda 0.5..2, 40 replicates in antithetic pairs, the quadratic
+            extrapolant; on the Mach window, cut first);
   moment    the exact extrapolant for linear columns: X^T X and X^T y averaged over the same
             replicates, extrapolated linearly to lambda = -1, then solved (corrected least squares).
 
@@ -52,8 +53,7 @@ def _fits(frame: pd.DataFrame, vehicle, corrected: bool = True) -> dict[str, np.
     """naive (and, with `corrected`, quadratic SIMEX and moment-corrected) estimates of the default
     C_m model on the frame's Mach window (cut first, as identify does: the derivatives, the noise
     draws and their low-pass see the same rows)."""
-    from aerosid.identification.band import segment_keys
-    from aerosid.identification.eiv import LAMBDAS, REPLICATES, SEED, extrapolate, with_angle_noise
+    from aerosid.identification.eiv import LAMBDAS, REPLICATES, extrapolate, simex_frames
     from aerosid.identification.identify import angle_cutoff_hz, mach_window_mask
     from aerosid.modelling.models import default_models, vehicle_signals
 
@@ -70,23 +70,18 @@ def _fits(frame: pd.DataFrame, vehicle, corrected: bool = True) -> dict[str, np.
     naive = np.linalg.lstsq(X0[ok], y[ok], rcond=None)[0]
     if not corrected:
         return {"naive": naive, "names": list(model.names)}
-    rng = np.random.default_rng(SEED)
-    groups = segment_keys(f0)
     sig = (f0["eiv_sigma_alpha_rad"].to_numpy(float), f0["eiv_sigma_beta_rad"].to_numpy(float))
     cut = angle_cutoff_hz(f0, vehicle)
     if not np.all(np.isfinite(np.concatenate(sig))):
         raise ValueError("the flight data's eiv_sigma_alpha_rad/eiv_sigma_beta_rad have non-finite values")
-    M = [X0[ok].T @ X0[ok]]
-    v = [X0[ok].T @ y[ok]]
-    th = [naive]
-    for lam in LAMBDAS:
-        Ms, vs, ts = 0.0, 0.0, 0.0
-        for _ in range(REPLICATES):
-            X = design(with_angle_noise(f0, rng, groups, tuple(s * np.sqrt(lam) for s in sig), cut))[ok]
-            Mb, vb = X.T @ X, X.T @ y[ok]
-            b = np.linalg.lstsq(X, y[ok], rcond=None)[0]
-            Ms, vs, ts = Ms + Mb / REPLICATES, vs + vb / REPLICATES, ts + b / REPLICATES
-        M.append(Ms), v.append(vs), th.append(ts)
+    sums = {lam: [0.0, 0.0, 0.0] for lam in LAMBDAS}  # X^T X, X^T y, estimate: summed over the replicates
+    for lam, f in simex_frames(f0, sig, cut):  # identify's own draws (antithetic common random numbers)
+        X = design(f)[ok]
+        for i, part in enumerate((X.T @ X, X.T @ y[ok], np.linalg.lstsq(X, y[ok], rcond=None)[0])):
+            sums[lam][i] = sums[lam][i] + part
+    M = [X0[ok].T @ X0[ok], *(sums[lam][0] / REPLICATES for lam in LAMBDAS)]
+    v = [X0[ok].T @ y[ok], *(sums[lam][1] / REPLICATES for lam in LAMBDAS)]
+    th = [naive, *(sums[lam][2] / REPLICATES for lam in LAMBDAS)]
     lams = np.array((0.0, *LAMBDAS))
     M, v, th = np.array(M), np.array(v), np.array(th)
     line = np.vander(lams, 2)

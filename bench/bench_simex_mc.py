@@ -1,78 +1,184 @@
-"""Monte-Carlo scatter of the SIMEX correction (aerosid.identification.eiv): the angles' draws as
-identify makes them (sequential from one generator) against common random numbers across lambda
-(as the gyros' draws are), each with 3 master seeds (the shipped SEED, 11, 12).
+"""Monte-Carlo error of the SIMEX correction (aerosid.identification.eiv): how much the corrected
+estimates depend on the seed of SIMEX's own draws, for three ways of drawing them.
 
-    python bench/bench_simex_mc.py      # ~10 min; caches as bench/bench_gyro_simex.py, plus seed-rlv:
-    python bench/attribution_cache.py --vehicles seed-rlv --seeds 0-9 --dir /tmp/gs-rlv
-    -> /tmp/gs_crn.csv and the summary on stdout (recorded in bench/results/simex_mc.md)
+    python bench/bench_simex_mc.py [--vehicles F4N,OV10,pa28,seed-rlv,T37,c172x] [--seeds 0-2] [--jobs 2]
+    -> bench/results/simex_mc.md and bench/results/simex_mc_runs.csv
 
-MC-sd: the spread over the master seeds, per flight, averaged over the 10 flights.  The shipped
-SEED is the same for every flight, so the Monte-Carlo errors of a vehicle's flights are correlated."""
-import sys, warnings, time
-sys.path.insert(0, "bench")
-import numpy as np, pandas as pd
+  seq   the scheme before 2026-11-28: the angles' draws fresh at every lambda from one
+        generator; the rates' draws common random numbers (replicate b, scaled by sqrt(lambda))
+  crn   common random numbers for the angles too (replicate b's draw at every lambda)
+  anti  what identify does (eiv.simex_frames): common random numbers in antithetic pairs,
+        pair k adds +sqrt(lambda) and -sqrt(lambda) times one draw
+
+Each (vehicle, seed) flight is simulated and estimated once (bench/attribution_cache.py, cached
+under /tmp/aerosid-attrib), then identified (identify(bias_pairs=0): SIMEX alone) with each
+scheme and three seeds of the draws (eiv.SEED, 11, 12).  MC-sd: the spread (1 sd, in % of the
+truth) of a flight's estimate over the three draw seeds, averaged over the flights; mean / RMS /
+sigma / coverage over every (flight, draw seed).  Coefficients and truth as
+bench/bench_generalisation.py."""
+from __future__ import annotations
+
+import argparse
+import platform
+import sys
+import time
+import warnings
+from datetime import date
 from pathlib import Path
 from types import SimpleNamespace
-import attribution_cache as ac
-import aerosid.identification.eiv as eiv
-import aerosid.identification.identify as idm
-from aerosid.identification.flight_data import build_flight_data_segments, load_database
-from bench_generalisation import estimate_of, truth_of
-warnings.simplefilter("ignore")
 
-def make(mode, master):
+import numpy as np
+import pandas as pd
+
+sys.path.insert(0, str(Path(__file__).parent))
+import attribution_cache  # noqa: E402
+from bench_accuracy import parse_seeds  # noqa: E402
+from bench_generalisation import COEFFICIENTS, estimate_of, truth_of  # noqa: E402
+
+MODES = ("seq", "crn", "anti")
+MASTERS_EXTRA = (11, 12)
+RESULTS = Path(__file__).parent / "results"
+
+
+def legacy_simex(mode: str, master: int):
+    """identify's simex_estimates with the draws of `mode` (seq or crn) seeded by `master`."""
+    import aerosid.identification.eiv as eiv
+
     def simex(fd, y_by_channel, design, sigma_rad, cutoff_hz, rate_sigma=None, rate_cutoff_hz=None):
         rng = np.random.default_rng(master)
-        groups = (fd["flight"].astype(str) + "/" + fd["segment"].astype(str)).to_numpy()
+        groups = eiv.segment_keys(fd)
+        t = fd["t_s"].to_numpy(float)
+
         def fit_all(frame):
             X = design(frame)
             return {ch: np.linalg.lstsq(X[ch], y, rcond=None)[0] for ch, y in y_by_channel.items()}
-        naive = fit_all(fd); curves = {ch: [b] for ch, b in naive.items()}
-        t = fd["t_s"].to_numpy(float); cache = {}
+
+        naive = fit_all(fd)
+        curves = {ch: [b] for ch, b in naive.items()}
+        angles, rates = {}, {}
         for lam in eiv.LAMBDAS:
             acc = {ch: np.zeros_like(b) for ch, b in naive.items()}
             for b in range(eiv.REPLICATES):
                 f = fd
                 if sigma_rad is not None:
-                    scaled = (tuple(np.asarray(x) * np.sqrt(lam) for x in sigma_rad) if isinstance(sigma_rad, tuple) else sigma_rad * np.sqrt(lam))
-                    r = np.random.default_rng([master, b]) if mode == "crn" else rng
-                    f = eiv.with_angle_noise(f, r, groups, scaled, cutoff_hz)
+                    if mode == "seq":
+                        scaled = (tuple(np.asarray(x) * np.sqrt(lam) for x in sigma_rad)
+                                  if isinstance(sigma_rad, tuple) else sigma_rad * np.sqrt(lam))
+                        f = eiv.with_angle_noise(f, rng, groups, scaled, cutoff_hz)
+                    else:
+                        if b not in angles:
+                            angles[b] = eiv.angle_noise(np.random.default_rng([master, b]), groups, t, sigma_rad,
+                                                        cutoff_hz)
+                        f = eiv.with_angles_moved(f, np.sqrt(lam) * angles[b][0], np.sqrt(lam) * angles[b][1])
                 if rate_sigma is not None:
-                    if b not in cache:
-                        cache[b] = eiv.rate_noise(np.random.default_rng([master + 1, b]), groups, t, rate_sigma, rate_cutoff_hz)
-                    f = eiv.with_rate_noise(f, np.sqrt(lam) * cache[b], copy=f is fd)
+                    if b not in rates:
+                        rates[b] = eiv.rate_noise(np.random.default_rng([master + 1, b]), groups, t, rate_sigma,
+                                                  rate_cutoff_hz)
+                    f = eiv.with_rate_noise(f, np.sqrt(lam) * rates[b], copy=f is fd)
                 for ch, est in fit_all(f).items():
                     acc[ch] += est / eiv.REPLICATES
-            for ch in curves: curves[ch].append(acc[ch])
+            for ch in curves:
+                curves[ch].append(acc[ch])
         lams = np.array((0.0, *eiv.LAMBDAS))
         return {ch: eiv.SimexResult(np.array([eiv.extrapolate(lams, E[:, j]) for j in range(E.shape[1])]),
-                                    np.array([eiv.extrapolation_spread(lams, E[:, j]) for j in range(E.shape[1])]), E[0].copy())
+                                    np.array([eiv.extrapolation_spread(lams, E[:, j]) for j in range(E.shape[1])]),
+                                    E[0].copy())
                 for ch, E in ((ch, np.array(rows)) for ch, rows in curves.items())}
     return simex
 
-rows = []
-specs = [("seed-rlv", "/tmp/gs-rlv"), ("OV10", "/tmp/aerosid-attrib-ab2"), ("pa28", "/tmp/aerosid-attrib-ab2"), ("F4N", "/tmp/aerosid-attrib-ab2")]
-for v, cdir in specs:
-    for s in range(10):
-        d = ac.load(v, s, Path(cdir)); veh = d["vehicle_obj"]
-        fd = build_flight_data_segments(d["preprocessed"], d["smoothed"], veh, load_database(veh), "flight")
-        fl = SimpleNamespace(coefficients=d["coefficients"])
-        for mode in ("seq", "crn"):
-            for master in (eiv.SEED, 11, 12):
-                idm.simex_estimates = make(mode, master)
-                ident = idm.identify(fd, veh, bias_pairs=0)  # SIMEX alone, as recorded
+
+def shipped_simex(master: int):
+    """identify's own simex_estimates (antithetic common random numbers) with the draws seeded by `master`."""
+    import aerosid.identification.eiv as eiv
+
+    def simex(*args, **kwargs):
+        return eiv.simex_estimates(*args, **kwargs, seed=master)
+    return simex
+
+
+def one(job: tuple[str, int]) -> list[dict]:
+    """The rows of one cached flight: every scheme with every draw seed."""
+    import aerosid.identification.eiv as eiv
+    import aerosid.identification.identify as idm
+
+    v, s = job
+    data = attribution_cache.load(v, s)
+    veh, fd = data["vehicle_obj"], data["flight_data"]
+    flight = SimpleNamespace(coefficients=data["coefficients"])
+    original = idm.simex_estimates
+    rows = []
+    try:
+        for mode in MODES:
+            for master in (eiv.SEED, *MASTERS_EXTRA):
+                idm.simex_estimates = shipped_simex(master) if mode == "anti" else legacy_simex(mode, master)
+                with warnings.catch_warnings():
+                    warnings.simplefilter("ignore")
+                    ident = idm.identify(fd, veh, bias_pairs=0)
                 row = {"vehicle": v, "seed": s, "mode": mode, "master": master}
-                for c in ("Cm_alpha", "Cm_delta", "damping"):
-                    tr = truth_of(fl, c); est, se = estimate_of(ident, c)
-                    row[c] = 100 * (est / tr - 1); row[c + "_cov"] = abs(est - tr) <= 1.96 * se
+                for c in COEFFICIENTS:
+                    tr = truth_of(flight, c)
+                    est, se = estimate_of(ident, c)
+                    row[c] = 100 * (est / tr - 1)
+                    row[c + "_sig"] = 100 * abs(se / tr)
+                    row[c + "_cov"] = bool(abs(est - tr) <= 1.96 * se)
                 rows.append(row)
-        print(v, s, flush=True)
-    df = pd.DataFrame(rows); df.to_csv("/tmp/gs_crn.csv", index=False)
-df = pd.DataFrame(rows)
-for (v, mode), g in df.groupby(["vehicle", "mode"], sort=False):
-    out = [f"{v:8s} {mode}"]
-    for c in ("Cm_alpha", "Cm_delta", "damping"):
-        mc = g.groupby("seed")[c].std().mean()  # MC scatter across master seeds
-        d0 = g[g.master == eiv.SEED]
-        out.append(f"{c}: mean {d0[c].mean():+.1f} rms {np.sqrt((d0[c]**2).mean()):.1f} cov {d0[c+'_cov'].mean():.0%} MC-sd {mc:.2f}")
-    print(" | ".join(out))
+    finally:
+        idm.simex_estimates = original
+    print(v, s, flush=True)
+    return rows
+
+
+def run(vehicles: list[str], seeds: list[int], jobs: int = 1) -> pd.DataFrame:
+    todo = [(v, s) for v in vehicles for s in seeds]
+    for job in todo:  # build the caches first, one at a time
+        attribution_cache.load(*job)
+    if jobs > 1:
+        from multiprocessing import Pool
+
+        with Pool(jobs) as pool:
+            parts = pool.map(one, todo)
+    else:
+        parts = [one(job) for job in todo]
+    return pd.DataFrame([row for part in parts for row in part])
+
+
+def report(df: pd.DataFrame, seeds: list[int], wall_s: float) -> str:
+    out = ["# Monte-Carlo error of the SIMEX correction: three ways of drawing its noise", "",
+           f"{date.today().isoformat()}, Python {platform.python_version()}, {platform.processor() or platform.machine()}; "
+           f"seeds {seeds[0]}..{seeds[-1]} per vehicle; wall {wall_s / 60:.1f} min.  "
+           "`python bench/bench_simex_mc.py` (docstring: the schemes and the columns).", "",
+           "Per coefficient: mean / RMS error % of the truth, mean sigma %, 95 % coverage, and MC-sd: how much a "
+           "flight's estimate moves with the seed of SIMEX's draws (1 sd over 3 draw seeds, %, averaged).", ""]
+    for v, gv in df.groupby("vehicle", sort=False):
+        out += [f"## {v}", "", "| coefficient | " + " | ".join(f"{m}: mean / RMS / sigma / cov / MC-sd" for m in MODES) + " |",
+                "|---|" + "---|" * len(MODES)]
+        for c in COEFFICIENTS:
+            if gv[c].isna().all():
+                continue
+            cells = []
+            for m in MODES:
+                g = gv[gv["mode"] == m]
+                mc = g.groupby("seed")[c].std().mean()
+                cells.append(f"{g[c].mean():+.1f} / {np.sqrt((g[c] ** 2).mean()):.1f} / {g[c + '_sig'].mean():.1f} / "
+                             f"{g[c + '_cov'].mean():.0%} / **{mc:.2f}**")
+            out.append(f"| {c} | " + " | ".join(cells) + " |")
+        out.append("")
+    return "\n".join(out)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--vehicles", default="F4N,OV10,pa28,seed-rlv,T37,c172x")
+    ap.add_argument("--seeds", default="0-2")
+    ap.add_argument("--out", default="simex_mc")
+    ap.add_argument("--jobs", type=int, default=1)
+    args = ap.parse_args()
+    seeds = parse_seeds(args.seeds)
+    t0 = time.perf_counter()
+    df = run(args.vehicles.split(","), seeds, args.jobs)
+    df.to_csv(RESULTS / f"{args.out}_runs.csv", index=False)
+    (RESULTS / f"{args.out}.md").write_text(report(df, seeds, time.perf_counter() - t0) + "\n")
+
+
+if __name__ == "__main__":
+    main()
