@@ -12,10 +12,9 @@ MIN_WINDOW_CONSISTENCY = 0.7
 MIN_VARIANCE_SHARE = 0.01
 """Smallest share of the residual variance a significant finding must explain."""
 SIMEX_REPLICATES = 8
-"""Replicates per extra-noise level."""
+"""Replicates per extra-noise level of the SIMEX check (even: antithetic pairs, aerosid.identification.eiv.simex_frames)."""
 SIMEX_LAMBDAS = (1.0, 2.0)
 """Extra angle-noise variances (in units of sigma^2) of the SIMEX check; quadratic extrapolation to -1."""
-"""Replicates of the extra angle noise in the SIMEX check."""
 SIMEX_SEED = 20240613
 """Seed of the SIMEX extra noise (the diagnosis is deterministic)."""
 FLAG_RATIO = 1.5

@@ -164,9 +164,9 @@ def with_rate_noise(fd: pd.DataFrame, noise: np.ndarray, copy: bool = True) -> p
 
 
 def simex_frames(fd: pd.DataFrame, sigma_rad, cutoff_hz: float | None, rate_sigma: tuple | None = None,
-                 rate_cutoff_hz=None, seed: int = SEED):
-    """The remeasured flight data SIMEX refits: yields (lambda, frame) REPLICATES times for each
-    lambda in LAMBDAS, the frame being ``fd`` with extra noise of variance lambda x sigma^2 on
+                 rate_cutoff_hz=None, seed: int = SEED, lambdas: tuple = LAMBDAS, replicates: int = REPLICATES):
+    """The remeasured flight data SIMEX refits: yields (lambda, frame) `replicates` times (even;
+    REPLICATES) for each lambda in `lambdas` (LAMBDAS), the frame being ``fd`` with extra noise of variance lambda x sigma^2 on
     the angles (sigma_rad: as angle_noise; None: the angles are exact) and, given rate_sigma, on
     p, q, r (rate_noise; None: the rates are exact).
 
@@ -180,14 +180,16 @@ def simex_frames(fd: pd.DataFrame, sigma_rad, cutoff_hz: float | None, rate_sigm
     rate_sigma the angles' frames are the same whatever the rates' generator would draw.  The
     frames share no arrays with ``fd`` or with each other, except that ``fd`` itself is yielded
     when there is no noise to add: read them, do not write them."""
+    if replicates % 2:
+        raise ValueError(f"replicates must be even (antithetic pairs), not {replicates}")
     groups = segment_keys(fd)
     t = fd["t_s"].to_numpy(float)
-    for k in range(REPLICATES // 2):
+    for k in range(replicates // 2):
         d_angles = (angle_noise(np.random.default_rng([seed, k]), groups, t, sigma_rad, cutoff_hz)
                     if sigma_rad is not None else None)
         d_rates = (rate_noise(np.random.default_rng([seed, k, 1]), groups, t, rate_sigma, rate_cutoff_hz)
                    if rate_sigma is not None else None)
-        for lam in LAMBDAS:
+        for lam in lambdas:
             for sign in (1.0, -1.0):
                 scale = sign * np.sqrt(lam)
                 f = fd
