@@ -364,11 +364,13 @@ def _simex_fraction(simex: dict, model: ChannelModel, c: Candidate, y: np.ndarra
             else:
                 base = cache[key]
             A = np.column_stack([base, c.regressor(sig)])
-            if np.all(np.isfinite(A)):
-                th.append(_scaled_lstsq(A, y)[-1])
-        if not th:
+            th.append(_scaled_lstsq(A, y)[-1] if np.all(np.isfinite(A)) else math.nan)
+        # the draws come in antithetic pairs (i, i + 1): a pair with a non-finite design is
+        # dropped whole, so the terms odd in the noise still cancel in the rest
+        pairs = [(a_, b_) for a_, b_ in zip(th[0::2], th[1::2]) if math.isfinite(a_) and math.isfinite(b_)]
+        if not pairs:
             return float("nan")
-        means.append(float(np.mean(th)))
+        means.append(float(np.mean(pairs)))
     lam = np.array((0.0, *SIMEX_LAMBDAS))
     coef = np.polyfit(lam, np.array([est, *means]), 2 if len(SIMEX_LAMBDAS) >= 2 else 1)
     theta_0 = float(np.polyval(coef, -1.0))

@@ -15,6 +15,8 @@ SIMEX_REPLICATES = 8
 """Replicates per extra-noise level of the SIMEX check (even: antithetic pairs, aerosid.identification.eiv.simex_frames)."""
 SIMEX_LAMBDAS = (1.0, 2.0)
 """Extra angle-noise variances (in units of sigma^2) of the SIMEX check; quadratic extrapolation to -1."""
+if SIMEX_REPLICATES % 2:
+    raise ValueError(f"SIMEX_REPLICATES must be even (antithetic pairs), not {SIMEX_REPLICATES}")
 SIMEX_SEED = 20240613
 """Seed of the SIMEX extra noise (the diagnosis is deterministic)."""
 FLAG_RATIO = 1.5

@@ -220,7 +220,7 @@ def simex_estimates(fd: pd.DataFrame, y_by_channel: dict[str, np.ndarray], desig
 
     naive = fit_all(fd)
     sums = {lam: {ch: np.zeros_like(b) for ch, b in naive.items()} for lam in LAMBDAS}
-    for lam, f in simex_frames(fd, sigma_rad, cutoff_hz, rate_sigma, rate_cutoff_hz, seed):
+    for lam, f in simex_frames(fd, sigma_rad, cutoff_hz, rate_sigma, rate_cutoff_hz, seed, LAMBDAS, REPLICATES):
         for ch, est in fit_all(f).items():
             sums[lam][ch] += est
     lams = np.array((0.0, *LAMBDAS))

@@ -90,7 +90,7 @@ def test_simex_draws_come_in_antithetic_pairs_common_to_every_lambda():
     """simex_frames: pair k moves alpha, beta and the rates by +sqrt(lambda) d_k and -sqrt(lambda) d_k,
     with the same d_k at every lambda (common random numbers), REPLICATES frames per lambda; the
     angles' draws are the same with or without the rates' (their own generators); fd is untouched."""
-    from aerosid.identification.eiv import LAMBDAS, REPLICATES, simex_frames
+    from aerosid.identification.eiv import LAMBDAS, REPLICATES, SEED, simex_frames
 
     t = np.arange(2000) * 0.01
     alpha = 0.01 * np.sin(2 * np.pi * 0.3 * t)
@@ -104,7 +104,14 @@ def test_simex_draws_come_in_antithetic_pairs_common_to_every_lambda():
     pd.testing.assert_frame_equal(fd, before)
     for (lam, f), (lam2, g) in zip(with_rates, angles_only):
         assert lam == lam2
-        np.testing.assert_array_equal(f["alpha_rad"].to_numpy(), g["alpha_rad"].to_numpy())
+        for col in ("alpha_rad", "beta_rad"):
+            np.testing.assert_array_equal(f[col].to_numpy(), g[col].to_numpy())
+    # no seed's rate draws are the next seed's angle draws (the rates' generator is (seed, k, 1); with
+    # (seed + 1, k) q's draw, the second from its stream after p's, was the next seed's beta draw)
+    q_move = with_rates[0][1]["q_rad_s"].to_numpy() - q
+    nxt = next(simex_frames(fd, 0.01, 2.0, seed=SEED + 1))[1]
+    for col, base in (("alpha_rad", alpha), ("beta_rad", 0.0 * t)):
+        assert not np.allclose(q_move, nxt[col].to_numpy() - base)
     for col in cols:
         moves: dict[float, list] = {lam: [] for lam in LAMBDAS}
         for lam, f in with_rates:

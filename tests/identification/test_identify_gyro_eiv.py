@@ -45,9 +45,11 @@ def test_zero_gyro_noise_and_the_switch_off_are_bit_identical_to_the_angle_only_
     on = identify(noisy, veh, models, gyro_eiv=True)  # the comparison above can fail: the gyro noise moves the rate terms
     est_on = on.table().set_index("coefficient")["estimate"]
     est_off = before.table().set_index("coefficient")["estimate"]
-    # the move undoes the attenuation the rate noise makes: about var(noise through the band) / var(q)
-    # (one noisy regressor's closed form; 8.6e-4 against 6.8e-4 when written, the earlier
-    # independent draws' Monte-Carlo error gave more), in the de-attenuating direction
+    # the move undoes the attenuation the DECLARED rate noise would make (eiv_sigma_q, white, through
+    # the 2 Hz band; the frame's own q noise is other and larger): about var(that noise) / var(q), one
+    # noisy regressor's closed form, in the de-attenuating direction (measured move 8.6e-4 against
+    # 6.8e-4 when written: q correlates with the other C_m regressors; the earlier independent
+    # draws' Monte-Carlo error gave more)
     from aerosid.identification.band import band_noise_gain
 
     fs = 1.0 / float(np.median(np.diff(noisy["t_s"].to_numpy(float))))
