@@ -166,9 +166,9 @@ def with_rate_noise(fd: pd.DataFrame, noise: np.ndarray, copy: bool = True) -> p
 def simex_frames(fd: pd.DataFrame, sigma_rad, cutoff_hz: float | None, rate_sigma: tuple | None = None,
                  rate_cutoff_hz=None, seed: int = SEED, lambdas: tuple = LAMBDAS, replicates: int = REPLICATES):
     """The remeasured flight data SIMEX refits: yields (lambda, frame) `replicates` times (even;
-    REPLICATES) for each lambda in `lambdas` (LAMBDAS), the frame being ``fd`` with extra noise of variance lambda x sigma^2 on
-    the angles (sigma_rad: as angle_noise; None: the angles are exact) and, given rate_sigma, on
-    p, q, r (rate_noise; None: the rates are exact).
+    REPLICATES) for each lambda in `lambdas` (LAMBDAS), the frame being ``fd`` with extra noise
+    of variance lambda x sigma^2 on the angles (sigma_rad: as angle_noise; None: the angles are
+    exact) and, given rate_sigma, on p, q, r (rate_noise; None: the rates are exact).
 
     The draws are antithetic common random numbers: pair k draws one unit of noise, from its own
     generator seeded (seed, k) for the angles and (seed, k, 1) for the rates, and adds
