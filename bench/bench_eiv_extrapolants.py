@@ -53,7 +53,7 @@ def _fits(frame: pd.DataFrame, vehicle, corrected: bool = True) -> dict[str, np.
     """naive (and, with `corrected`, quadratic SIMEX and moment-corrected) estimates of the default
     C_m model on the frame's Mach window (cut first, as identify does: the derivatives, the noise
     draws and their low-pass see the same rows)."""
-    from aerosid.identification.eiv import LAMBDAS, REPLICATES, extrapolate, simex_frames
+    from aerosid.identification.eiv import LAMBDAS, REPLICATES, SimexResult, simex_frames
     from aerosid.identification.identify import angle_cutoff_hz, mach_window_mask
     from aerosid.modelling.models import default_models, vehicle_signals
 
@@ -88,7 +88,7 @@ def _fits(frame: pd.DataFrame, vehicle, corrected: bool = True) -> dict[str, np.
     at = np.array([-1.0, 1.0])
     M1 = (at @ np.linalg.lstsq(line, M.reshape(len(lams), -1), rcond=None)[0]).reshape(M.shape[1:])
     v1 = at @ np.linalg.lstsq(line, v, rcond=None)[0]
-    return {"naive": naive, "quadratic": np.array([extrapolate(lams, th[:, j]) for j in range(th.shape[1])]),
+    return {"naive": naive, "quadratic": SimexResult.from_curve(lams, th).corrected,
             "moment": np.linalg.solve(M1, v1), "names": list(model.names)}
 
 
@@ -120,6 +120,11 @@ def one(vehicle: str, seed: int) -> list[dict]:
     return rows
 
 
+def _shortfall_ratio(clean, quadratic, renoised):
+    """shortfall / correction = (clean - quadratic) / (quadratic - renoised), signed."""
+    return (clean - quadratic) / (quadratic - renoised)
+
+
 def report(df: pd.DataFrame, wall_s: float, command: str) -> str:
     sys.path.insert(0, str(Path(__file__).parent))
     from machine import cpu_model
@@ -132,22 +137,19 @@ def report(df: pd.DataFrame, wall_s: float, command: str) -> str:
     piv = df.pivot_table(index=["vehicle", "seed"], columns="fit", values=[f"{k}_pct" for k in TARGETS])
     lines += ["| vehicle | coefficient | clean | renoised | quadratic (SIMEX) | moment (exact extrapolant) "
               "| recovered by SIMEX | shortfall / correction |", "|---|---|---|---|---|---|---|---|"]
+    ratios = []  # abs(shortfall / correction) of every run attenuated by >= 3 %
     for v in df["vehicle"].unique():
         for k in TARGETS:
             p = piv.loc[v][f"{k}_pct"]
             rec = (p["quadratic"] - p["renoised"]) / (p["clean"] - p["renoised"])
-            short = (p["clean"] - p["quadratic"]) / (p["quadratic"] - p["renoised"])
+            short = _shortfall_ratio(p["clean"], p["quadratic"], p["renoised"])
             cell = lambda s: f"{s.mean():+.1f} ({s.std():.1f})"  # noqa: E731
             big = (p["clean"] - p["renoised"]).abs() >= 3.0  # attenuation of 3 % or more: ratios meaningful
             lines.append(f"| {v} | {k} | {cell(p['clean'])} | {cell(p['renoised'])} | {cell(p['quadratic'])} | "
                          f"{cell(p['moment'])} | "
                          + (f"{rec[big].median():.0%} ({int(big.sum())} runs)" if big.any() else "-") + " | "
                          + (f"{short[big].median():.2f}" if big.any() else "-") + " |")
-    ratios = []
-    for k in TARGETS:
-        p = piv[f"{k}_pct"]
-        big = (p["clean"] - p["renoised"]).abs() >= 3.0
-        ratios += list(((p["clean"] - p["quadratic"]) / (p["quadratic"] - p["renoised"])).abs()[big])
+            ratios += list(short[big].abs())
     r = pd.Series(ratios)
     lines += ["", "recovered / shortfall: medians over the runs whose attenuation (clean - renoised) is at least "
               "3 % of the truth.", "",
@@ -217,7 +219,7 @@ def rlv_report(df: pd.DataFrame, share: float) -> str:
     d = df.copy()
     d["attenuation_pct"] = 100 * (d["clean"].abs() - d["renoised"].abs()) / d["clean"].abs()
     d["recovered"] = (d["quadratic"] - d["renoised"]) / (d["clean"] - d["renoised"])
-    d["ratio"] = ((d["clean"] - d["quadratic"]) / (d["quadratic"] - d["renoised"])).abs()
+    d["ratio"] = _shortfall_ratio(d["clean"], d["quadratic"], d["renoised"]).abs()
     d["z_spread"] = (d["quadratic"] - d["clean"]).abs() / d["spread"]
     d["z_share"] = (d["quadratic"] - d["clean"]).abs() / np.maximum(d["spread"], share * (d["quadratic"] - d["renoised"]).abs())
     big = d["attenuation_pct"].abs() >= 3.0

@@ -80,10 +80,7 @@ def legacy_simex(mode: str, master: int):
             for ch in curves:
                 curves[ch].append(acc[ch])
         lams = np.array((0.0, *eiv.LAMBDAS))
-        return {ch: eiv.SimexResult(np.array([eiv.extrapolate(lams, E[:, j]) for j in range(E.shape[1])]),
-                                    np.array([eiv.extrapolation_spread(lams, E[:, j]) for j in range(E.shape[1])]),
-                                    E[0].copy())
-                for ch, E in ((ch, np.array(rows)) for ch, rows in curves.items())}
+        return {ch: eiv.SimexResult.from_curve(lams, np.array(rows)) for ch, rows in curves.items()}
     return simex
 
 
@@ -130,8 +127,9 @@ def one(job: tuple[str, int]) -> list[dict]:
 
 def run(vehicles: list[str], seeds: list[int], jobs: int = 1) -> pd.DataFrame:
     todo = [(v, s) for v in vehicles for s in seeds]
-    for job in todo:  # build the caches first, one at a time
-        attribution_cache.load(*job)
+    for job in todo:  # build the missing caches first, one at a time
+        if not attribution_cache.cache_path(*job).exists():
+            attribution_cache.build(*job)
     if jobs > 1:
         from multiprocessing import Pool
 

@@ -224,13 +224,8 @@ def simex_estimates(fd: pd.DataFrame, y_by_channel: dict[str, np.ndarray], desig
         for ch, est in fit_all(f).items():
             sums[lam][ch] += est
     lams = np.array((0.0, *LAMBDAS))
-    out = {}
-    for ch, b in naive.items():
-        E = np.array([b, *(sums[lam][ch] / REPLICATES for lam in LAMBDAS)])
-        out[ch] = SimexResult(np.array([extrapolate(lams, E[:, j]) for j in range(E.shape[1])]),
-                              np.array([extrapolation_spread(lams, E[:, j]) for j in range(E.shape[1])]),
-                              E[0].copy())
-    return out
+    return {ch: SimexResult.from_curve(lams, np.array([b, *(sums[lam][ch] / REPLICATES for lam in LAMBDAS)]))
+            for ch, b in naive.items()}
 
 
 @dataclass(frozen=True)
@@ -243,6 +238,14 @@ class SimexResult:
     corrected: np.ndarray
     spread: np.ndarray
     naive: np.ndarray
+
+    @classmethod
+    def from_curve(cls, lams: np.ndarray, curve: np.ndarray) -> "SimexResult":
+        """From the SIMEX curve: curve[i] the coefficient vector averaged at lams[i] (lams[0] = 0,
+        the naive fit), each coefficient extrapolated to lambda = -1 (:func:`extrapolate`)."""
+        cols = range(curve.shape[1])
+        return cls(np.array([extrapolate(lams, curve[:, j]) for j in cols]),
+                   np.array([extrapolation_spread(lams, curve[:, j]) for j in cols]), curve[0].copy())
 
     def std_error(self, naive_std_error: np.ndarray, *, correction_share: float) -> np.ndarray:
         """The corrected estimates' sigma: the naive fit's sigma scaled by the correction
