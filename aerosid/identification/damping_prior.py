@@ -74,13 +74,20 @@ class SplitUpdate:
     share_data_sigma: float
     share_post: float
     prior: tuple[float, float]
+    reliability: float = 1.0
 
     def summary(self) -> str:
         f0, sf = self.prior
-        return (f"pitch-damping split: C_m,alpha_dot / (C_m,q + C_m,alpha_dot) = {self.share_data:.2f} "
+        text = (f"pitch-damping split: C_m,alpha_dot / (C_m,q + C_m,alpha_dot) = {self.share_data:.2f} "
                 f"+- {self.share_data_sigma:.2f} from this flight, prior {f0:.2f} +- {sf:.2f} (downwash lag, "
                 f"mixed estimation), combined {self.share_post:.2f}; the other estimates and sigma include the "
                 "prior (aerosid.identification.damping_prior)")
+        if self.reliability < 1.0:
+            text += (f"; only {self.reliability:.0%} of this flight's information on the split is signal, the rest "
+                     "is the angles' noise (through alpha_dot_hat): sigma counts the split as uncertain as that "
+                     "share and the prior leave it (C_m,alpha, C_m,q and C_m,alpha_dot widen; a manoeuvre that "
+                     "separates alpha-dot from q, or angles with less noise, would determine it)")
+        return text
 
 
 def _share(theta: np.ndarray, cov: np.ndarray, iq: int, ia: int, cq: float, ca: float) -> tuple[float, float]:
@@ -94,9 +101,18 @@ def _share(theta: np.ndarray, cov: np.ndarray, iq: int, ia: int, cq: float, ca: 
     return float(f), float(math.sqrt(max(g @ cov @ g, 0.0)))
 
 
+def split_row(k: int, iq: int, ia: int, share: float, factors: tuple[float, float]) -> np.ndarray:
+    """The prior's row r (length k): r theta = (1 - share) C_m,alpha_dot - share C_m,q, zero at the
+    prior's split."""
+    cq, ca = (float(c) for c in factors)
+    r = np.zeros(k)
+    r[iq], r[ia] = -share * cq, (1.0 - share) * ca
+    return r
+
+
 def split_update(estimate, cov, iq: int, ia: int, share: float = PRIOR_SHARE,
-                 share_sigma: float = PRIOR_SHARE_SIGMA, factors: tuple[float, float] = (1.0, 1.0)
-                 ) -> SplitUpdate | str:
+                 share_sigma: float = PRIOR_SHARE_SIGMA, factors: tuple[float, float] = (1.0, 1.0),
+                 reliability: float = 1.0, coupling=None) -> SplitUpdate | str:
     """The posterior of (estimate, cov) given the prior C_m,alpha_dot = share x D +- share_sigma x D,
     D = C_m,q + C_m,alpha_dot (the damping as estimated; its own variance is added to the
     prior's, so a damping the flight hardly determines does not turn the prior into a constraint).
@@ -104,7 +120,16 @@ def split_update(estimate, cov, iq: int, ia: int, share: float = PRIOR_SHARE,
     iq, ia: the positions of the q_hat and alpha_dot_hat terms; factors: their expressions'
     factors (a term ``2*q_hat`` has C_m,q = 2 x its coefficient).  Terms whose estimate is not
     finite (not identifiable) are left as they are.  A string saying why when the prior cannot
-    be applied (those two not finite, or a damping of exactly zero with no uncertainty)."""
+    be applied (those two not finite, or a damping of exactly zero with no uncertainty).
+
+    reliability (in [0, 1]): the share of the flight's information on the split that is signal
+    (aerosid.identification.eiv.information_reliability; the rest is the regressors' noise,
+    which decorrelates alpha_dot_hat from q_hat and alpha and so makes the split look
+    determined).  The estimate is the update above, but its covariance is widened along the
+    split to the posterior variance the flight's *signal* information and the prior give,
+    1 / (reliability / v + 1 / s2) (v, s2: the flight's and the prior's variance of r theta;
+    reliability 0: the prior's alone), mapped into the other coefficients through the
+    posterior's own correlation with r theta."""
     theta = np.array(estimate, float)
     P = np.array(cov, float)
     cq, ca = (float(c) for c in factors)
@@ -122,8 +147,7 @@ def split_update(estimate, cov, iq: int, ia: int, share: float = PRIOR_SHARE,
     w = np.zeros(sub.size)
     w[jq], w[ja] = cq, ca
     damping = float(w @ th)
-    r = np.zeros(sub.size)
-    r[jq], r[ja] = -share * cq, (1.0 - share) * ca
+    r = split_row(sub.size, jq, ja, share, (cq, ca))
     s2 = share_sigma ** 2 * (damping ** 2 + float(w @ Ps @ w))
     if not s2 > 0:
         return "the estimated pitch damping is zero with no uncertainty (nothing to scale the prior by)"
@@ -131,13 +155,25 @@ def split_update(estimate, cov, iq: int, ia: int, share: float = PRIOR_SHARE,
     den = float(r @ Pr) + s2
     post = th - Pr * float(r @ th) / den
     P_post = Ps - np.outer(Pr, Pr) / den
+    reliability = float(np.clip(reliability, 0.0, 1.0)) if math.isfinite(reliability) else 0.0
+    v_data = float(r @ Pr)
+    if reliability < 1.0 and v_data > 0:
+        # widen along r theta to the variance the flight's signal information and the prior give
+        v_post = 1.0 / (1.0 / v_data + 1.0 / s2)
+        extra = 1.0 / (reliability / v_data + 1.0 / s2) - v_post
+        g = P_post @ r / float(r @ P_post @ r)
+        if coupling is not None:
+            c = np.asarray(coupling, float)[sub]
+            if np.all(np.isfinite(c)) and abs(float(r @ c)) > 0:
+                g = c / float(r @ c)
+        P_post = P_post + extra * np.outer(g, g)
     P_post = 0.5 * (P_post + P_post.T)  # symmetric to rounding
     est_out, cov_out = theta.copy(), P.copy()
     est_out[sub] = post
     cov_out[np.ix_(sub, sub)] = P_post
     f_data, sf_data = _share(th, Ps, jq, ja, cq, ca)
     f_post, _ = _share(post, P_post, jq, ja, cq, ca)
-    return SplitUpdate(est_out, cov_out, f_data, sf_data, f_post, (float(share), float(share_sigma)))
+    return SplitUpdate(est_out, cov_out, f_data, sf_data, f_post, (float(share), float(share_sigma)), reliability)
 
 
 def damping_terms(expressions) -> tuple[tuple[int, float], tuple[int, float]] | None:

@@ -214,18 +214,20 @@ def simex_estimates(fd: pd.DataFrame, y_by_channel: dict[str, np.ndarray], desig
     number, or one per sample).  Both noises are added in the same draws (one lambda scales
     every variance): :func:`simex_frames`, seeded by ``seed``.
     """
-    def fit_all(frame: pd.DataFrame) -> dict[str, np.ndarray]:
+    def fit_all(frame: pd.DataFrame) -> dict[str, tuple[np.ndarray, np.ndarray]]:
         X = design(frame)
-        return {ch: np.linalg.lstsq(X[ch], y, rcond=None)[0] for ch, y in y_by_channel.items()}
+        return {ch: (np.linalg.lstsq(X[ch], y, rcond=None)[0], X[ch].T @ X[ch]) for ch, y in y_by_channel.items()}
 
     naive = fit_all(fd)
-    sums = {lam: {ch: np.zeros_like(b) for ch, b in naive.items()} for lam in LAMBDAS}
+    sums = {lam: {ch: [np.zeros_like(b), np.zeros_like(g)] for ch, (b, g) in naive.items()} for lam in LAMBDAS}
     for lam, f in simex_frames(fd, sigma_rad, cutoff_hz, rate_sigma, rate_cutoff_hz, seed, LAMBDAS, REPLICATES):
-        for ch, est in fit_all(f).items():
-            sums[lam][ch] += est
+        for ch, (est, gram) in fit_all(f).items():
+            sums[lam][ch][0] += est
+            sums[lam][ch][1] += gram
     lams = np.array((0.0, *LAMBDAS))
-    return {ch: SimexResult.from_curve(lams, np.array([b, *(sums[lam][ch] / REPLICATES for lam in LAMBDAS)]))
-            for ch, b in naive.items()}
+    return {ch: SimexResult.from_curve(lams, np.array([b, *(sums[lam][ch][0] / REPLICATES for lam in LAMBDAS)]),
+                                       np.array([g, *(sums[lam][ch][1] / REPLICATES for lam in LAMBDAS)]))
+            for ch, (b, g) in naive.items()}
 
 
 @dataclass(frozen=True)
@@ -238,14 +240,20 @@ class SimexResult:
     corrected: np.ndarray
     spread: np.ndarray
     naive: np.ndarray
+    #: X^T X of the naive fit and X^T X extrapolated to no noise (None: not given).
+    gram_naive: np.ndarray | None = None
+    gram_corrected: np.ndarray | None = None
 
     @classmethod
-    def from_curve(cls, lams: np.ndarray, curve: np.ndarray) -> "SimexResult":
+    def from_curve(cls, lams: np.ndarray, curve: np.ndarray, grams: np.ndarray | None = None) -> "SimexResult":
         """From the SIMEX curve: curve[i] the coefficient vector averaged at lams[i] (lams[0] = 0,
-        the naive fit), each coefficient extrapolated to lambda = -1 (:func:`extrapolate`)."""
+        the naive fit), each coefficient extrapolated to lambda = -1 (:func:`extrapolate`).
+        grams (optional): X^T X averaged at each lams[i], extrapolated to lambda = -1 by a straight
+        line (:func:`noise_free_gram`)."""
         cols = range(curve.shape[1])
+        gn, gc = (None, None) if grams is None else (np.array(grams[0], float), noise_free_gram(lams, grams))
         return cls(np.array([extrapolate(lams, curve[:, j]) for j in cols]),
-                   np.array([extrapolation_spread(lams, curve[:, j]) for j in cols]), curve[0].copy())
+                   np.array([extrapolation_spread(lams, curve[:, j]) for j in cols]), curve[0].copy(), gn, gc)
 
     def std_error(self, naive_std_error: np.ndarray, *, correction_share: float) -> np.ndarray:
         """The corrected estimates' sigma: the naive fit's sigma scaled by the correction
@@ -258,6 +266,53 @@ class SimexResult:
         correction = np.abs(np.asarray(self.corrected, float) - np.asarray(self.naive, float))
         own = np.maximum(self.spread, correction_share * np.where(np.isnan(correction), 0.0, correction))
         return np.hypot(np.asarray(naive_std_error, float) * ratio, own)
+
+
+def noise_free_gram(lams: np.ndarray, grams: np.ndarray) -> np.ndarray:
+    """X^T X extrapolated to lambda = -1 (no noise) by a least-squares line through its
+    averages at ``lams``.  For columns linear in the noise, E[X^T X] grows exactly linearly with
+    lambda (the added noise's variance), and the antithetic pairs cancel the cross terms
+    draw by draw, so the line is exact up to the draws' N^T N error."""
+    lams = np.asarray(lams, float)
+    g = np.asarray(grams, float)
+    coef = np.linalg.lstsq(np.vander(lams, 2), g.reshape(len(lams), -1), rcond=None)[0]
+    out = (np.array([-1.0, 1.0]) @ coef).reshape(g.shape[1:])
+    return 0.5 * (out + out.T)
+
+
+def information_reliability(gram_naive: np.ndarray, gram_corrected: np.ndarray, direction) -> float:
+    """The share of the flight's apparent information on the combination ``direction`` . theta
+    that is signal, not regressor noise: I_signal / I_naive with I = 1 / (d^T G^-1 d) for the
+    naive X^T X and the one extrapolated to no noise (noise adds to X^T X, and along a direction
+    where the regressors hardly vary it can supply most of it: alpha_dot_hat read off a noisy
+    vane angle, on a flight that barely separates alpha-dot from q and alpha).  In [0, 1]; 0 when
+    the noise-free information along d is not positive (the noise supplies all of it)."""
+    d = np.asarray(direction, float)
+    try:
+        vn = float(d @ np.linalg.solve(np.asarray(gram_naive, float), d))
+        vc = float(d @ np.linalg.solve(np.asarray(gram_corrected, float), d))
+    except np.linalg.LinAlgError:
+        return 0.0
+    if not (vn > 0 and np.isfinite(vn)) or not (vc > 0 and np.isfinite(vc)):
+        return 0.0
+    return float(min(vn / vc, 1.0))
+
+
+def profile_direction(gram: np.ndarray, j: int) -> np.ndarray | None:
+    """How the coefficients follow a change of coefficient j when the others refit to keep the
+    fit (the columns' Gram matrix ``gram``): 1 at j, -G_oo^-1 G_oj at the others (the
+    omitted-variable direction: what the others absorb of a part of column j's effect).  Needs
+    only the other columns' block to be positive definite, so it holds where the noise-free
+    information on j itself is gone; None when that block is singular."""
+    g = np.asarray(gram, float)
+    others = [i for i in range(g.shape[0]) if i != j]
+    out = np.zeros(g.shape[0])
+    out[j] = 1.0
+    try:
+        out[others] = -np.linalg.solve(g[np.ix_(others, others)], g[others, j])
+    except np.linalg.LinAlgError:
+        return None
+    return out if np.all(np.isfinite(out)) else None
 
 
 def extrapolate(lams: np.ndarray, est: np.ndarray) -> float:

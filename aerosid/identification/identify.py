@@ -14,12 +14,14 @@ import numpy as np
 import pandas as pd
 
 from aerosid.modelling.aeromodel import AeroModel
-from aerosid.identification.eiv import CORRECTION_SHARE, simex_estimates
+from aerosid.identification.eiv import (CORRECTION_SHARE, information_reliability, profile_direction,
+                                        simex_estimates)
 from aerosid.identification.crb import identification_bounds
 from aerosid.modelling.models import ChannelModel, default_models, signals_from_flight_data, vehicle_signals
 from aerosid.plausibility.estimates import preflight_departure
 from aerosid.identification.regression import LinearFit, fit_linear, with_corrected_estimate, with_posterior
-from aerosid.identification.damping_prior import PRIOR_SHARE, PRIOR_SHARE_SIGMA, damping_terms, split_update
+from aerosid.identification.damping_prior import (PRIOR_SHARE, PRIOR_SHARE_SIGMA, damping_terms, split_row,
+                                                   split_update)
 from aerosid.vehicles.vehicle import Vehicle
 
 #: Coefficients that are slopes per radian (the report prints them per degree); the rest are per unit term.
@@ -261,7 +263,8 @@ def _eiv_corrected(fd: pd.DataFrame, vehicle: Vehicle, models: dict, fits: dict,
                    "SIMEX's quadratic extrapolant leaves part of a large attenuation, or overshoots it); residual "
                    "statistics are the uncorrected fit's")
     return {ch: with_corrected_estimate(f, corrected[ch].corrected, note,
-                                        corrected[ch].std_error(f.std_error, correction_share=share))
+                                        corrected[ch].std_error(f.std_error, correction_share=share),
+                                        (corrected[ch].gram_naive, corrected[ch].gram_corrected))
             if ch in corrected else f for ch, f in fits.items()}
 
 
@@ -345,12 +348,28 @@ def with_pitch_damping_prior(vehicle: Vehicle, models: dict, fits: dict) -> tupl
         return fits, {}
     share, sigma = (PRIOR_SHARE, PRIOR_SHARE_SIGMA) if setting is True else setting
     (iq, cq), (ia, ca) = terms
-    upd = split_update(fit.estimate, fit.cov, iq, ia, share, sigma, (cq, ca))
+    upd = split_update(fit.estimate, fit.cov, iq, ia, share, sigma, (cq, ca),
+                       *split_information(fit, iq, ia, share, (cq, ca)))
     if isinstance(upd, str):
         note = f"pitch-damping split prior not applied: {upd} (aerosid.identification.damping_prior)"
         return {**fits, "Cm": replace(fit, warnings=tuple(fit.warnings) + (note,))}, {}
     return ({**fits, "Cm": with_posterior(fit, upd.estimate, upd.cov, upd.summary())},
             {"Cm": (fit.names[iq], fit.names[ia])})
+
+
+def split_information(fit: LinearFit, iq: int, ia: int, share: float, factors: tuple[float, float]
+                      ) -> tuple[float, np.ndarray | None]:
+    """(reliability, coupling) of the pitch-damping split for damping_prior.split_update, from the
+    errors-in-variables correction's X^T X (LinearFit.information_eiv): the share of the fit's
+    apparent information on the split that is signal (eiv.information_reliability along the
+    prior's row, damping_prior.split_row), and how the other coefficients follow C_m,alpha_dot
+    on the noise-free regressors (eiv.profile_direction).  (1, None) when the fit has none
+    (exact angles) or a coefficient is not finite."""
+    if fit.information_eiv is None or not np.all(np.isfinite(fit.estimate)):
+        return 1.0, None
+    gram_naive, gram_corrected = fit.information_eiv
+    row = split_row(fit.estimate.size, iq, ia, share, factors)
+    return information_reliability(gram_naive, gram_corrected, row), profile_direction(gram_corrected, ia)
 
 
 #: Widen the sigma of the coefficients that depend on a term the flight does not determine

@@ -68,6 +68,11 @@ class LinearFit:
     identifiable: np.ndarray
     has_intercept: bool
     warnings: tuple[str, ...] = field(default=())
+    #: (X^T X of the fit's columns, the same extrapolated to no regressor noise) from the
+    #: errors-in-variables correction's draws (aerosid.identification.eiv.SimexResult); None
+    #: without one.  Their ratio along a direction is how much of the flight's apparent
+    #: information there is signal (eiv.information_reliability).
+    information_eiv: tuple | None = None
 
     # ---- statsmodels-flavoured aliases
     @property

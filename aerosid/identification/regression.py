@@ -216,11 +216,12 @@ def with_posterior(fit: LinearFit, estimate: np.ndarray, cov: np.ndarray, note: 
 
 
 def with_corrected_estimate(fit: LinearFit, estimate: np.ndarray, note: str,
-                            std_error: np.ndarray | None = None) -> LinearFit:
+                            std_error: np.ndarray | None = None, information: tuple | None = None) -> LinearFit:
     """The same fit with another estimate vector (e.g. corrected for errors in the
     regressors); t, p and the intervals follow it; `std_error` (optional) replaces the
     corrected sigma (the covariance is rescaled to it, correlations kept); the plain OLS
-    sigma and the residual statistics stay those of the fit; `note` is added to its warnings."""
+    sigma and the residual statistics stay those of the fit; `note` is added to its warnings;
+    `information` (optional): the correction's (naive, noise-free) X^T X (LinearFit.information_eiv)."""
     est = np.asarray(estimate, dtype=float)
     se, cov = fit.std_error, fit.cov
     if std_error is not None:
@@ -233,7 +234,8 @@ def with_corrected_estimate(fit: LinearFit, estimate: np.ndarray, note: str,
     p = 2.0 * scipy.stats.t.sf(np.abs(t), fit.dof_eff)
     return dataclasses.replace(fit, estimate=_as_readonly(est), std_error=_as_readonly(se), cov=_as_readonly(cov),
                                t_values=_as_readonly(t), p_values=_as_readonly(p),
-                               warnings=tuple(fit.warnings) + (note,))
+                               warnings=tuple(fit.warnings) + (note,),
+                               information_eiv=fit.information_eiv if information is None else information)
 
 
 def fit_linear(

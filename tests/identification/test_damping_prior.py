@@ -108,6 +108,37 @@ def test_posterior_intervals_cover_a_truth_inside_the_prior_and_are_narrower_whe
     assert np.median(ratio) < 0.5
 
 
+def test_a_flight_whose_split_information_is_noise_gets_the_priors_uncertainty_not_a_new_estimate():
+    """reliability (the signal's share of the flight's information on the split): 1 is the plain
+    update bit for bit; below 1 the estimate stays and the variance of r theta becomes
+    1 / (reliability / v + 1 / s2) (0: the prior's s2 alone), every sigma growing as it falls and
+    the other coefficients following the given coupling."""
+    X, theta, P = _flight(3, 800, 0.5, 2e-3)
+    w, r = _damping_and_split_rows()
+    s2 = PRIOR_SHARE_SIGMA ** 2 * ((theta[IQ] + theta[IA]) ** 2 + w @ P @ w)
+    v = r @ P @ r
+    plain = split_update(theta, P, IQ, IA)
+    same = split_update(theta, P, IQ, IA, reliability=1.0)
+    assert np.array_equal(same.estimate, plain.estimate) and np.array_equal(same.cov, plain.cov)
+    sd_before = np.sqrt(np.diag(plain.cov))
+    coupling = np.array([0.0, 0.01, -1.0, 1.0])  # alpha follows alpha-dot, q compensates
+    for rel in (0.5, 0.1, 0.0):
+        for c in (None, coupling):
+            upd = split_update(theta, P, IQ, IA, reliability=rel, coupling=c)
+            assert np.array_equal(upd.estimate, plain.estimate)
+            assert abs(r @ upd.cov @ r / (1.0 / (rel / v + 1.0 / s2)) - 1) < 1e-9
+            sd = np.sqrt(np.diag(upd.cov))
+            assert np.all(sd >= sd_before * (1 - 1e-12))
+            assert upd.reliability == rel and (rel == 1.0 or "only" in upd.summary())
+            sd_before_rel = sd
+        assert np.all(sd_before_rel >= sd_before * (1 - 1e-12))
+    # with the coupling, the extra variance lies along it: C_m,alpha's grows by 0.01^2 x the extra
+    upd = split_update(theta, P, IQ, IA, reliability=0.0, coupling=coupling)
+    extra = s2 - plain.cov.dot(r).dot(r)
+    g = coupling / (r @ coupling)
+    assert np.allclose(upd.cov - plain.cov, extra * np.outer(g, g), rtol=1e-9, atol=1e-18)
+
+
 def test_the_share_sigma_is_the_delta_method_of_the_fit_covariance():
     """Against a Monte-Carlo of the share over draws from the fit's own Gaussian."""
     X, theta, P = _flight(4, 4000, 2.0, 2e-3)
@@ -215,6 +246,31 @@ def test_identify_combines_the_prior_into_an_aircrafts_pitch_fit_and_says_so(c17
     assert not np.allclose(f.estimate, fits["Cm"].estimate)
     assert any("pitch-damping split" in w for w in f.warnings)
     assert np.all(f.std_error <= fits["Cm"].std_error * (1 + 1e-12))
+
+
+def test_identify_widens_the_split_where_the_angle_noise_supplies_its_information():
+    """A fit whose errors-in-variables correction says the noise-free alpha_dot_hat column carries
+    no information of its own (X^T X extrapolated to no noise: the alpha-dot column's variance
+    all noise): the estimates are the plain prior's, C_m,alpha's sigma grows, and the fit says so."""
+    # alpha_dot_hat's independent part (collinear 0.5) looks like information: it is the noise
+    veh, models, fits, X, _ = _c172x_flight(collinear=0.5)
+    names = list(fits["Cm"].names)
+    ia, iq, ialpha = names.index("Cm_alpha_dot"), names.index("Cm_q"), names.index("Cm_alpha")
+    G = X.T @ X
+    clean = G.copy()
+    # the noise-free alpha-dot column is q_hat - 0.01 alpha: its independent part is noise
+    a = X[:, iq] - 0.01 * X[:, ialpha]
+    clean[ia, :] = clean[:, ia] = X.T @ a
+    clean[ia, ia] = a @ a
+    plain, _ = with_pitch_damping_prior(veh, models, fits)
+    noisy = {"Cm": replace(fits["Cm"], information_eiv=(G, clean))}
+    out, covered = with_pitch_damping_prior(veh, models, noisy)
+    f = out["Cm"]
+    assert covered == {"Cm": ("Cm_q", "Cm_alpha_dot")}
+    assert np.allclose(f.estimate, plain["Cm"].estimate, rtol=1e-12, atol=0)
+    assert f.std_error[ialpha] > 2 * plain["Cm"].std_error[ialpha]
+    assert any("of this flight's information on the split is signal" in w for w in f.warnings)
+    assert not any("information on the split is signal" in w for w in plain["Cm"].warnings)
 
 
 def test_the_vehicle_file_sets_its_own_prior_or_turns_it_off(c172x_fits):

@@ -6,6 +6,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from aerosid.identification import eiv
 from aerosid.identification.eiv import CORRECTION_SHARE, filtered_noise, simex_estimates
 
 
@@ -213,3 +214,46 @@ def test_gyro_simex_with_zero_or_no_rate_noise_is_the_angle_only_correction():
     s = np.full(t.size, 0.02)
     on = simex_estimates(fd, {"Cm": y}, _rate_design, 0.02, 2.0, (0 * s, s, 0 * s), 2.0)["Cm"]
     assert not np.allclose(on.corrected, off.corrected, rtol=1e-3)
+
+
+def test_the_noise_free_gram_is_the_line_through_the_averaged_grams_at_minus_one():
+    """E[X^T X](lambda) = A + (1 + lambda) B for noise of variance (1 + lambda) B: the extrapolant gives A."""
+    rng = np.random.default_rng(7)
+    A = rng.normal(size=(3, 3))
+    A = A @ A.T + 3 * np.eye(3)
+    B = np.diag([0.0, 0.5, 2.0])
+    lams = np.array((0.0, *eiv.LAMBDAS))
+    grams = np.array([A + (1 + lam) * B for lam in lams])
+    assert np.allclose(eiv.noise_free_gram(lams, grams), A, atol=1e-12)
+    res = eiv.SimexResult.from_curve(lams, np.zeros((len(lams), 3)), grams)
+    assert np.allclose(res.gram_naive, A + B) and np.allclose(res.gram_corrected, A, atol=1e-12)
+
+
+def test_information_reliability_is_the_reliability_ratio_of_a_noisy_column():
+    """Two uncorrelated columns, the second with signal variance s2 and noise variance v: along it
+    the signal's share of the information is s2 / (s2 + v) (the classical reliability ratio); the
+    clean column's is 1; a direction where the noise-free information is not positive gets 0."""
+    n, s1, s2, v = 1000, 2.0, 0.3, 0.9
+    naive = n * np.diag([s1, s2 + v])
+    clean = n * np.diag([s1, s2])
+    assert abs(eiv.information_reliability(naive, clean, [0.0, 1.0]) - s2 / (s2 + v)) < 1e-12
+    assert abs(eiv.information_reliability(naive, clean, [1.0, 0.0]) - 1.0) < 1e-12
+    assert eiv.information_reliability(naive, n * np.diag([s1, -0.1]), [0.0, 1.0]) == 0.0
+    assert eiv.information_reliability(naive, n * np.diag([s1, 0.0]), [0.0, 1.0]) == 0.0
+
+
+def test_the_profile_direction_is_what_the_other_columns_absorb_of_one():
+    """Column 2 = 3 x column 0 - column 1 + its own part: a change d of coefficient 2 refitted by
+    the others moves them by -d x (3, -1) as its own part vanishes; for a positive definite
+    Gram matrix it is G^-1 e_j scaled to 1 at j."""
+    rng = np.random.default_rng(3)
+    X = rng.normal(size=(500, 2))
+    for own in (0.0, 0.5):
+        Z = np.column_stack([X, 3 * X[:, 0] - X[:, 1] + own * rng.normal(size=500)])
+        g = eiv.profile_direction(Z.T @ Z, 2)
+        if own == 0.0:
+            assert np.allclose(g, [-3.0, 1.0, 1.0], atol=1e-9)
+        else:
+            h = np.linalg.solve(Z.T @ Z, np.eye(3)[2])
+            assert np.allclose(g, h / h[2], atol=1e-9)
+    assert eiv.profile_direction(np.zeros((3, 3)), 0) is None
