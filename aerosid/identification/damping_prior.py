@@ -38,7 +38,15 @@ pure alpha_dot_hat term (``q_hat``, ``(q_hat)``, ``2*q_hat`` ...).  The model-st
 which already holds the model without C_m,alpha_dot (f = 0, at 1.25 sigma); a C_m,alpha_dot of the
 wrong sign that the flight pins down still takes the mixture.  A flight that determines
 the split keeps its own answer (its precision outweighs the prior's); one that does not gets the
-prior's share and an interval that says so.  A vehicle file sets its own prior
+prior's share and an interval that says so.  What the flight seems to know of the split can be
+the angles' noise: a noisy alpha_dot_hat is decorrelated from q_hat and alpha by its noise, so the
+fit's covariance calls the split determined where the noise-free regressors do not determine it.
+The errors-in-variables correction measures that share (``reliability``: the signal's share of
+the apparent information along r, aerosid.identification.eiv.information_reliability); the
+posterior's variance of r theta is then the one the signal's share and the prior give, mapped into
+the other coefficients along the noise-free regressors' omitted-variable direction (``coupling``),
+and the estimate is left as the update gives it (moving it to the prior's split was measured and
+was worse on pa28 and T37: docs/estimation.md).  A vehicle file sets its own prior
 (``[estimation] pitch_damping_split = [f0, sigma]``) or turns it off (``pitch_damping_split =
 false``).  Measured on the generalisation bench and on
 aircraft the project had never flown: docs/estimation.md.
@@ -58,6 +66,9 @@ from aerosid.identification.term_report import damping_term
 PRIOR_SHARE = 0.25
 #: Its 1-sigma: 95 % interval -0.15 ... 0.65 (tailless/canard layouts to a doubled downwash ratio).
 PRIOR_SHARE_SIGMA = 0.2
+#: Below this reliability (the signal's share of the flight's information on the split) the
+#: summary says how much of it is noise.
+RELIABILITY_SAID = 0.99
 
 
 @dataclass(frozen=True)
@@ -82,11 +93,12 @@ class SplitUpdate:
                 f"+- {self.share_data_sigma:.2f} from this flight, prior {f0:.2f} +- {sf:.2f} (downwash lag, "
                 f"mixed estimation), combined {self.share_post:.2f}; the other estimates and sigma include the "
                 "prior (aerosid.identification.damping_prior)")
-        if self.reliability < 1.0:
+        if self.reliability < RELIABILITY_SAID:
             text += (f"; only {self.reliability:.0%} of this flight's information on the split is signal, the rest "
-                     "is the angles' noise (through alpha_dot_hat): sigma counts the split as uncertain as that "
-                     "share and the prior leave it (C_m,alpha, C_m,q and C_m,alpha_dot widen; a manoeuvre that "
-                     "separates alpha-dot from q, or angles with less noise, would determine it)")
+                     "is the regressors' noise (the vane angles' through alpha_dot_hat): sigma counts the split "
+                     "as uncertain as that share and the prior leave it (C_m,q, C_m,alpha_dot and the terms that "
+                     "trade with them on the noise-free regressors, C_m,alpha first, widen; a manoeuvre that "
+                     "separates alpha-dot from q and alpha, or angles with less noise, would determine it)")
         return text
 
 
@@ -129,7 +141,11 @@ def split_update(estimate, cov, iq: int, ia: int, share: float = PRIOR_SHARE,
     split to the posterior variance the flight's *signal* information and the prior give,
     1 / (reliability / v + 1 / s2) (v, s2: the flight's and the prior's variance of r theta;
     reliability 0: the prior's alone), mapped into the other coefficients through the
-    posterior's own correlation with r theta."""
+    posterior's own correlation with r theta, or along ``coupling`` when given: a direction in
+    the coefficients (full length k, any scale; aerosid.identification.eiv.profile_direction,
+    how the others follow C_m,alpha_dot on the noise-free regressors), used unless it is not
+    finite or nearly orthogonal to r.  A reliability that is not finite is taken as 1 (nothing
+    known against the flight's own information)."""
     theta = np.array(estimate, float)
     P = np.array(cov, float)
     cq, ca = (float(c) for c in factors)
@@ -155,7 +171,7 @@ def split_update(estimate, cov, iq: int, ia: int, share: float = PRIOR_SHARE,
     den = float(r @ Pr) + s2
     post = th - Pr * float(r @ th) / den
     P_post = Ps - np.outer(Pr, Pr) / den
-    reliability = float(np.clip(reliability, 0.0, 1.0)) if math.isfinite(reliability) else 0.0
+    reliability = float(np.clip(reliability, 0.0, 1.0)) if math.isfinite(reliability) else 1.0
     v_data = float(r @ Pr)
     if reliability < 1.0 and v_data > 0:
         # widen along r theta to the variance the flight's signal information and the prior give
@@ -164,9 +180,12 @@ def split_update(estimate, cov, iq: int, ia: int, share: float = PRIOR_SHARE,
         g = P_post @ r / float(r @ P_post @ r)
         if coupling is not None:
             c = np.asarray(coupling, float)[sub]
-            if np.all(np.isfinite(c)) and abs(float(r @ c)) > 0:
-                g = c / float(r @ c)
+            rc = float(r @ c)
+            if np.all(np.isfinite(c)) and abs(rc) > 1e-3 * float(np.linalg.norm(r) * np.linalg.norm(c)):
+                g = c / rc
         P_post = P_post + extra * np.outer(g, g)
+    else:
+        reliability = 1.0  # nothing widened: the summary says nothing of it
     P_post = 0.5 * (P_post + P_post.T)  # symmetric to rounding
     est_out, cov_out = theta.copy(), P.copy()
     est_out[sub] = post

@@ -39,6 +39,13 @@ band-limited gyro noise) has no correlation with the rates' noise at zero lag, a
 (identify(gyro_eiv=False), or flight data without or with zero eiv_sigma_p/q/r), the result is
 bit-identical to the angle-only correction (tested).
 
+The information. The same draws average X^T X at each lambda; extrapolated to lambda = -1 by a
+line (:func:`noise_free_gram`: exact for columns linear in the noise) it is the regressors'
+noise-free information, and its ratio to the naive X^T X along a direction
+(:func:`information_reliability`) says how much of what the flight seems to know there is noise.
+identify uses it for the pitch-damping split (aerosid.identification.damping_prior), where a
+noisy alpha_dot_hat makes the split look determined.
+
 The draws. Every draw, the angles' and the rates', is a common random number across lambda and
 comes in an antithetic pair (:func:`simex_frames`): pair k adds the same noise, times +sqrt(lambda)
 and -sqrt(lambda), at every lambda. With independent draws the Monte-Carlo error of 40 replicates
@@ -255,6 +262,16 @@ class SimexResult:
         return cls(np.array([extrapolate(lams, curve[:, j]) for j in cols]),
                    np.array([extrapolation_spread(lams, curve[:, j]) for j in cols]), curve[0].copy(), gn, gc)
 
+    def information(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """(naive X^T X, X^T X extrapolated to no noise), read-only, or None when not given
+        (LinearFit.information_eiv)."""
+        if self.gram_naive is None or self.gram_corrected is None:
+            return None
+        out = (np.array(self.gram_naive, float), np.array(self.gram_corrected, float))
+        for a in out:
+            a.setflags(write=False)
+        return out
+
     def std_error(self, naive_std_error: np.ndarray, *, correction_share: float) -> np.ndarray:
         """The corrected estimates' sigma: the naive fit's sigma scaled by the correction
         factor |corrected / naive| (kept within [1, 3]: a de-attenuated slope carries its
@@ -268,15 +285,43 @@ class SimexResult:
         return np.hypot(np.asarray(naive_std_error, float) * ratio, own)
 
 
+#: An X^T X entry that departs from its line in lambda by more than this share of its columns'
+#: size is not linear in the noise (abs(beta), alpha_r ...): noise_free_gram keeps such a column naive.
+GRAM_LINEARITY_TOL = 1e-6
+
+
 def noise_free_gram(lams: np.ndarray, grams: np.ndarray) -> np.ndarray:
     """X^T X extrapolated to lambda = -1 (no noise) by a least-squares line through its
-    averages at ``lams``.  For columns linear in the noise, E[X^T X] grows exactly linearly with
-    lambda (the added noise's variance), and the antithetic pairs cancel the cross terms
-    draw by draw, so the line is exact up to the draws' N^T N error."""
+    averages at ``lams`` (lams[0] = 0, grams[0] the naive X^T X).  A column linear in the noise,
+    x + sqrt(lambda) n, has (x + s n)^T (x + s n) averaged over an antithetic pair (s = +-sqrt
+    lambda) equal to x^T x + lambda n^T n: exactly a line in lambda, so its entries are
+    extrapolated without error of their own (in expectation over the flight's own noise).  A
+    column that is not (abs(beta): its products with the other columns grow like sqrt(1 + lambda)
+    near beta = 0) keeps its naive row and column: its noise is not taken out, rather than taken
+    out wrongly (a half-corrected block can turn indefinite).  The columns blamed are found from the
+    entries off their line by more than GRAM_LINEARITY_TOL of their columns' size, one column at a
+    time, the one with the most such entries first."""
     lams = np.asarray(lams, float)
     g = np.asarray(grams, float)
-    coef = np.linalg.lstsq(np.vander(lams, 2), g.reshape(len(lams), -1), rcond=None)[0]
-    out = (np.array([-1.0, 1.0]) @ coef).reshape(g.shape[1:])
+    k = g.shape[1]
+    line = np.vander(lams, 2)
+    coef = np.linalg.lstsq(line, g.reshape(len(lams), -1), rcond=None)[0]
+    out = (np.array([-1.0, 1.0]) @ coef).reshape(k, k)
+    # how far each entry is off its line, as a share of its columns' size
+    size = np.sqrt(np.outer(*(2 * [np.abs(np.einsum("lii->li", g)).max(axis=0)])))
+    off = np.abs(g - (line @ coef).reshape(g.shape)).max(axis=0) / np.maximum(size, np.finfo(float).tiny)
+    off = np.where(size > 0, off, 0.0)
+    bent_entry = off > GRAM_LINEARITY_TOL
+    bent = np.zeros(k, dtype=bool)
+    while True:  # blame the column with the most bent entries left (then the largest departure)
+        left = bent_entry & ~bent[:, None] & ~bent[None, :]
+        if not left.any():
+            break
+        count = left.sum(axis=0)
+        worst = np.lexsort((np.where(left, off, 0.0).sum(axis=0), count))[-1]
+        bent[worst] = True
+    out[bent, :] = g[0][bent, :]
+    out[:, bent] = g[0][:, bent]
     return 0.5 * (out + out.T)
 
 
@@ -303,15 +348,20 @@ def profile_direction(gram: np.ndarray, j: int) -> np.ndarray | None:
     fit (the columns' Gram matrix ``gram``): 1 at j, -G_oo^-1 G_oj at the others (the
     omitted-variable direction: what the others absorb of a part of column j's effect).  Needs
     only the other columns' block to be positive definite, so it holds where the noise-free
-    information on j itself is gone; None when that block is singular."""
+    information on j itself is gone; None when that block is not (or not finite).  identify
+    uses it for alpha_dot_hat, the column the vane noise enters through, so the direction is that
+    coefficient's, not the least-favourable one of a combination it is in."""
     g = np.asarray(gram, float)
     others = [i for i in range(g.shape[0]) if i != j]
     out = np.zeros(g.shape[0])
     out[j] = 1.0
-    try:
-        out[others] = -np.linalg.solve(g[np.ix_(others, others)], g[others, j])
-    except np.linalg.LinAlgError:
+    block = g[np.ix_(others, others)]
+    if not np.all(np.isfinite(g)):
         return None
+    scale = np.sqrt(np.abs(np.diag(block)))
+    if others and (np.any(scale == 0) or np.linalg.eigvalsh(block / np.outer(scale, scale)).min() <= 1e-12):
+        return None
+    out[others] = -np.linalg.solve(block, g[others, j])
     return out if np.all(np.isfinite(out)) else None
 
 

@@ -264,7 +264,7 @@ def _eiv_corrected(fd: pd.DataFrame, vehicle: Vehicle, models: dict, fits: dict,
                    "statistics are the uncorrected fit's")
     return {ch: with_corrected_estimate(f, corrected[ch].corrected, note,
                                         corrected[ch].std_error(f.std_error, correction_share=share),
-                                        (corrected[ch].gram_naive, corrected[ch].gram_corrected))
+                                        corrected[ch].information())
             if ch in corrected else f for ch, f in fits.items()}
 
 
@@ -368,6 +368,8 @@ def split_information(fit: LinearFit, iq: int, ia: int, share: float, factors: t
     if fit.information_eiv is None or not np.all(np.isfinite(fit.estimate)):
         return 1.0, None
     gram_naive, gram_corrected = fit.information_eiv
+    if gram_naive is None or gram_corrected is None:
+        return 1.0, None
     row = split_row(fit.estimate.size, iq, ia, share, factors)
     return information_reliability(gram_naive, gram_corrected, row), profile_direction(gram_corrected, ia)
 

@@ -120,18 +120,24 @@ def test_a_flight_whose_split_information_is_noise_gets_the_priors_uncertainty_n
     plain = split_update(theta, P, IQ, IA)
     same = split_update(theta, P, IQ, IA, reliability=1.0)
     assert np.array_equal(same.estimate, plain.estimate) and np.array_equal(same.cov, plain.cov)
-    sd_before = np.sqrt(np.diag(plain.cov))
+    assert "information on the split is signal" not in plain.summary()
     coupling = np.array([0.0, 0.01, -1.0, 1.0])  # alpha follows alpha-dot, q compensates
-    for rel in (0.5, 0.1, 0.0):
-        for c in (None, coupling):
+    for c in (None, coupling):
+        sd_before = np.sqrt(np.diag(plain.cov))
+        for rel in (0.5, 0.1, 0.0):
             upd = split_update(theta, P, IQ, IA, reliability=rel, coupling=c)
             assert np.array_equal(upd.estimate, plain.estimate)
             assert abs(r @ upd.cov @ r / (1.0 / (rel / v + 1.0 / s2)) - 1) < 1e-9
             sd = np.sqrt(np.diag(upd.cov))
-            assert np.all(sd >= sd_before * (1 - 1e-12))
-            assert upd.reliability == rel and (rel == 1.0 or "only" in upd.summary())
-            sd_before_rel = sd
-        assert np.all(sd_before_rel >= sd_before * (1 - 1e-12))
+            assert np.all(sd >= sd_before * (1 - 1e-12))  # every sigma grows as the reliability falls
+            assert sd[IA] > 1.01 * sd_before[IA]
+            assert upd.reliability == rel
+            assert f"only {rel:.0%} of this flight's information on the split is signal" in upd.summary()
+            sd_before = sd
+    # a coupling (nearly) orthogonal to r falls back to the posterior's own direction
+    along_r_free = np.array([0.0, 1.0, 1.0 - PRIOR_SHARE, PRIOR_SHARE])  # r . c = 0
+    fallback = split_update(theta, P, IQ, IA, reliability=0.0, coupling=along_r_free)
+    assert np.allclose(fallback.cov, split_update(theta, P, IQ, IA, reliability=0.0).cov, rtol=1e-12)
     # with the coupling, the extra variance lies along it: C_m,alpha's grows by 0.01^2 x the extra
     upd = split_update(theta, P, IQ, IA, reliability=0.0, coupling=coupling)
     extra = s2 - plain.cov.dot(r).dot(r)

@@ -257,3 +257,34 @@ def test_the_profile_direction_is_what_the_other_columns_absorb_of_one():
             h = np.linalg.solve(Z.T @ Z, np.eye(3)[2])
             assert np.allclose(g, h / h[2], atol=1e-9)
     assert eiv.profile_direction(np.zeros((3, 3)), 0) is None
+
+
+def test_simex_gives_the_naive_and_the_noise_free_information_of_the_design():
+    """simex_estimates' Gram matrices: the naive one is the design's X^T X; extrapolated to no noise,
+    the noisy alpha column's variance comes back to the clean alpha's (within the noise's own
+    sampling error), the constant column's stays exact, and abs(alpha) -- not linear in the noise
+    -- keeps its naive row (noise_free_gram); information_reliability along alpha is then the
+    clean/measured variance ratio."""
+    rng = np.random.default_rng(5)
+    t = np.arange(6000) * 0.01
+    alpha = 0.01 * np.sin(2 * np.pi * 0.3 * t) + 0.006 * np.sin(2 * np.pi * 0.9 * t + 1.0)
+    sigma = 0.03
+    measured = alpha + filtered_noise(rng, np.zeros(t.size), t, sigma, 2.0)
+    fd = _frame(measured, t)
+
+    def design(frame):
+        a = frame["alpha_rad"].to_numpy()
+        return {"Cm": np.column_stack([np.ones_like(a), a, np.abs(a)])}
+
+    res = simex_estimates(fd, {"Cm": -1.8 * alpha}, design, sigma, 2.0)["Cm"]
+    X = design(fd)["Cm"]
+    naive, clean = res.information()
+    assert np.allclose(naive, X.T @ X, rtol=1e-12)
+    assert abs(clean[0, 0] - t.size) < 1e-6 * t.size
+    clean_var, noisy_var = alpha @ alpha, measured @ measured
+    assert noisy_var > 1.2 * clean_var  # the noise is a real part of the column (the test can fail)
+    assert abs(clean[1, 1] / clean_var - 1) < 0.1
+    assert np.array_equal(clean[2], naive[2]) and np.array_equal(clean[:, 2], naive[:, 2])
+    rho = eiv.information_reliability(naive[:2, :2], clean[:2, :2], [0.0, 1.0])
+    assert abs(rho - (clean[1, 1] - clean[0, 1] ** 2 / t.size) / (naive[1, 1] - naive[0, 1] ** 2 / t.size)) < 1e-9
+    assert not naive.flags.writeable
