@@ -97,7 +97,7 @@ class SplitUpdate:
             text += (f"; only {self.reliability:.0%} of this flight's information on the split is signal, the rest "
                      "is the regressors' noise (the vane angles' through alpha_dot_hat): sigma counts the split "
                      "as uncertain as that share and the prior leave it (C_m,q, C_m,alpha_dot and the terms that "
-                     "trade with them on the noise-free regressors, C_m,alpha first, widen; a manoeuvre that "
+                     "trade with them, C_m,alpha first, widen; a manoeuvre that "
                      "separates alpha-dot from q and alpha, or angles with less noise, would determine it)")
         return text
 
@@ -144,8 +144,9 @@ def split_update(estimate, cov, iq: int, ia: int, share: float = PRIOR_SHARE,
     posterior's own correlation with r theta, or along ``coupling`` when given: a direction in
     the coefficients (full length k, any scale; aerosid.identification.eiv.profile_direction,
     how the others follow C_m,alpha_dot on the noise-free regressors), used unless it is not
-    finite or nearly orthogonal to r.  A reliability that is not finite is taken as 1 (nothing
-    known against the flight's own information)."""
+    finite or nearly orthogonal to r (r . c a near-cancellation: |r . c| <= 0.1 sum |r_i c_i|).
+    A reliability that is not finite is taken as 1 (nothing known against the flight's own
+    information)."""
     theta = np.array(estimate, float)
     P = np.array(cov, float)
     cq, ca = (float(c) for c in factors)
@@ -181,7 +182,7 @@ def split_update(estimate, cov, iq: int, ia: int, share: float = PRIOR_SHARE,
         if coupling is not None:
             c = np.asarray(coupling, float)[sub]
             rc = float(r @ c)
-            if np.all(np.isfinite(c)) and abs(rc) > 1e-3 * float(np.linalg.norm(r) * np.linalg.norm(c)):
+            if np.all(np.isfinite(c)) and abs(rc) > 0.1 * float(np.abs(r * c).sum()):  # not a near-cancellation
                 g = c / rc
         P_post = P_post + extra * np.outer(g, g)
     else:

@@ -40,9 +40,10 @@ band-limited gyro noise) has no correlation with the rates' noise at zero lag, a
 bit-identical to the angle-only correction (tested).
 
 The information. The same draws average X^T X at each lambda; extrapolated to lambda = -1 by a
-line (:func:`noise_free_gram`: exact for columns linear in the noise) it is the regressors'
-noise-free information, and its ratio to the naive X^T X along a direction
-(:func:`information_reliability`) says how much of what the flight seems to know there is noise.
+line (:func:`noise_free_gram`: exact for columns linear in the noise; the others, found by their
+sums moving with lambda, are left out) it is the regressors' noise-free information, and its
+ratio to the naive X^T X along a direction (:func:`information_reliability`) says how much of
+what the flight seems to know there is noise.
 identify uses it for the pitch-damping split (aerosid.identification.damping_prior), where a
 noisy alpha_dot_hat makes the split look determined.
 
@@ -88,7 +89,8 @@ LAMBDAS = (0.5, 1.0, 1.5, 2.0)
 #: corrections).  The values are round choices inside those ranges (the vanes' 1 below its
 #: median: a constant cannot know the flight, and where the quadratic leaves more than about
 #: twice its correction a 1.96-sigma interval still falls short -- F4N's C_m_alpha correction
-#: is 0.4 % of an 8 % attenuation, which no share of it covers; the estimator-bias check,
+#: is 0.4 % of an 8 % attenuation, which no share of it covers -- there the pitch-damping split's
+#: reliability widens sigma instead, information_reliability; the estimator-bias check,
 #: bias_check.py, adds its own part).  The exact extrapolant for linear columns (corrected
 #: least squares) over-corrects and is unstable where the noise is a large share of alpha-dot, so
 #: the estimate stays the quadratic's.
@@ -221,20 +223,25 @@ def simex_estimates(fd: pd.DataFrame, y_by_channel: dict[str, np.ndarray], desig
     number, or one per sample).  Both noises are added in the same draws (one lambda scales
     every variance): :func:`simex_frames`, seeded by ``seed``.
     """
-    def fit_all(frame: pd.DataFrame) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    def fit_all(frame: pd.DataFrame) -> dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]]:
         X = design(frame)
-        return {ch: (np.linalg.lstsq(X[ch], y, rcond=None)[0], X[ch].T @ X[ch]) for ch, y in y_by_channel.items()}
+        return {ch: (np.linalg.lstsq(X[ch], y, rcond=None)[0], X[ch].T @ X[ch], X[ch].sum(axis=0))
+                for ch, y in y_by_channel.items()}
 
     naive = fit_all(fd)
-    sums = {lam: {ch: [np.zeros_like(b), np.zeros_like(g)] for ch, (b, g) in naive.items()} for lam in LAMBDAS}
+    sums = {lam: {ch: [np.zeros_like(part) for part in parts] for ch, parts in naive.items()} for lam in LAMBDAS}
     for lam, f in simex_frames(fd, sigma_rad, cutoff_hz, rate_sigma, rate_cutoff_hz, seed, LAMBDAS, REPLICATES):
-        for ch, (est, gram) in fit_all(f).items():
-            sums[lam][ch][0] += est
-            sums[lam][ch][1] += gram
+        for ch, parts in fit_all(f).items():
+            for acc, part in zip(sums[lam][ch], parts):
+                acc += part
     lams = np.array((0.0, *LAMBDAS))
-    return {ch: SimexResult.from_curve(lams, np.array([b, *(sums[lam][ch][0] / REPLICATES for lam in LAMBDAS)]),
-                                       np.array([g, *(sums[lam][ch][1] / REPLICATES for lam in LAMBDAS)]))
-            for ch, (b, g) in naive.items()}
+    X0 = design(fd)
+
+    def curve(ch: str, i: int) -> np.ndarray:  # part i (estimate, X^T X, column sums) at every lambda
+        return np.array([naive[ch][i], *(sums[lam][ch][i] / REPLICATES for lam in LAMBDAS)])
+
+    return {ch: SimexResult.from_curve(lams, curve(ch, 0), curve(ch, 1), curve(ch, 2), np.abs(X0[ch]).sum(axis=0))
+            for ch in naive}
 
 
 @dataclass(frozen=True)
@@ -252,13 +259,16 @@ class SimexResult:
     gram_corrected: np.ndarray | None = None
 
     @classmethod
-    def from_curve(cls, lams: np.ndarray, curve: np.ndarray, grams: np.ndarray | None = None) -> "SimexResult":
+    def from_curve(cls, lams: np.ndarray, curve: np.ndarray, grams: np.ndarray | None = None,
+                   sums: np.ndarray | None = None, abs_sums: np.ndarray | None = None) -> "SimexResult":
         """From the SIMEX curve: curve[i] the coefficient vector averaged at lams[i] (lams[0] = 0,
         the naive fit), each coefficient extrapolated to lambda = -1 (:func:`extrapolate`).
         grams (optional): X^T X averaged at each lams[i], extrapolated to lambda = -1 by a straight
-        line (:func:`noise_free_gram`)."""
+        line, with the columns' averaged sums and naive sums of absolute values to find the columns
+        that are not linear in the noise (:func:`noise_free_gram`)."""
         cols = range(curve.shape[1])
-        gn, gc = (None, None) if grams is None else (np.array(grams[0], float), noise_free_gram(lams, grams))
+        gn, gc = ((None, None) if grams is None
+                  else (np.array(grams[0], float), noise_free_gram(lams, grams, sums, abs_sums)))
         return cls(np.array([extrapolate(lams, curve[:, j]) for j in cols]),
                    np.array([extrapolation_spread(lams, curve[:, j]) for j in cols]), curve[0].copy(), gn, gc)
 
@@ -285,44 +295,43 @@ class SimexResult:
         return np.hypot(np.asarray(naive_std_error, float) * ratio, own)
 
 
-#: An X^T X entry that departs from its line in lambda by more than this share of its columns'
-#: size is not linear in the noise (abs(beta), alpha_r ...): noise_free_gram keeps such a column naive.
-GRAM_LINEARITY_TOL = 1e-6
+#: A column whose averaged sum moves with lambda by more than this share of its sum of absolute
+#: values is not linear in the noise (abs(beta), alpha_r ...): noise_free_gram leaves it out.
+GRAM_LINEARITY_TOL = 1e-9
 
 
-def noise_free_gram(lams: np.ndarray, grams: np.ndarray) -> np.ndarray:
+def noise_free_gram(lams: np.ndarray, grams: np.ndarray, sums: np.ndarray | None = None,
+                    abs_sums: np.ndarray | None = None) -> np.ndarray:
     """X^T X extrapolated to lambda = -1 (no noise) by a least-squares line through its
     averages at ``lams`` (lams[0] = 0, grams[0] the naive X^T X).  A column linear in the noise,
-    x + sqrt(lambda) n, has (x + s n)^T (x + s n) averaged over an antithetic pair (s = +-sqrt
-    lambda) equal to x^T x + lambda n^T n: exactly a line in lambda, so its entries are
-    extrapolated without error of their own (in expectation over the flight's own noise).  A
-    column that is not (abs(beta): its products with the other columns grow like sqrt(1 + lambda)
-    near beta = 0) keeps its naive row and column: its noise is not taken out, rather than taken
-    out wrongly (a half-corrected block can turn indefinite).  The columns blamed are found from the
-    entries off their line by more than GRAM_LINEARITY_TOL of their columns' size, one column at a
-    time, the one with the most such entries first."""
+    x + s n, averaged over an antithetic pair (s = +-sqrt lambda) has (x + s n)^T (x + s n) =
+    x^T x + lambda n^T n, exactly a line in lambda, so its entries are extrapolated without error
+    of their own (in expectation over the flight's own noise).  Such a column's pair-averaged sum
+    is exactly constant in lambda; given ``sums`` (the columns' sums averaged at each lambda) and
+    ``abs_sums`` (the naive columns' sums of absolute values, the rounding scale), a column whose
+    sum moves by more than GRAM_LINEARITY_TOL x abs_sums is not linear in the noise (abs(beta)
+    near beta = 0) and its row and column are NaN: its noise cannot be taken out by a line, and
+    keeping its naive products next to corrected ones can make the matrix indefinite.  The
+    information measures below leave such columns out."""
     lams = np.asarray(lams, float)
     g = np.asarray(grams, float)
     k = g.shape[1]
     line = np.vander(lams, 2)
     coef = np.linalg.lstsq(line, g.reshape(len(lams), -1), rcond=None)[0]
     out = (np.array([-1.0, 1.0]) @ coef).reshape(k, k)
-    # how far each entry is off its line, as a share of its columns' size
-    size = np.sqrt(np.outer(*(2 * [np.abs(np.einsum("lii->li", g)).max(axis=0)])))
-    off = np.abs(g - (line @ coef).reshape(g.shape)).max(axis=0) / np.maximum(size, np.finfo(float).tiny)
-    off = np.where(size > 0, off, 0.0)
-    bent_entry = off > GRAM_LINEARITY_TOL
-    bent = np.zeros(k, dtype=bool)
-    while True:  # blame the column with the most bent entries left (then the largest departure)
-        left = bent_entry & ~bent[:, None] & ~bent[None, :]
-        if not left.any():
-            break
-        count = left.sum(axis=0)
-        worst = np.lexsort((np.where(left, off, 0.0).sum(axis=0), count))[-1]
-        bent[worst] = True
-    out[bent, :] = g[0][bent, :]
-    out[:, bent] = g[0][:, bent]
-    return 0.5 * (out + out.T)
+    out = 0.5 * (out + out.T)
+    if sums is not None and abs_sums is not None:
+        sm = np.asarray(sums, float)
+        moved = np.abs(sm - sm[0]).max(axis=0)
+        bent = moved > GRAM_LINEARITY_TOL * np.maximum(np.asarray(abs_sums, float), np.finfo(float).tiny)
+        out[bent, :] = np.nan
+        out[:, bent] = np.nan
+    return out
+
+
+def _kept(gram: np.ndarray) -> np.ndarray:
+    """The columns of a noise-free Gram matrix with finite entries (noise_free_gram's NaN: left out)."""
+    return np.flatnonzero(np.isfinite(np.diag(gram)))
 
 
 def information_reliability(gram_naive: np.ndarray, gram_corrected: np.ndarray, direction) -> float:
@@ -330,36 +339,55 @@ def information_reliability(gram_naive: np.ndarray, gram_corrected: np.ndarray, 
     that is signal, not regressor noise: I_signal / I_naive with I = 1 / (d^T G^-1 d) for the
     naive X^T X and the one extrapolated to no noise (noise adds to X^T X, and along a direction
     where the regressors hardly vary it can supply most of it: alpha_dot_hat read off a noisy
-    vane angle, on a flight that barely separates alpha-dot from q and alpha).  In [0, 1]; 0 when
-    the noise-free information along d is not positive (the noise supplies all of it)."""
+    vane angle, on a flight that barely separates alpha-dot from q and alpha).  Columns the
+    noise-free matrix leaves out (NaN: not linear in the noise) are left out of both.  In [0, 1];
+    0 when the noise-free information along d is not positive (the noise supplies all of it);
+    NaN when it cannot be said (d on a column left out, a singular matrix)."""
     d = np.asarray(direction, float)
+    gc = np.asarray(gram_corrected, float)
+    keep = _kept(gc)
+    if np.any(d[np.setdiff1d(np.arange(d.size), keep)] != 0):
+        return float("nan")
+    d, gn, gc = d[keep], np.asarray(gram_naive, float)[np.ix_(keep, keep)], gc[np.ix_(keep, keep)]
     try:
-        vn = float(d @ np.linalg.solve(np.asarray(gram_naive, float), d))
-        vc = float(d @ np.linalg.solve(np.asarray(gram_corrected, float), d))
+        vn = float(d @ np.linalg.solve(gn, d))
+        vc = float(d @ np.linalg.solve(gc, d))
     except np.linalg.LinAlgError:
-        return 0.0
-    if not (vn > 0 and np.isfinite(vn)) or not (vc > 0 and np.isfinite(vc)):
-        return 0.0
-    return float(min(vn / vc, 1.0))
+        return float("nan")
+    if not (vn > 0 and np.isfinite(vn)) or not np.isfinite(vc):
+        return float("nan")
+    return 0.0 if vc <= 0 else float(min(vn / vc, 1.0))
+
+
+#: profile_direction's bound on the other columns' block: smallest eigenvalue of its
+#: correlation form, and each column's size against the largest.
+PROFILE_CONDITION = 1e-10
 
 
 def profile_direction(gram: np.ndarray, j: int) -> np.ndarray | None:
     """How the coefficients follow a change of coefficient j when the others refit to keep the
     fit (the columns' Gram matrix ``gram``): 1 at j, -G_oo^-1 G_oj at the others (the
-    omitted-variable direction: what the others absorb of a part of column j's effect).  Needs
-    only the other columns' block to be positive definite, so it holds where the noise-free
-    information on j itself is gone; None when that block is not (or not finite).  identify
-    uses it for alpha_dot_hat, the column the vane noise enters through, so the direction is that
-    coefficient's, not the least-favourable one of a combination it is in."""
+    omitted-variable direction: what the others absorb of a part of column j's effect), 0 at
+    columns the matrix leaves out (NaN).  Needs only the other columns' block to be positive
+    definite, so it holds where the noise-free information on j itself is gone; None when that
+    block is not (PROFILE_CONDITION) or j is left out.  identify uses it for alpha_dot_hat, the
+    column the vane noise enters through, so the direction is that coefficient's, not the
+    least-favourable one of a combination it is in."""
     g = np.asarray(gram, float)
-    others = [i for i in range(g.shape[0]) if i != j]
+    keep = _kept(g)
+    if j not in keep:
+        return None
+    others = [i for i in keep if i != j]
     out = np.zeros(g.shape[0])
     out[j] = 1.0
+    if not others:
+        return out
     block = g[np.ix_(others, others)]
-    if not np.all(np.isfinite(g)):
+    diag = np.diag(block)
+    if np.any(diag <= PROFILE_CONDITION * diag.max()):
         return None
-    scale = np.sqrt(np.abs(np.diag(block)))
-    if others and (np.any(scale == 0) or np.linalg.eigvalsh(block / np.outer(scale, scale)).min() <= 1e-12):
+    scale = np.sqrt(diag)
+    if np.linalg.eigvalsh(block / np.outer(scale, scale)).min() <= PROFILE_CONDITION:
         return None
     out[others] = -np.linalg.solve(block, g[others, j])
     return out if np.all(np.isfinite(out)) else None

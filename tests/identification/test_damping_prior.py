@@ -256,16 +256,17 @@ def test_identify_combines_the_prior_into_an_aircrafts_pitch_fit_and_says_so(c17
 
 def test_identify_widens_the_split_where_the_angle_noise_supplies_its_information():
     """A fit whose errors-in-variables correction says the noise-free alpha_dot_hat column carries
-    no information of its own (X^T X extrapolated to no noise: the alpha-dot column's variance
-    all noise): the estimates are the plain prior's, C_m,alpha's sigma grows, and the fit says so."""
-    # alpha_dot_hat's independent part (collinear 0.5) looks like information: it is the noise
+    almost no information of its own (X^T X extrapolated to no noise: 5 % of the alpha-dot
+    column's independent part is signal, the rest noise): the estimates are the plain prior's,
+    C_m,alpha's sigma grows, and the fit says so."""
+    # alpha_dot_hat's independent part (collinear 0.5) looks like information: it is mostly noise
     veh, models, fits, X, _ = _c172x_flight(collinear=0.5)
     names = list(fits["Cm"].names)
     ia, iq, ialpha = names.index("Cm_alpha_dot"), names.index("Cm_q"), names.index("Cm_alpha")
     G = X.T @ X
     clean = G.copy()
-    # the noise-free alpha-dot column is q_hat - 0.01 alpha: its independent part is noise
-    a = X[:, iq] - 0.01 * X[:, ialpha]
+    own = X[:, ia] - (X[:, iq] - 0.01 * X[:, ialpha])  # alpha_dot_hat's independent part: 5 % of it signal
+    a = X[:, iq] - 0.01 * X[:, ialpha] + 0.05 * own
     clean[ia, :] = clean[:, ia] = X.T @ a
     clean[ia, ia] = a @ a
     plain, _ = with_pitch_damping_prior(veh, models, fits)
