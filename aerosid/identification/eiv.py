@@ -43,9 +43,9 @@ The information. The same draws average X^T X at each lambda; extrapolated to la
 line (:func:`noise_free_gram`: exact for columns linear in the noise; the others, found by their
 sums moving with lambda, are left out) it is the regressors' noise-free information, and its
 ratio to the naive X^T X along a direction (:func:`information_reliability`) says how much of
-what the flight seems to know there is noise.
-identify uses it for the pitch-damping split (aerosid.identification.damping_prior), where a
-noisy alpha_dot_hat makes the split look determined.
+what the flight seems to know there is noise.  identify uses it for the pitch-damping split
+(aerosid.identification.damping_prior), where a noisy alpha_dot_hat makes the split look
+determined.
 
 The draws. Every draw, the angles' and the rates', is a common random number across lambda and
 comes in an antithetic pair (:func:`simex_frames`): pair k adds the same noise, times +sqrt(lambda)
@@ -223,19 +223,19 @@ def simex_estimates(fd: pd.DataFrame, y_by_channel: dict[str, np.ndarray], desig
     number, or one per sample).  Both noises are added in the same draws (one lambda scales
     every variance): :func:`simex_frames`, seeded by ``seed``.
     """
-    def fit_all(frame: pd.DataFrame) -> dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]]:
-        X = design(frame)
+    def fit_all(X: dict) -> dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]]:
+        """Per channel: the estimate, X^T X and the columns' sums of the design X."""
         return {ch: (np.linalg.lstsq(X[ch], y, rcond=None)[0], X[ch].T @ X[ch], X[ch].sum(axis=0))
                 for ch, y in y_by_channel.items()}
 
-    naive = fit_all(fd)
+    X0 = design(fd)
+    naive = fit_all(X0)
     sums = {lam: {ch: [np.zeros_like(part) for part in parts] for ch, parts in naive.items()} for lam in LAMBDAS}
     for lam, f in simex_frames(fd, sigma_rad, cutoff_hz, rate_sigma, rate_cutoff_hz, seed, LAMBDAS, REPLICATES):
-        for ch, parts in fit_all(f).items():
+        for ch, parts in fit_all(design(f)).items():
             for acc, part in zip(sums[lam][ch], parts):
                 acc += part
     lams = np.array((0.0, *LAMBDAS))
-    X0 = design(fd)
 
     def curve(ch: str, i: int) -> np.ndarray:  # part i (estimate, X^T X, column sums) at every lambda
         return np.array([naive[ch][i], *(sums[lam][ch][i] / REPLICATES for lam in LAMBDAS)])
