@@ -53,7 +53,7 @@ def _fits(frame: pd.DataFrame, vehicle, corrected: bool = True) -> dict[str, np.
     """naive (and, with `corrected`, quadratic SIMEX and moment-corrected) estimates of the default
     C_m model on the frame's Mach window (cut first, as identify does: the derivatives, the noise
     draws and their low-pass see the same rows)."""
-    from aerosid.identification.eiv import LAMBDAS, REPLICATES, SimexResult, simex_frames
+    from aerosid.identification.eiv import LAMBDAS, REPLICATES, SimexResult, noise_free_gram, simex_frames
     from aerosid.identification.identify import angle_cutoff_hz, mach_window_mask
     from aerosid.modelling.models import default_models, vehicle_signals
 
@@ -84,10 +84,8 @@ def _fits(frame: pd.DataFrame, vehicle, corrected: bool = True) -> dict[str, np.
     th = [naive, *(sums[lam][2] / REPLICATES for lam in LAMBDAS)]
     lams = np.array((0.0, *LAMBDAS))
     M, v, th = np.array(M), np.array(v), np.array(th)
-    line = np.vander(lams, 2)
-    at = np.array([-1.0, 1.0])
-    M1 = (at @ np.linalg.lstsq(line, M.reshape(len(lams), -1), rcond=None)[0]).reshape(M.shape[1:])
-    v1 = at @ np.linalg.lstsq(line, v, rcond=None)[0]
+    M1 = noise_free_gram(lams, M)  # X^T X on its line to lambda = -1, as identify's information measures
+    v1 = np.array([-1.0, 1.0]) @ np.linalg.lstsq(np.vander(lams, 2), v, rcond=None)[0]  # X^T y: the same line
     return {"naive": naive, "quadratic": SimexResult.from_curve(lams, th).corrected,
             "moment": np.linalg.solve(M1, v1), "names": list(model.names)}
 

@@ -368,8 +368,6 @@ def split_information(fit: LinearFit, iq: int, ia: int, share: float, factors: t
     if fit.information_eiv is None or not np.all(np.isfinite(fit.estimate)):
         return 1.0, None
     gram_naive, gram_corrected = fit.information_eiv
-    if gram_naive is None or gram_corrected is None:
-        return 1.0, None
     row = split_row(fit.estimate.size, iq, ia, share, factors)
     return information_reliability(gram_naive, gram_corrected, row), profile_direction(gram_corrected, ia)
 
