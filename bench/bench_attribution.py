@@ -237,6 +237,8 @@ def mass_check(data: dict) -> dict:
             "x_cg_span_mm": 1000 * float(np.ptp(T["x_cg_m"]))}
 
 
+#: The curve's levels: SIMEX's usual ones (identify refits vane angles at 0.25..1 since 2026-11-28,
+#: aerosid.identification.eiv.LAMBDAS_BY_SOURCE; this check of the premise keeps the curve it recorded).
 SIMEX_LAMBDAS = (0.0, 0.5, 1.0, 1.5, 2.0)
 
 
@@ -321,7 +323,8 @@ def simex_report(sc: pd.DataFrame) -> str:
              "Every group but alpha is the band-limited truth; naive C_m_alpha error % with extra vane-like noise of "
              "variance lambda sigma^2 (mean of 30 draws; lambda = 0: the flight's own vane noise only), the answer "
              "with the true alpha (where the extrapolation to lambda = -1 must land) and SIMEX's quadratic "
-             "extrapolant (mean over the seeds).", "",
+             "extrapolant through lambda 0..2 (mean over the seeds; identify refits vane angles at 0.25..1 since "
+             "2026-11-28).", "",
              "| vehicle | true alpha | " + " | ".join(c.replace("lambda_", "lambda ") for c in cols) +
              " | quadratic extrapolant |", "|---|---|" + "---|" * len(cols) + "---|"]
     for v, g in sc.groupby("vehicle", sort=False):

@@ -14,7 +14,8 @@ on a flight whose only angle error is known exactly:
             eiv_sigma_alpha_rad, eiv_sigma_beta_rad, through the same low-pass, as SIMEX draws it)
             added to the clean angles: naive least squares, attenuated;
   quadratic SIMEX on the renoised flight as aerosid.identification.eiv corrects the angles (its own
-            draws, eiv.simex_frames: lambda 0.5..2, 40 replicates in antithetic pairs, the quadratic
+            draws, eiv.simex_frames at the source's levels identify uses, identify.simex_lambdas:
+            lambda 0.25..1 for vanes, 0.5..2 for inverted angles; 40 replicates in antithetic pairs, the quadratic
             extrapolant; on the Mach window, cut first);
   moment    the exact extrapolant for linear columns: X^T X and X^T y averaged over the same
             replicates, extrapolated linearly to lambda = -1, then solved (corrected least squares).
@@ -53,8 +54,8 @@ def _fits(frame: pd.DataFrame, vehicle, corrected: bool = True) -> dict[str, np.
     """naive (and, with `corrected`, quadratic SIMEX and moment-corrected) estimates of the default
     C_m model on the frame's Mach window (cut first, as identify does: the derivatives, the noise
     draws and their low-pass see the same rows)."""
-    from aerosid.identification.eiv import LAMBDAS, REPLICATES, SimexResult, noise_free_gram, simex_frames
-    from aerosid.identification.identify import angle_cutoff_hz, mach_window_mask
+    from aerosid.identification.eiv import REPLICATES, SimexResult, noise_free_gram, simex_frames
+    from aerosid.identification.identify import angle_cutoff_hz, mach_window_mask, simex_lambdas
     from aerosid.modelling.models import default_models, vehicle_signals
 
     model = default_models(vehicle)["Cm"]
@@ -74,15 +75,16 @@ def _fits(frame: pd.DataFrame, vehicle, corrected: bool = True) -> dict[str, np.
     cut = angle_cutoff_hz(f0, vehicle)
     if not np.all(np.isfinite(np.concatenate(sig))):
         raise ValueError("the flight data's eiv_sigma_alpha_rad/eiv_sigma_beta_rad have non-finite values")
-    sums = {lam: [0.0, 0.0, 0.0] for lam in LAMBDAS}  # X^T X, X^T y, estimate: summed over the replicates
-    for lam, f in simex_frames(f0, sig, cut):  # identify's own draws (antithetic common random numbers)
+    lambdas = simex_lambdas(vehicle)
+    sums = {lam: [0.0, 0.0, 0.0] for lam in lambdas}  # X^T X, X^T y, estimate: summed over the replicates
+    for lam, f in simex_frames(f0, sig, cut, lambdas=lambdas):  # identify's own draws (antithetic common random numbers)
         X = design(f)[ok]
         for i, part in enumerate((X.T @ X, X.T @ y[ok], np.linalg.lstsq(X, y[ok], rcond=None)[0])):
             sums[lam][i] = sums[lam][i] + part
-    M = [X0[ok].T @ X0[ok], *(sums[lam][0] / REPLICATES for lam in LAMBDAS)]
-    v = [X0[ok].T @ y[ok], *(sums[lam][1] / REPLICATES for lam in LAMBDAS)]
-    th = [naive, *(sums[lam][2] / REPLICATES for lam in LAMBDAS)]
-    lams = np.array((0.0, *LAMBDAS))
+    M = [X0[ok].T @ X0[ok], *(sums[lam][0] / REPLICATES for lam in lambdas)]
+    v = [X0[ok].T @ y[ok], *(sums[lam][1] / REPLICATES for lam in lambdas)]
+    th = [naive, *(sums[lam][2] / REPLICATES for lam in lambdas)]
+    lams = np.array((0.0, *lambdas))
     M, v, th = np.array(M), np.array(v), np.array(th)
     M1 = noise_free_gram(lams, M)  # X^T X on its line to lambda = -1, as identify's information measures
     v1 = np.array([-1.0, 1.0]) @ np.linalg.lstsq(np.vander(lams, 2), v, rcond=None)[0]  # X^T y: the same line
@@ -163,7 +165,7 @@ def rlv_rows(seed: int) -> list[dict]:
     from aerosid.identification.band import segment_keys
     from aerosid.identification.derivatives import zero_phase_low_pass
     from aerosid.identification.eiv import simex_estimates, with_angle_noise, with_angles_moved
-    from aerosid.identification.identify import angle_cutoff_hz, mach_window_mask
+    from aerosid.identification.identify import angle_cutoff_hz, mach_window_mask, simex_lambdas
     from aerosid.modelling.models import default_models, vehicle_signals
     from aerosid.simulation import load_case, simulate
 
@@ -198,7 +200,8 @@ def rlv_rows(seed: int) -> list[dict]:
         return {c: models[c].regressors(s).to_numpy(float) for c in chans}
 
     X_clean = design(clean)
-    res = simex_estimates(renoised, {c: renoised[c].to_numpy(float) for c in chans}, design, sig, cut)
+    res = simex_estimates(renoised, {c: renoised[c].to_numpy(float) for c in chans}, design, sig, cut,
+                          lambdas=simex_lambdas(veh))
     rows = []
     for c in chans:
         y = clean[c].to_numpy(float)

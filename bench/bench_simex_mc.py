@@ -44,7 +44,8 @@ def legacy_simex(mode: str, master: int):
     """identify's simex_estimates with the draws of `mode` (seq or crn) seeded by `master`."""
     import aerosid.identification.eiv as eiv
 
-    def simex(fd, y_by_channel, design, sigma_rad, cutoff_hz, rate_sigma=None, rate_cutoff_hz=None):
+    def simex(fd, y_by_channel, design, sigma_rad, cutoff_hz, rate_sigma=None, rate_cutoff_hz=None,
+              lambdas=eiv.LAMBDAS):
         rng = np.random.default_rng(master)
         groups = eiv.segment_keys(fd)
         t = fd["t_s"].to_numpy(float)
@@ -56,7 +57,7 @@ def legacy_simex(mode: str, master: int):
         naive = fit_all(fd)
         curves = {ch: [b] for ch, b in naive.items()}
         angles, rates = {}, {}
-        for lam in eiv.LAMBDAS:
+        for lam in lambdas:
             acc = {ch: np.zeros_like(b) for ch, b in naive.items()}
             for b in range(eiv.REPLICATES):
                 f = fd
@@ -79,7 +80,7 @@ def legacy_simex(mode: str, master: int):
                     acc[ch] += est / eiv.REPLICATES
             for ch in curves:
                 curves[ch].append(acc[ch])
-        lams = np.array((0.0, *eiv.LAMBDAS))
+        lams = np.array((0.0, *lambdas))
         return {ch: eiv.SimexResult.from_curve(lams, np.array(rows)) for ch, rows in curves.items()}
     return simex
 

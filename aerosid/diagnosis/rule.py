@@ -14,7 +14,9 @@ MIN_VARIANCE_SHARE = 0.01
 SIMEX_REPLICATES = 8
 """Replicates per extra-noise level of the SIMEX check (even: antithetic pairs, aerosid.identification.eiv.simex_frames)."""
 SIMEX_LAMBDAS = (1.0, 2.0)
-"""Extra angle-noise variances (in units of sigma^2) of the SIMEX check; quadratic extrapolation to -1."""
+"""Extra angle-noise variances (in units of sigma^2) of the SIMEX check; quadratic extrapolation to -1.
+The diagnosis' own check, calibrated on the look-alike bench (docs/modelling-loop.md), not the
+identification's levels (aerosid.identification.eiv.LAMBDAS_BY_SOURCE)."""
 if SIMEX_REPLICATES % 2:
     raise ValueError(f"SIMEX_REPLICATES must be even (antithetic pairs), not {SIMEX_REPLICATES}")
 SIMEX_SEED = 20240613

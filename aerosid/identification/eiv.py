@@ -9,9 +9,10 @@ JSBSim c172x flight this moved C_m_alpha by about -6 %.
 SIMEX (Cook & Stefanski 1994) measures the attenuation on the data themselves. It
 refits with extra noise of variance lambda sigma^2 added to the raw vane angles,
 passed through the same low-pass as the vanes, with every derived signal
-recomputed. It does so for lambda in LAMBDAS, averaging REPLICATES refits each (REPLICATES / 2
-draws in antithetic pairs, common to every lambda: :func:`simex_frames`), then
-extrapolates each coefficient to lambda = -1, no noise at all (:func:`extrapolate`).
+recomputed. It does so for lambda in LAMBDAS_BY_SOURCE (0.25..1 for vanes, 0.5..2 for inverted
+angles), averaging REPLICATES refits each (REPLICATES / 2 draws in antithetic pairs, common to
+every lambda: :func:`simex_frames`), then extrapolates each coefficient to lambda = -1, no
+noise at all (:func:`extrapolate`).
 
 The corrected estimates replace the naive ones. Their sigma is the coloured-residual
 sigma of the naive fit scaled by the correction factor, combined with the extrapolation's
@@ -54,8 +55,8 @@ passed for a curvature the quadratic amplified: the rates' part moved OV10's C_m
 where the gyro noise makes -1.4 %, and the angles' part made the corrected F4N C_n_r depend on the
 draws' seed by 14 % (bench/results/simex_mc.md).
 
-Measured on 10 cached JSBSim flights each (bench/results/gyro_simex.md; mean error % of the
-truth). The gyro part moves C_m_alpha toward the answer with the true rates: the
+Measured on 10 cached JSBSim flights each (bench/results/gyro_simex.md, at the usual levels
+0.5..2, before the vanes' 0.25..1; mean error % of the truth). The gyro part moves C_m_alpha toward the answer with the true rates: the
 rates-true-minus-flight difference against the SIMEX move is F4N -4.2 against -1.5 (with the
 true angles -6.2 against -5.1), OV10 -1.5 against -2.1, pa28 -0.6 against -0.6. The F4N
 shortfall with the vane angles comes from the joint extrapolation. The vane noise's saturating
@@ -76,13 +77,26 @@ from aerosid.identification.derivatives import zero_phase_low_pass
 from aerosid.identification.inversion import total_angles
 
 LAMBDAS = (0.5, 1.0, 1.5, 2.0)
+#: The extra-noise levels by the angles' source (the vehicle's air_data_source; identify picks
+#: them, simex_lambdas).  The usual grid (LAMBDAS, 0.5..2) for angles inverted from the force
+#: database; half of it (0.25..1) for vane angles, whose attenuation is larger and more curved
+#: in lambda, so a quadratic through lambda <= 2 flattens it and leaves more of it.  Chosen where
+#: the answer is known, the controlled test of bench/bench_eiv_extrapolants.py (one known draw of
+#: the noise SIMEX assumes added to the clean angles), 2026-11-28: on the vane aircraft the
+#: median |shortfall / correction| went 1.45 -> 1.14 (above 1 in 70 -> 53 % of the 60 runs
+#: attenuated by >= 3 %; SIMEX's recovery of C_m_alpha's attenuation c172p 56 -> 67 %, J3Cub
+#: 37 -> 46 %, pa28 45 -> 55 %, F4N 19 -> 21 %; OV10's C_m_alpha, where the quadratic
+#: overshoots a 2 % attenuation, +3.9 -> +4.3 % against +1.9 % clean); on the database angles it
+#: halved the recovery of C_l_cos4phi (91 -> 47 %), so they keep the usual grid.
+LAMBDAS_BY_SOURCE = {"vanes": (0.25, 0.5, 0.75, 1.0), "database": LAMBDAS}
 #: One sigma of the correction's own error, as a share of the correction |corrected - naive|, by
 #: the vehicle's air_data_source (where the angles come from).  Measured where the only angle
 #: error is one known draw of the noise SIMEX assumes (bench/bench_eiv_extrapolants.py,
 #: bench/results/eiv_extrapolants.md), over the runs the noise attenuates by >= 3 %, as
 #: |shortfall / correction| = |clean - quadratic| / |quadratic - naive|:
-#: "vanes" (10 JSBSim aircraft x 3 seeds, C_m, 60 runs): median 1.45, 68th percentile 2.26, > 1 in
-#: 70 % of the runs (c172x's C_m_alpha: none left, T37's and F4N's: most); "database" (angles
+#: "vanes" (10 JSBSim aircraft x 3 seeds, C_m, 60 runs; at the vanes' levels 0.25..1): median 1.14,
+#: 68th percentile 1.61, > 1 in 53 % of the runs (1.45 / 2.26 / 70 % at the usual levels 0.5..2;
+#: c172x's C_m_alpha: none left, T37's and F4N's: most); "database" (angles
 #: inverted from the force database, seed-rlv x 5 seeds, C_m, C_n, C_l, 25 runs): median 0.37,
 #: 68th percentile 0.48, > 1 in 8 % (with simex_frames' draws, 2026-11-28; 1.2 / 2.0 and
 #: 0.38 / 0.57 with the earlier independent draws, whose Monte-Carlo error inflated the
@@ -211,7 +225,7 @@ def simex_frames(fd: pd.DataFrame, sigma_rad, cutoff_hz: float | None, rate_sigm
 
 def simex_estimates(fd: pd.DataFrame, y_by_channel: dict[str, np.ndarray], design, sigma_rad,
                     cutoff_hz: float | None, rate_sigma: tuple | None = None,
-                    rate_cutoff_hz=None, seed: int = SEED) -> dict[str, "SimexResult"]:
+                    rate_cutoff_hz=None, seed: int = SEED, lambdas: tuple = LAMBDAS) -> dict[str, "SimexResult"]:
     """Corrected coefficient vectors per channel, with their sigma's ingredients.
 
     fd: the flight data of the fit (sorted as fitted). y_by_channel: the responses.
@@ -221,7 +235,8 @@ def simex_estimates(fd: pd.DataFrame, y_by_channel: dict[str, np.ndarray], desig
     sigma_r) [rad/s] of the gyros' white noise, None: the rates are exact (the angle-only
     correction, bit-identical to it); rate_cutoff_hz: the band the rates went through (a
     number, or one per sample).  Both noises are added in the same draws (one lambda scales
-    every variance): :func:`simex_frames`, seeded by ``seed``.
+    every variance): :func:`simex_frames`, seeded by ``seed``, at the extra-noise levels
+    ``lambdas`` (LAMBDAS; identify: LAMBDAS_BY_SOURCE).
     """
     def fit_all(X: dict) -> dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]]:
         """Per channel: the estimate, X^T X and the columns' sums of the design X."""
@@ -230,15 +245,15 @@ def simex_estimates(fd: pd.DataFrame, y_by_channel: dict[str, np.ndarray], desig
 
     X0 = design(fd)
     naive = fit_all(X0)
-    sums = {lam: {ch: [np.zeros_like(part) for part in parts] for ch, parts in naive.items()} for lam in LAMBDAS}
-    for lam, f in simex_frames(fd, sigma_rad, cutoff_hz, rate_sigma, rate_cutoff_hz, seed, LAMBDAS, REPLICATES):
+    sums = {lam: {ch: [np.zeros_like(part) for part in parts] for ch, parts in naive.items()} for lam in lambdas}
+    for lam, f in simex_frames(fd, sigma_rad, cutoff_hz, rate_sigma, rate_cutoff_hz, seed, lambdas, REPLICATES):
         for ch, parts in fit_all(design(f)).items():
             for acc, part in zip(sums[lam][ch], parts):
                 acc += part
-    lams = np.array((0.0, *LAMBDAS))
+    lams = np.array((0.0, *lambdas))
 
     def curve(ch: str, i: int) -> np.ndarray:  # part i (estimate, X^T X, column sums) at every lambda
-        return np.array([naive[ch][i], *(sums[lam][ch][i] / REPLICATES for lam in LAMBDAS)])
+        return np.array([naive[ch][i], *(sums[lam][ch][i] / REPLICATES for lam in lambdas)])
 
     return {ch: SimexResult.from_curve(lams, curve(ch, 0), curve(ch, 1), curve(ch, 2), np.abs(X0[ch]).sum(axis=0))
             for ch in naive}

@@ -14,8 +14,8 @@ import numpy as np
 import pandas as pd
 
 from aerosid.modelling.aeromodel import AeroModel
-from aerosid.identification.eiv import (CORRECTION_SHARE, information_reliability, profile_direction,
-                                        simex_estimates)
+from aerosid.identification.eiv import (CORRECTION_SHARE, LAMBDAS, LAMBDAS_BY_SOURCE, information_reliability,
+                                        profile_direction, simex_estimates)
 from aerosid.identification.crb import identification_bounds
 from aerosid.modelling.models import ChannelModel, default_models, signals_from_flight_data, vehicle_signals
 from aerosid.plausibility.estimates import preflight_departure
@@ -247,7 +247,8 @@ def _eiv_corrected(fd: pd.DataFrame, vehicle: Vehicle, models: dict, fits: dict,
 
     rate_cutoff = fd["band_hz"].to_numpy(float) if rate_sigma is not None else None
     corrected = simex_estimates(fd, {ch: fd[ch].to_numpy(float) for ch in ok}, design, sigma,
-                                angle_cutoff_hz(fd, vehicle), rate_sigma, rate_cutoff)
+                                angle_cutoff_hz(fd, vehicle), rate_sigma, rate_cutoff,
+                                lambdas=simex_lambdas(vehicle, angles=sigma is not None))
     what = ("the vane noise" if vehicle.air_data_source == "vanes"
             else "the noise the accelerometers put into the inverted angles")
     rates = ("" if rate_sigma is None else "the gyro noise in the band-limited rates (SIMEX, median sigma p, q, r "
@@ -268,11 +269,24 @@ def _eiv_corrected(fd: pd.DataFrame, vehicle: Vehicle, models: dict, fits: dict,
             if ch in corrected else f for ch, f in fits.items()}
 
 
+def _noise_source(vehicle: Vehicle, angles: bool) -> str:
+    """The key of eiv's per-source settings: the vehicle's angle source, or "vanes" for the rates'
+    noise alone (gyro_eiv without angle noise: band-limited like the vanes')."""
+    return vehicle.air_data_source if angles else "vanes"
+
+
 def correction_share(vehicle: Vehicle, angles: bool = True) -> float:
     """The share of SIMEX's correction counted as its own 1-sigma (aerosid.identification.eiv
     CORRECTION_SHARE) for the vehicle's angle source; a source nobody measured raises KeyError.
     angles=False (the rates' noise alone, gyro_eiv without angle noise): the vanes' larger share."""
-    return CORRECTION_SHARE[vehicle.air_data_source if angles else "vanes"]
+    return CORRECTION_SHARE[_noise_source(vehicle, angles)]
+
+
+def simex_lambdas(vehicle: Vehicle, angles: bool = True) -> tuple:
+    """SIMEX's extra-noise levels (aerosid.identification.eiv LAMBDAS_BY_SOURCE) for the vehicle's
+    angle source; angles=False (the gyros' noise alone): the usual LAMBDAS, where the rates' part
+    was measured (bench/results/gyro_simex.md).  A source nobody measured raises KeyError."""
+    return LAMBDAS_BY_SOURCE[vehicle.air_data_source] if angles else LAMBDAS
 
 
 def angle_cutoff_hz(fd: pd.DataFrame, vehicle: Vehicle) -> float | None:

@@ -300,3 +300,56 @@ def test_simex_gives_the_naive_and_the_noise_free_information_of_the_design():
     rho = eiv.information_reliability(naive, clean, [0.0, 0.0, 1.0])
     assert 0 < rho < 1 and abs(rho / ratio - 1) < 0.15
     assert not naive.flags.writeable
+
+
+@pytest.mark.parametrize("reliability", [0.5, 0.7, 0.9])
+def test_the_vanes_levels_leave_less_of_an_attenuation_than_the_usual_ones(reliability):
+    """One noisy regressor of reliability R: the naive slope at extra noise lambda is
+    b R / (R + (1 - R)(1 + lambda)) (the classical attenuation), its size falling convexly in lambda.  A quadratic
+    through the vanes' levels (0.25..1) extrapolated to lambda = -1 leaves less of the attenuation
+    than one through the usual levels (0.5..2), and both leave some (neither overshoots)."""
+    b = -1.8
+
+    def naive(lams):
+        return b * reliability / (reliability + (1 - reliability) * (1 + lams))
+
+    left = {}
+    for source, levels in eiv.LAMBDAS_BY_SOURCE.items():
+        lams = np.array((0.0, *levels))
+        left[source] = (b - eiv.extrapolate(lams, naive(lams))) / (b - naive(0.0))
+    assert 0 < left["vanes"] < left["database"] < 1
+
+
+
+@pytest.mark.parametrize("source, angles, expected", [("vanes", True, "vanes"), ("database", True, "database"),
+                                                      ("database", False, "rates")])
+def test_identify_runs_simex_at_the_levels_of_the_noise_source(monkeypatch, source, angles, expected):
+    """identify's SIMEX (_eiv_corrected) refits at the vanes' levels for vane angles, at the usual
+    ones for angles inverted from the force database, and at the usual ones for the gyros' noise
+    alone (measured there, bench/results/gyro_simex.md); an unknown source is refused."""
+    from types import SimpleNamespace
+
+    import aerosid.identification.identify as idm
+    from aerosid.identification.regression import fit_linear
+
+    seen = {}
+
+    def spy(fd, y_by_channel, design, sigma, cutoff, rate_sigma=None, rate_cutoff=None, **kwargs):
+        seen.update(kwargs)
+        k = 2
+        return {ch: eiv.SimexResult.from_curve(np.array([0.0, 0.5, 1.0]), np.zeros((3, k))) for ch in y_by_channel}
+
+    monkeypatch.setattr(idm, "simex_estimates", spy)
+    t = np.arange(200) * 0.01
+    alpha = 0.01 * np.sin(t)
+    fd = _frame(alpha, t).assign(Cm=-1.8 * alpha, band_hz=2.0)
+    fits = {"Cm": fit_linear(fd["Cm"].to_numpy(), _design(fd)["Cm"], names=["Cm_0", "Cm_alpha"], channel="Cm")}
+    vehicle = SimpleNamespace(air_data_source=source, vane_cutoff_hz=None)
+    sigma = (np.full(t.size, 0.01), np.full(t.size, 0.01)) if angles else None
+    rate_sigma = None if angles else tuple(np.full(t.size, 1e-3) for _ in range(3))
+    idm._eiv_corrected(fd, vehicle, {"Cm": None}, fits, sigma, rate_sigma)
+    assert seen["lambdas"] == {"vanes": eiv.LAMBDAS_BY_SOURCE["vanes"], "database": eiv.LAMBDAS,
+                               "rates": eiv.LAMBDAS}[expected]
+    assert max(eiv.LAMBDAS_BY_SOURCE["vanes"]) < max(eiv.LAMBDAS)
+    with pytest.raises(KeyError):
+        idm.simex_lambdas(SimpleNamespace(air_data_source="laser"))
