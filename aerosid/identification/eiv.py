@@ -56,8 +56,8 @@ where the gyro noise makes -1.4 %, and the angles' part made the corrected F4N C
 draws' seed by 14 % (bench/results/simex_mc.md).
 
 Measured on 10 cached JSBSim flights each (bench/results/gyro_simex.md, at the usual levels
-0.5..2, before the vanes' 0.25..1; mean error % of the truth). The gyro part moves C_m_alpha toward the answer with the true rates: the
-rates-true-minus-flight difference against the SIMEX move is F4N -4.2 against -1.5 (with the
+0.5..2, before the vanes' 0.25..1; mean error % of the truth). The gyro part moves C_m_alpha
+toward the answer with the true rates: the rates-true-minus-flight difference against the SIMEX move is F4N -4.2 against -1.5 (with the
 true angles -6.2 against -5.1), OV10 -1.5 against -2.1, pa28 -0.6 against -0.6. The F4N
 shortfall with the vane angles comes from the joint extrapolation. The vane noise's saturating
 alpha_dot_hat (finding 2) damps the gyro effect at the flight's noise level. Against the truth,
@@ -225,7 +225,8 @@ def simex_frames(fd: pd.DataFrame, sigma_rad, cutoff_hz: float | None, rate_sigm
 
 def simex_estimates(fd: pd.DataFrame, y_by_channel: dict[str, np.ndarray], design, sigma_rad,
                     cutoff_hz: float | None, rate_sigma: tuple | None = None,
-                    rate_cutoff_hz=None, seed: int = SEED, lambdas: tuple = LAMBDAS) -> dict[str, "SimexResult"]:
+                    rate_cutoff_hz=None, seed: int = SEED,
+                    lambdas: tuple = LAMBDAS) -> dict[str, "SimexResult"]:
     """Corrected coefficient vectors per channel, with their sigma's ingredients.
 
     fd: the flight data of the fit (sorted as fitted). y_by_channel: the responses.

@@ -269,17 +269,11 @@ def _eiv_corrected(fd: pd.DataFrame, vehicle: Vehicle, models: dict, fits: dict,
             if ch in corrected else f for ch, f in fits.items()}
 
 
-def _noise_source(vehicle: Vehicle, angles: bool) -> str:
-    """The key of eiv's per-source settings: the vehicle's angle source, or "vanes" for the rates'
-    noise alone (gyro_eiv without angle noise: band-limited like the vanes')."""
-    return vehicle.air_data_source if angles else "vanes"
-
-
 def correction_share(vehicle: Vehicle, angles: bool = True) -> float:
     """The share of SIMEX's correction counted as its own 1-sigma (aerosid.identification.eiv
     CORRECTION_SHARE) for the vehicle's angle source; a source nobody measured raises KeyError.
     angles=False (the rates' noise alone, gyro_eiv without angle noise): the vanes' larger share."""
-    return CORRECTION_SHARE[_noise_source(vehicle, angles)]
+    return CORRECTION_SHARE[vehicle.air_data_source if angles else "vanes"]
 
 
 def simex_lambdas(vehicle: Vehicle, angles: bool = True) -> tuple:
