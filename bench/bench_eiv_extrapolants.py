@@ -15,8 +15,8 @@ on a flight whose only angle error is known exactly:
             added to the clean angles: naive least squares, attenuated;
   quadratic SIMEX on the renoised flight as aerosid.identification.eiv corrects the angles (its own
             draws, eiv.simex_frames at the source's levels identify uses, identify.simex_lambdas:
-            lambda 0.25..1 for vanes, 0.5..2 for inverted angles; 40 replicates in antithetic pairs, the quadratic
-            extrapolant; on the Mach window, cut first);
+            lambda 0.25..1 for vanes, 0.5..2 for inverted angles; 40 replicates in antithetic pairs,
+            the quadratic extrapolant; on the Mach window, cut first);
   moment    the exact extrapolant for linear columns: X^T X and X^T y averaged over the same
             replicates, extrapolated linearly to lambda = -1, then solved (corrected least squares).
 

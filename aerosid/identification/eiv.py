@@ -57,8 +57,8 @@ draws' seed by 14 % (bench/results/simex_mc.md).
 
 Measured on 10 cached JSBSim flights each (bench/results/gyro_simex.md, at the usual levels
 0.5..2, before the vanes' 0.25..1; mean error % of the truth). The gyro part moves C_m_alpha
-toward the answer with the true rates: the rates-true-minus-flight difference against the SIMEX move is F4N -4.2 against -1.5 (with the
-true angles -6.2 against -5.1), OV10 -1.5 against -2.1, pa28 -0.6 against -0.6. The F4N
+toward the answer with the true rates: the rates-true-minus-flight difference against the
+SIMEX move is F4N -4.2 against -1.5 (with the true angles -6.2 against -5.1), OV10 -1.5 against -2.1, pa28 -0.6 against -0.6. The F4N
 shortfall with the vane angles comes from the joint extrapolation. The vane noise's saturating
 alpha_dot_hat (finding 2) damps the gyro effect at the flight's noise level. Against the truth,
 C_m_alpha goes OV10 +3.0 -> +0.9, F4N -4.9 -> -6.5 (its oracle is itself -6.3 %), and pa28
