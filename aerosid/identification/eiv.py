@@ -115,6 +115,8 @@ if REPLICATES % 2:
 SEED = 20261122
 #: The body-rate columns the gyro part of the correction adds noise to.
 RATE_COLUMNS = ("p_rad_s", "q_rad_s", "r_rad_s")
+#: The mixed-control columns the surfaces' part adds noise to (the order of control_sigma).
+CONTROL_COLUMNS = ("delta_p_rad", "delta_y_rad", "delta_r_rad")
 
 
 def filtered_noise(rng: np.random.Generator, groups: np.ndarray, t_s: np.ndarray, sigma,
@@ -178,23 +180,29 @@ def rate_noise(rng: np.random.Generator, groups: np.ndarray, t_s: np.ndarray, si
     return np.column_stack([filtered_noise(rng, groups, t_s, sig, cutoff_hz) for sig in sigma])
 
 
-def with_rate_noise(fd: pd.DataFrame, noise: np.ndarray, copy: bool = True) -> pd.DataFrame:
-    """The flight data with `noise` (N, 3) added to p, q, r (a copy unless copy=False)."""
+def with_rate_noise(fd: pd.DataFrame, noise: np.ndarray, copy: bool = True,
+                    columns: tuple = RATE_COLUMNS) -> pd.DataFrame:
+    """The flight data with `noise` (N, len(columns)) added to ``columns`` (p, q, r; or
+    CONTROL_COLUMNS), a copy unless copy=False."""
     f = fd.copy() if copy else fd
-    for j, col in enumerate(RATE_COLUMNS):
+    for j, col in enumerate(columns):
         f[col] = f[col].to_numpy(float) + noise[:, j]
     return f
 
 
 def simex_frames(fd: pd.DataFrame, sigma_rad, cutoff_hz: float | None, rate_sigma: tuple | None = None,
-                 rate_cutoff_hz=None, seed: int = SEED, lambdas: tuple = LAMBDAS, replicates: int = REPLICATES):
+                 rate_cutoff_hz=None, seed: int = SEED, lambdas: tuple = LAMBDAS, replicates: int = REPLICATES,
+                 control_sigma: tuple | None = None, control_cutoff_hz=None):
     """The remeasured flight data SIMEX refits: yields (lambda, frame) `replicates` times (even;
     REPLICATES) for each lambda in `lambdas` (LAMBDAS), the frame being ``fd`` with extra noise
     of variance lambda x sigma^2 on the angles (sigma_rad: as angle_noise; None: the angles are
-    exact) and, given rate_sigma, on p, q, r (rate_noise; None: the rates are exact).
+    exact), given rate_sigma, on p, q, r (rate_noise; None: the rates are exact) and, given
+    control_sigma (sigma_delta_p, sigma_delta_y, sigma_delta_r [rad], the mixed surfaces' white
+    noise before the band control_cutoff_hz), on the controls CONTROL_COLUMNS.
 
     The draws are antithetic common random numbers: pair k draws one unit of noise, from its own
-    generator seeded (seed, k) for the angles and (seed, k, 1) for the rates, and adds
+    generator seeded (seed, k) for the angles, (seed, k, 1) for the rates and (seed, k, 2) for
+    the controls, and adds
     +sqrt(lambda) and -sqrt(lambda) times it at every lambda.  So the Monte-Carlo error of the
     curve is smooth in lambda (common numbers), and within each pair the terms odd in the noise
     cancel (antithetic): with independent draws at each lambda, 40 replicates left the
@@ -212,6 +220,8 @@ def simex_frames(fd: pd.DataFrame, sigma_rad, cutoff_hz: float | None, rate_sigm
                     if sigma_rad is not None else None)
         d_rates = (rate_noise(np.random.default_rng([seed, k, 1]), groups, t, rate_sigma, rate_cutoff_hz)
                    if rate_sigma is not None else None)
+        d_controls = (rate_noise(np.random.default_rng([seed, k, 2]), groups, t, control_sigma, control_cutoff_hz)
+                      if control_sigma is not None else None)
         for lam in lambdas:
             for sign in (1.0, -1.0):
                 scale = sign * np.sqrt(lam)
@@ -220,13 +230,15 @@ def simex_frames(fd: pd.DataFrame, sigma_rad, cutoff_hz: float | None, rate_sigm
                     f = with_angles_moved(f, scale * d_angles[0], scale * d_angles[1])
                 if d_rates is not None:
                     f = with_rate_noise(f, scale * d_rates, copy=f is fd)
+                if d_controls is not None:
+                    f = with_rate_noise(f, scale * d_controls, copy=f is fd, columns=CONTROL_COLUMNS)
                 yield lam, f
 
 
 def simex_estimates(fd: pd.DataFrame, y_by_channel: dict[str, np.ndarray], design, sigma_rad,
                     cutoff_hz: float | None, rate_sigma: tuple | None = None,
-                    rate_cutoff_hz=None, seed: int = SEED,
-                    lambdas: tuple = LAMBDAS) -> dict[str, "SimexResult"]:
+                    rate_cutoff_hz=None, seed: int = SEED, lambdas: tuple = LAMBDAS,
+                    control_sigma: tuple | None = None, control_cutoff_hz=None) -> dict[str, "SimexResult"]:
     """Corrected coefficient vectors per channel, with their sigma's ingredients.
 
     fd: the flight data of the fit (sorted as fitted). y_by_channel: the responses.
@@ -235,8 +247,9 @@ def simex_estimates(fd: pd.DataFrame, y_by_channel: dict[str, np.ndarray], desig
     angles are exact; cutoff_hz: the vane low-pass corner.  rate_sigma: (sigma_p, sigma_q,
     sigma_r) [rad/s] of the gyros' white noise, None: the rates are exact (the angle-only
     correction, bit-identical to it); rate_cutoff_hz: the band the rates went through (a
-    number, or one per sample).  Both noises are added in the same draws (one lambda scales
-    every variance): :func:`simex_frames`, seeded by ``seed``, at the extra-noise levels
+    number, or one per sample).  control_sigma, control_cutoff_hz: the same for the mixed
+    controls (CONTROL_COLUMNS; None: the controls are exact).  Every noise is added in the same
+    draws (one lambda scales every variance): :func:`simex_frames`, seeded by ``seed``, at the extra-noise levels
     ``lambdas`` (LAMBDAS; identify: LAMBDAS_BY_SOURCE).
     """
     def fit_all(X: dict) -> dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]]:
@@ -247,7 +260,8 @@ def simex_estimates(fd: pd.DataFrame, y_by_channel: dict[str, np.ndarray], desig
     X0 = design(fd)
     naive = fit_all(X0)
     sums = {lam: {ch: [np.zeros_like(part) for part in parts] for ch, parts in naive.items()} for lam in lambdas}
-    for lam, f in simex_frames(fd, sigma_rad, cutoff_hz, rate_sigma, rate_cutoff_hz, seed, lambdas, REPLICATES):
+    for lam, f in simex_frames(fd, sigma_rad, cutoff_hz, rate_sigma, rate_cutoff_hz, seed, lambdas, REPLICATES,
+                               control_sigma, control_cutoff_hz):
         for ch, parts in fit_all(design(f)).items():
             for acc, part in zip(sums[lam][ch], parts):
                 acc += part

@@ -164,13 +164,30 @@ def _rate_eiv_sigma(fd: pd.DataFrame):
     return None
 
 
+def _control_eiv_sigma(fd: pd.DataFrame):
+    """(sigma_delta_p, sigma_delta_y, sigma_delta_r) [rad] per sample of the mixed surfaces' white
+    noise whose band-limited part is in the flight data's controls (flight_data.CONTROL_NOISE_COLUMNS,
+    measured from the fins' second differences), or None when the controls are taken as exact:
+    flight data without those columns, or with them all zero (quantised or held surfaces) or not
+    finite."""
+    from aerosid.identification.flight_data import CONTROL_NOISE_COLUMNS
+
+    cols = tuple(CONTROL_NOISE_COLUMNS[c] for c in ("delta_p", "delta_y", "delta_r"))
+    if not set(cols) <= set(fd.columns):
+        return None
+    sig = tuple(fd[c].to_numpy(float) for c in cols)
+    if all(np.all(np.isfinite(x)) for x in sig) and max(float(x.max(initial=0.0)) for x in sig) > 0:
+        return sig
+    return None
+
+
 #: A control whose white noise through the band is more than this share of its variance in the
-#: fit window gets a warning on every term that reads it: the controls are taken as exact, so a
-#: share s attenuates such a term's estimate by about s (errors in variables, not corrected).
+#: fit window gets a warning on every term that reads it: a share s attenuates such a term's
+#: estimate by about s (errors in variables; corrected by SIMEX with control_eiv, the default).
 CONTROL_NOISE_SHARE = 0.05
 
 
-def control_noise_warnings(fd: pd.DataFrame, models: dict, skip=()) -> dict[str, str]:
+def control_noise_warnings(fd: pd.DataFrame, models: dict, skip=(), corrected: bool = False) -> dict[str, str]:
     """{channel: warning} for the channels with terms that read a control whose own noise is a
     sizeable share of its variation in this flight data (CONTROL_NOISE_SHARE): the flight
     data's eiv_sigma_delta_*_rad (the mixed surfaces' white noise, aerosid.identification.
@@ -178,8 +195,9 @@ def control_noise_warnings(fd: pd.DataFrame, models: dict, skip=()) -> dict[str,
     JSBSim A320 (rudder doublet against the yaw damper): the rudder moved 2.8e-4 rad in the
     band and its surfaces' 0.05 deg noise is 1.1e-4 rad there (a share of ~15 %).  The noise
     goes through each flight segment's own band and sample rate.  skip: channels not to warn on
-    (the identities alpha and beta are inverted from).  Empty for flight data without those
-    columns or without a band."""
+    (the identities alpha and beta are inverted from).  corrected: the estimates were corrected
+    for that noise (SIMEX, control_eiv), so the warning says so instead of "low by".  Empty for
+    flight data without those columns or without a band."""
     from aerosid.identification.band import band_noise_gain, segment_rates_and_bands
     from aerosid.identification.flight_data import CONTROL_NOISE_COLUMNS
     from aerosid.modelling.expressions import signal_names
@@ -207,10 +225,12 @@ def control_noise_warnings(fd: pd.DataFrame, models: dict, skip=()) -> dict[str,
             names = [t.coefficient for t in model.terms if c in signal_names(t.expression, SIGNALS)]
             if names:
                 share = (noise / spread) ** 2
+                effect = ("corrected for it by SIMEX, with a wider sigma" if corrected else
+                          f"the controls are taken as exact, so these estimates are low by about {share:.0%} "
+                          "(errors in variables, not corrected)")
                 text = (f"{', '.join(names)}: {c} moves only {spread / noise:.1f} x its own noise in the band "
                         f"(std {spread:.2g} rad against {noise:.2g} rad of surface-sensor noise through the band); "
-                        f"the controls are taken as exact, so these estimates are low by about {share:.0%} "
-                        "(errors in variables, not corrected): excite the control more")
+                        f"{effect}: excite the control more")
                 out[ch] = f"{out[ch]}; {text}" if ch in out else text
     return out
 
@@ -231,10 +251,11 @@ def identity_channels(vehicle, channels) -> tuple[str, ...]:
 
 
 def _eiv_corrected(fd: pd.DataFrame, vehicle: Vehicle, models: dict, fits: dict, sigma,
-                   rate_sigma=None) -> dict:
+                   rate_sigma=None, control_sigma=None) -> dict:
     """The fits with their estimates corrected for the noise in alpha and beta and, given
-    rate_sigma, in the band-limited rates p, q, r (aerosid.identification.eiv, SIMEX); for
-    inverted angles the force channels they come from are left as they are."""
+    rate_sigma, in the band-limited rates p, q, r, and, given control_sigma, in the band-limited
+    controls (aerosid.identification.eiv, SIMEX); for inverted angles the force channels they come
+    from are left as they are."""
     skip = identity_channels(vehicle, fits)
     ok = {ch: f for ch, f in fits.items()
           if np.all(np.isfinite(f.estimate)) and f.n_dropped == 0 and ch not in skip}
@@ -245,14 +266,20 @@ def _eiv_corrected(fd: pd.DataFrame, vehicle: Vehicle, models: dict, fits: dict,
         sig = vehicle_signals(frame, vehicle)
         return {ch: models[ch].regressors(sig).to_numpy(float) for ch in ok}
 
-    rate_cutoff = fd["band_hz"].to_numpy(float) if rate_sigma is not None else None
+    band = fd["band_hz"].to_numpy(float) if "band_hz" in fd.columns else None
     corrected = simex_estimates(fd, {ch: fd[ch].to_numpy(float) for ch in ok}, design, sigma,
-                                angle_cutoff_hz(fd, vehicle), rate_sigma, rate_cutoff,
-                                lambdas=simex_lambdas(vehicle, angles=sigma is not None))
+                                angle_cutoff_hz(fd, vehicle), rate_sigma, band if rate_sigma is not None else None,
+                                lambdas=simex_lambdas(vehicle, angles=sigma is not None),
+                                control_sigma=control_sigma,
+                                control_cutoff_hz=band if control_sigma is not None else None)
     what = ("the vane noise" if vehicle.air_data_source == "vanes"
             else "the noise the accelerometers put into the inverted angles")
-    rates = ("" if rate_sigma is None else "the gyro noise in the band-limited rates (SIMEX, median sigma p, q, r "
-             + ", ".join(f"{float(np.median(x)):.2g}" for x in rate_sigma) + " rad/s)")
+    parts = [text for text, sig, unit in (("the gyro noise in the band-limited rates (SIMEX, median sigma p, q, r ",
+                                           rate_sigma, " rad/s)"),
+                                          ("the surface-sensor noise in the band-limited controls (SIMEX, median "
+                                           "sigma delta_p, delta_y, delta_r ", control_sigma, " rad)"))
+             if sig is not None for text in [text + ", ".join(f"{float(np.median(x)):.2g}" for x in sig) + unit]]
+    rates = " and ".join(parts)
     if sigma is None:
         head = f"estimates corrected for {rates}"
     else:
@@ -310,6 +337,9 @@ def mach_window_mask(mach: np.ndarray, reference: float, half_width: float | Non
 #: on (generalisation bench, 10 seeds, C_m_alpha mean error off -> on: OV10 +3.0 -> +0.9 %,
 #: T37 -1.4 -> -5.2 %, F4N -4.6 -> -6.1 %, pa28 -4.0 -> -4.6 %; docs/estimation.md).
 GYRO_EIV_DEFAULT = False
+#: The controls' part of SIMEX (the surfaces' white noise, flight data eiv_sigma_delta_*_rad) is on
+#: by default: see docs/estimation.md, "Errors in the controls".
+CONTROL_EIV_DEFAULT = True
 
 #: Antithetic pairs of re-draws of the parametric check of the estimator's own bias
 #: (aerosid.identification.bias_check): the flight's regressors taken as the truth, the sensors'
@@ -461,13 +491,15 @@ def _with_structure_uncertainty(fd: pd.DataFrame, signals: dict, models: dict, f
 def identify(flight_data: pd.DataFrame, vehicle: Vehicle, models: dict[str, ChannelModel] | None = None,
              mach_half_width: float | None = 0.5, cov: str = "morelli_klein",
              gyro_eiv: bool = GYRO_EIV_DEFAULT, bias_pairs: int | None = None,
-             instrumental: bool | None = None) -> Identification:
+             instrumental: bool | None = None, control_eiv: bool = CONTROL_EIV_DEFAULT) -> Identification:
     """Fit every channel's model on the samples with |M - M_ref| <= mach_half_width.
     Pooled flights (several values of ``flight``: manoeuvres of one aircraft) are fitted
     together; the coloured-residual correction treats each flight as its own record
     (``fit_linear(groups=...)``).  The estimates are corrected for the noise in the angles
     and (gyro_eiv, the flight data's eiv_sigma_p/q/r columns) in the rates by SIMEX
     (aerosid.identification.eiv); gyro_eiv=False (the default, GYRO_EIV_DEFAULT): the angles only.
+    control_eiv (default CONTROL_EIV_DEFAULT, True): the same for the controls' surface-sensor
+    noise (the flight data's eiv_sigma_delta_*_rad; zero for quantised or held surfaces).
     bias_pairs: +/- pairs of re-draws of the parametric check of the estimator's own bias at this
     flight's noise, counted in the sigma (aerosid.identification.bias_check); 0: no check; None:
     default_bias_pairs().  instrumental: the flight was flown in turbulent air: every channel but the
@@ -491,8 +523,9 @@ def identify(flight_data: pd.DataFrame, vehicle: Vehicle, models: dict[str, Chan
     instrumental = vehicle.turbulent_air if instrumental is None else bool(instrumental)
     identities = identity_channels(vehicle, models)
     signals = vehicle_signals(fd, vehicle)
-    corrected = _corrected_fits(fd, vehicle, models, cov, gyro_eiv, signals, instrumental)
-    fits, wrong_sign = _with_prior_and_structure(fd, signals, vehicle, models, corrected, identities)
+    corrected = _corrected_fits(fd, vehicle, models, cov, gyro_eiv, signals, instrumental, control_eiv)
+    fits, wrong_sign = _with_prior_and_structure(fd, signals, vehicle, models, corrected, identities,
+                                                 control_eiv and not instrumental)
     if bias_pairs:
         from aerosid.identification.bias_check import with_estimator_bias
 
@@ -500,7 +533,8 @@ def identify(flight_data: pd.DataFrame, vehicle: Vehicle, models: dict[str, Chan
         # own, so a prior applied again would count as bias (its own spread is in the posterior)
         fits = with_estimator_bias(fd, vehicle, models, corrected, fits,
                                    lambda f: _corrected_fits(f, vehicle, models, cov, gyro_eiv,
-                                                             instrumental=instrumental), bias_pairs,
+                                                             instrumental=instrumental, control_eiv=control_eiv),
+                                   bias_pairs,
                                    skip=identities)
     refs = AeroModel.preflight(vehicle).linear_truth() if vehicle.preflight is not None else {}
     window = (float(fd["mach"].min()), float(fd["mach"].max()))
@@ -510,7 +544,8 @@ def identify(flight_data: pd.DataFrame, vehicle: Vehicle, models: dict[str, Chan
 
 
 def _corrected_fits(fd: pd.DataFrame, vehicle: Vehicle, models: dict, cov: str, gyro_eiv: bool,
-                    signals: dict | None = None, instrumental: bool = False) -> dict[str, LinearFit]:
+                    signals: dict | None = None, instrumental: bool = False,
+                    control_eiv: bool = CONTROL_EIV_DEFAULT) -> dict[str, LinearFit]:
     """Every channel's fit on the window's flight data ``fd`` (sorted, inside the Mach window):
     least squares with the coloured-residual sigma and the errors-in-variables correction, or,
     with ``instrumental``, the instrumental-variable fit (aerosid.identification.instrumental,
@@ -540,17 +575,18 @@ def _corrected_fits(fd: pd.DataFrame, vehicle: Vehicle, models: dict, cov: str, 
     sigma = angle_eiv_sigma(fd, vehicle)
     band_limited = "band_hz" in fd.columns and bool(np.all(np.isfinite(fd["band_hz"].to_numpy(float))))
     rate_sigma = _rate_eiv_sigma(fd) if gyro_eiv and band_limited else None
-    if sigma is not None or rate_sigma is not None:
-        fits = _eiv_corrected(fd, vehicle, models, fits, sigma, rate_sigma)
+    control_sigma = _control_eiv_sigma(fd) if control_eiv and band_limited else None
+    if sigma is not None or rate_sigma is not None or control_sigma is not None:
+        fits = _eiv_corrected(fd, vehicle, models, fits, sigma, rate_sigma, control_sigma)
     return fits
 
 
 def _with_prior_and_structure(fd: pd.DataFrame, signals: dict, vehicle: Vehicle, models: dict,
-                              fits: dict[str, LinearFit], identities: tuple[str, ...]
-                              ) -> tuple[dict[str, LinearFit], dict[str, float]]:
+                              fits: dict[str, LinearFit], identities: tuple[str, ...],
+                              controls_corrected: bool = False) -> tuple[dict[str, LinearFit], dict[str, float]]:
     """(fits, wrong-sign damping terms): the corrected fits with the controls' noise warnings (not on
     the ``identities``), the pitch-damping prior and the model-structure mixture."""
-    for ch, text in control_noise_warnings(fd, models, skip=identities).items():
+    for ch, text in control_noise_warnings(fd, models, skip=identities, corrected=controls_corrected).items():
         if ch in fits:
             fits = {**fits, ch: replace(fits[ch], warnings=tuple(fits[ch].warnings) + (text,))}
     wrong_sign = wrong_sign_terms(models, fits)  # on the flight's own estimates, before the prior

@@ -69,6 +69,52 @@ def test_identify_warns_where_a_controls_noise_is_a_sizeable_share_of_its_variat
     # 10 x its noise (share 1 % < CONTROL_NOISE_SHARE): nothing
     assert 0.01 < CONTROL_NOISE_SHARE
     assert control_noise_warnings(_flight_data(n, fs, band, 1e-2, in_band), models) == {}
+    # with the estimates corrected for it (identify's control_eiv), the warning says so
+    text = control_noise_warnings(_flight_data(n, fs, band, 2e-3, in_band), models, corrected=True)["Cm"]
+    assert "corrected for it by SIMEX" in text and "not corrected" not in text
     # flight data without the columns (smoother path, older files): nothing
     fd = _flight_data(n, fs, band, 2e-3, in_band).drop(columns=["eiv_sigma_delta_p_rad"])
     assert control_noise_warnings(fd, models) == {}
+
+
+def test_identify_corrects_for_the_controls_noise_by_default_and_zero_noise_changes_nothing(clean_truth):
+    """identify's controls' part of SIMEX (control_eiv, on by default): flight data without the
+    eiv_sigma_delta columns, with them zero (quantised surfaces), or with the switch off give the
+    same answer bit for bit.  With one draw of white surface noise through the band actually added
+    to delta_p and declared, the naive C_m_delta_p is attenuated (delta_p and alpha move together in
+    this flight, so by several times the one-regressor share) and the correction takes most of it
+    back toward the fit on the exact controls; the fit says what it corrected."""
+    from aerosid.diagnosis.synthetic import MEASURED_NOISE, flight_data_from_truth
+    from aerosid.identification.eiv import filtered_noise
+    from aerosid.identification.flight_data import CONTROL_NOISE_COLUMNS
+    from aerosid.identification.identify import identify
+
+    veh, tr, _ = clean_truth
+    fd = flight_data_from_truth(tr, MEASURED_NOISE, seed=0)
+    fd["band_hz"] = 2.0
+    fd["eiv_sigma_alpha_rad"] = fd["eiv_sigma_beta_rad"] = MEASURED_NOISE.alpha_rad
+    models = default_models(veh)
+    t = fd["t_s"].to_numpy(float)
+    fs = 1.0 / float(np.median(np.diff(t)))
+    sigma = 0.15 * float(fd["delta_p_rad"].std()) / band_noise_gain(fs, 2.0)  # 15 % of delta_p's std in the band
+    zero, noisy = fd.copy(), fd.copy()
+    noisy["delta_p_rad"] += filtered_noise(np.random.default_rng(11), np.zeros(len(t)), t, sigma, 2.0)
+    for c, col in CONTROL_NOISE_COLUMNS.items():
+        zero[col] = 0.0
+        noisy[col] = sigma if c == "delta_p" else 0.0
+
+    def table(ident):
+        return ident.table().set_index("coefficient")
+
+    exact = table(identify(fd, veh, models))
+    t_zero = table(identify(zero, veh, models))
+    for c in ("estimate", "std_error"):
+        np.testing.assert_array_equal(t_zero[c].to_numpy(), exact[c].to_numpy())
+    naive = table(identify(noisy, veh, models, control_eiv=False))
+    on = table(identify(noisy, veh, models))
+    assert "in the band-limited controls" not in " ".join(naive["warnings"].astype(str))
+    b0, b_naive, b_on = (x.loc["Cm_delta_p", "estimate"] for x in (exact, naive, on))
+    assert abs(b_naive / b0 - 1) > 0.05  # the noise's attenuation (the comparison below can fail)
+    assert abs(b_on - b0) < 0.5 * abs(b_naive - b0)
+    assert on.loc["Cm_delta_p", "std_error"] > naive.loc["Cm_delta_p", "std_error"]
+    assert "surface-sensor noise in the band-limited controls" in on.loc["Cm_delta_p", "warnings"]

@@ -353,3 +353,89 @@ def test_identify_runs_simex_at_the_levels_of_the_noise_source(monkeypatch, sour
     assert max(eiv.LAMBDAS_BY_SOURCE["vanes"]) < max(eiv.LAMBDAS)
     with pytest.raises(KeyError):
         idm.simex_lambdas(SimpleNamespace(air_data_source="laser"))
+
+
+def _roll_frame(t: np.ndarray, p: np.ndarray, delta: np.ndarray) -> pd.DataFrame:
+    z = 0.0 * t
+    return pd.DataFrame({"t_s": t, "flight": "f", "segment": "s0", "alpha_rad": z, "beta_rad": z,
+                         "alpha_r_rad": z, "phi_r_rad": z, "p_rad_s": p, "q_rad_s": z, "r_rad_s": z,
+                         "delta_p_rad": z, "delta_y_rad": z, "delta_r_rad": delta})
+
+
+def _roll_design(frame: pd.DataFrame) -> dict:
+    return {"Cl": np.column_stack([np.ones(len(frame)), frame["p_rad_s"].to_numpy(),
+                                   frame["delta_r_rad"].to_numpy()])}
+
+
+@pytest.mark.parametrize("seed", [4, 5])
+def test_control_simex_corrects_the_attenuation_of_a_noisy_control_in_a_near_collinear_pair(seed):
+    """A roll channel as a small aircraft flies it: p follows the aileron through a fast roll mode,
+    so C_l_p p and C_l_delta delta nearly cancel and the fit lives on their small difference.  The
+    aileron is measured with white noise through the 2 Hz band, 1 % of its variance there: the naive
+    slopes are the closed form (S + diag(0, 0, gain^2 sigma^2))^-1 S beta, both low by far more than
+    1 % and outside their intervals.  With control_sigma the controls' part of SIMEX removes most
+    of it and the truth is inside the reported interval; without it (None) nothing moves."""
+    from aerosid.identification.band import band_noise_gain
+    from aerosid.identification.regression import fit_linear
+
+    rng = np.random.default_rng(seed)
+    t = np.arange(20000) * 0.01
+    one = np.zeros(t.size)
+    delta = filtered_noise(rng, one, t, 1.0, 0.7)
+    delta *= 0.01 / delta.std()
+    tau = 0.12  # roll-mode time constant [s]: p = -k delta through a first-order lag
+    p = np.zeros_like(delta)
+    for i in range(1, t.size):
+        p[i] = p[i - 1] + 0.01 / tau * (2.0 * delta[i - 1] - p[i - 1])
+    # in a steady roll (p = 2 delta) C_l_p p + C_l_delta delta is 2 % of C_l_delta delta
+    beta_true = np.array([0.0, -0.47, 0.47 * 2.0 * 0.98])
+    y = beta_true[1] * p + beta_true[2] * delta + 1e-6 * rng.standard_normal(t.size)
+    sigma = 0.1 * 0.01 / band_noise_gain(100.0, 2.0)  # 10 % of the aileron's std through the band
+    fd = _roll_frame(t, p, delta + filtered_noise(rng, one, t, sigma, 2.0))
+    X_true = _roll_design(_roll_frame(t, p, delta))["Cl"]
+    S = X_true.T @ X_true / t.size
+    closed = np.linalg.solve(S + np.diag([0.0, 0.0, (band_noise_gain(100.0, 2.0) * sigma) ** 2]), S @ beta_true)
+    naive = fit_linear(y, _roll_design(fd)["Cl"], names=["Cl_0", "Cl_p", "Cl_delta_r"])
+    assert naive.estimate[1:] == pytest.approx(closed[1:], rel=0.05)
+    assert np.all(np.abs(naive.estimate[1:] / beta_true[1:] - 1) > 0.05)  # far more than the 1 % share
+    assert np.all(np.abs(naive.estimate[1:] - beta_true[1:]) > 5 * naive.std_error[1:])
+    s = np.full(t.size, sigma)
+    res = simex_estimates(fd, {"Cl": y}, _roll_design, None, None, control_sigma=(0 * s, 0 * s, s),
+                          control_cutoff_hz=2.0)["Cl"]
+    assert res.naive == pytest.approx(naive.estimate, rel=1e-9)
+    err, naive_err = np.abs(res.corrected - beta_true), np.abs(naive.estimate - beta_true)
+    assert np.all(err[1:] < 0.5 * naive_err[1:])
+    assert np.all(err[1:] <= 1.96 * res.std_error(naive.std_error, correction_share=1.0)[1:])
+    off = simex_estimates(fd, {"Cl": y}, _roll_design, None, None)["Cl"]
+    assert off.corrected == pytest.approx(naive.estimate, rel=1e-9, abs=1e-12)  # no noise declared: nothing moves
+
+
+def test_control_draws_have_their_own_generator_and_leave_the_angles_and_rates_alone():
+    """simex_frames with control_sigma: the controls move in antithetic pairs common to every lambda,
+    from the generator (seed, k, 2); the angles' and rates' draws are those without it."""
+    from aerosid.identification.eiv import CONTROL_COLUMNS, LAMBDAS, simex_frames
+
+    t = np.arange(1500) * 0.01
+    d = 0.01 * np.sin(2 * np.pi * 0.4 * t)
+    fd = _roll_frame(t, 0.02 * np.sin(2 * np.pi * 0.5 * t), d)
+    fd["alpha_rad"] = 0.01 * np.sin(2 * np.pi * 0.3 * t)
+    before = fd.copy()
+    s = np.full(t.size, 0.01)
+    with_controls = list(simex_frames(fd, 0.02, 2.0, (s, s, s), 2.0, control_sigma=(s, 0 * s, s),
+                                      control_cutoff_hz=2.0))
+    without = list(simex_frames(fd, 0.02, 2.0, (s, s, s), 2.0))
+    pd.testing.assert_frame_equal(fd, before)
+    moved = {lam: [] for lam in LAMBDAS}
+    for (lam, f), (_, g) in zip(with_controls, without):
+        for col in ("alpha_rad", "beta_rad", "p_rad_s", "q_rad_s", "r_rad_s"):
+            np.testing.assert_array_equal(f[col].to_numpy(), g[col].to_numpy())
+        np.testing.assert_array_equal(f["delta_y_rad"].to_numpy(), fd["delta_y_rad"].to_numpy())  # zero sigma
+        moved[lam].append((f["delta_r_rad"].to_numpy() - d) / np.sqrt(lam))
+    for lam in LAMBDAS:
+        m = np.array(moved[lam])
+        np.testing.assert_allclose(m[0::2], -m[1::2], atol=1e-15)
+        np.testing.assert_allclose(m, np.array(moved[LAMBDAS[0]]), atol=1e-12)
+    assert set(CONTROL_COLUMNS) == {"delta_p_rad", "delta_y_rad", "delta_r_rad"}
+    # the controls' unit draw is not the rates' (each its own generator)
+    rate_move = with_controls[0][1]["p_rad_s"].to_numpy() - fd["p_rad_s"].to_numpy()
+    assert not np.allclose(rate_move, with_controls[0][1]["delta_r_rad"].to_numpy() - d)
