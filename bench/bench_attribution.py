@@ -139,7 +139,8 @@ def simex_cm(fd: pd.DataFrame, vehicle) -> dict:
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        ident = identify(fd, vehicle, {"Cm": default_models(vehicle)["Cm"]}, bias_pairs=0)  # as recorded
+        ident = identify(fd, vehicle, {"Cm": default_models(vehicle)["Cm"]}, bias_pairs=0,
+                         control_eiv=False)  # as recorded (before the controls' part)
     fit = ident.fits["Cm"]
     return dict(zip(fit.names, np.asarray(fit.estimate, float)))
 
@@ -249,7 +250,7 @@ def simex_curve(data: dict, replicates: int = 30, seed: int = 1) -> dict:
     draws at each lambda, not identify's antithetic pairs), averaged over `replicates` draws, against the answer with the true alpha (lambda = -1, what the
     extrapolation must reach) and aerosid.identification.eiv.extrapolate's quadratic."""
     from aerosid.identification.eiv import extrapolate, with_angle_noise
-    from aerosid.identification.identify import angle_cutoff_hz
+    from aerosid.identification.eiv_fit import angle_cutoff_hz
 
     fd, T, veh = data["flight_data"], data["truth"], data["vehicle_obj"]
     lp = band_limited_truth(data, {"beta": T["beta_rad"], "q": T["q_rad_s"], "V": T["V_m_s"],

@@ -14,7 +14,7 @@ on a flight whose only angle error is known exactly:
             eiv_sigma_alpha_rad, eiv_sigma_beta_rad, through the same low-pass, as SIMEX draws it)
             added to the clean angles: naive least squares, attenuated;
   quadratic SIMEX on the renoised flight as aerosid.identification.eiv corrects the angles (its own
-            draws, eiv.simex_frames at the source's levels identify uses, identify.simex_lambdas:
+            draws, eiv.simex_frames at the source's levels identify uses, eiv_fit.simex_lambdas:
             lambda 0.25..1 for vanes, 0.5..2 for inverted angles; 40 replicates in antithetic pairs,
             the quadratic extrapolant; on the Mach window, cut first);
   moment    the exact extrapolant for linear columns: X^T X and X^T y averaged over the same
@@ -55,7 +55,8 @@ def _fits(frame: pd.DataFrame, vehicle, corrected: bool = True) -> dict[str, np.
     C_m model on the frame's Mach window (cut first, as identify does: the derivatives, the noise
     draws and their low-pass see the same rows)."""
     from aerosid.identification.eiv import REPLICATES, SimexResult, noise_free_gram, simex_frames
-    from aerosid.identification.identify import angle_cutoff_hz, mach_window_mask, simex_lambdas
+    from aerosid.identification.eiv_fit import angle_cutoff_hz, simex_lambdas
+    from aerosid.identification.identify import mach_window_mask
     from aerosid.modelling.models import default_models, vehicle_signals
 
     model = default_models(vehicle)["Cm"]
@@ -95,7 +96,7 @@ def _fits(frame: pd.DataFrame, vehicle, corrected: bool = True) -> dict[str, np.
 def one(vehicle: str, seed: int) -> list[dict]:
     from aerosid.identification.band import segment_keys
     from aerosid.identification.eiv import with_angle_noise, with_angles_moved
-    from aerosid.identification.identify import angle_cutoff_hz
+    from aerosid.identification.eiv_fit import angle_cutoff_hz
 
     data = attribution_cache.load(vehicle, seed)
     fd, T, veh = data["flight_data"], data["truth"], data["vehicle_obj"]
@@ -165,7 +166,8 @@ def rlv_rows(seed: int) -> list[dict]:
     from aerosid.identification.band import segment_keys
     from aerosid.identification.derivatives import zero_phase_low_pass
     from aerosid.identification.eiv import simex_estimates, with_angle_noise, with_angles_moved
-    from aerosid.identification.identify import angle_cutoff_hz, mach_window_mask, simex_lambdas
+    from aerosid.identification.eiv_fit import angle_cutoff_hz, simex_lambdas
+    from aerosid.identification.identify import mach_window_mask
     from aerosid.modelling.models import default_models, vehicle_signals
     from aerosid.simulation import load_case, simulate
 

@@ -89,7 +89,8 @@ def run(vehicles: list[str], seeds: list[int], cache_dir: Path) -> pd.DataFrame:
                 t0 = time.perf_counter()
                 with warnings.catch_warnings():
                     warnings.simplefilter("ignore")
-                    ident = identify(fd, data["vehicle_obj"], gyro_eiv=gyro, bias_pairs=0)  # as recorded
+                    ident = identify(fd, data["vehicle_obj"], gyro_eiv=gyro, bias_pairs=0,
+                                     control_eiv=False)  # as recorded (before the controls' part)
                 row = {"vehicle": v, "seed": s, "variant": name, "identify_s": time.perf_counter() - t0}
                 for c in NAMES:
                     truth = truth_of(flight, c)

@@ -45,7 +45,9 @@ def legacy_simex(mode: str, master: int):
     import aerosid.identification.eiv as eiv
 
     def simex(fd, y_by_channel, design, sigma_rad, cutoff_hz, rate_sigma=None, rate_cutoff_hz=None,
-              lambdas=eiv.LAMBDAS):
+              lambdas=eiv.LAMBDAS, control_sigma=None, control_cutoff_hz=None):
+        if control_sigma is not None:
+            raise ValueError("the legacy schemes have no controls' part: identify(control_eiv=False)")
         rng = np.random.default_rng(master)
         groups = eiv.segment_keys(fd)
         t = fd["t_s"].to_numpy(float)
@@ -97,21 +99,22 @@ def shipped_simex(master: int):
 def one(job: tuple[str, int]) -> list[dict]:
     """The rows of one cached flight: every scheme with every draw seed."""
     import aerosid.identification.eiv as eiv
+    import aerosid.identification.eiv_fit as eiv_fit
     import aerosid.identification.identify as idm
 
     v, s = job
     data = attribution_cache.load(v, s)
     veh, fd = data["vehicle_obj"], data["flight_data"]
     flight = SimpleNamespace(coefficients=data["coefficients"])
-    original = idm.simex_estimates
+    original = eiv_fit.simex_estimates
     rows = []
     try:
         for mode in MODES:
             for master in (eiv.SEED, *MASTERS_EXTRA):
-                idm.simex_estimates = shipped_simex(master) if mode == "anti" else legacy_simex(mode, master)
+                eiv_fit.simex_estimates = shipped_simex(master) if mode == "anti" else legacy_simex(mode, master)
                 with warnings.catch_warnings():
                     warnings.simplefilter("ignore")
-                    ident = idm.identify(fd, veh, bias_pairs=0)
+                    ident = idm.identify(fd, veh, bias_pairs=0, control_eiv=False)  # the angles' (and rates') draws
                 row = {"vehicle": v, "seed": s, "mode": mode, "master": master}
                 for c in COEFFICIENTS:
                     tr = truth_of(flight, c)
@@ -121,7 +124,7 @@ def one(job: tuple[str, int]) -> list[dict]:
                     row[c + "_cov"] = bool(abs(est - tr) <= 1.96 * se)
                 rows.append(row)
     finally:
-        idm.simex_estimates = original
+        eiv_fit.simex_estimates = original
     print(v, s, flush=True)
     return rows
 

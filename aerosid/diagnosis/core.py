@@ -59,7 +59,8 @@ from aerosid.diagnosis.candidates import Candidate, default_candidates, derived_
 from aerosid.diagnosis.lookalikes import heldout_sse as _heldout_sse, scaled_lstsq as _scaled_lstsq
 from aerosid.diagnosis.lookalikes import windows_index as _windows_index
 from aerosid.modelling.expressions import evaluate
-from aerosid.identification.identify import angle_cutoff_hz, identity_channels, mach_window_mask
+from aerosid.identification.eiv_fit import angle_cutoff_hz
+from aerosid.identification.identify import identity_channels, mach_window_mask
 from aerosid.identification.band import segment_keys
 from aerosid.identification.eiv import simex_frames
 from aerosid.modelling.models import ChannelModel, default_models, vehicle_signals

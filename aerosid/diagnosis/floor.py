@@ -183,7 +183,7 @@ def angle_floor_rms(fd, vehicle, models: dict, channels, replicates: int = ANGLE
     from aerosid.diagnosis.candidates import derived_signals
     from aerosid.diagnosis.lookalikes import scaled_lstsq
     from aerosid.identification.eiv import with_angle_noise
-    from aerosid.identification.identify import angle_eiv_sigma, angle_cutoff_hz
+    from aerosid.identification.eiv_fit import angle_eiv_sigma, angle_cutoff_hz
     from aerosid.modelling.models import vehicle_signals
 
     sigma = angle_eiv_sigma(fd, vehicle)

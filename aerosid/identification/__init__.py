@@ -4,7 +4,9 @@
 ``flight_coefficients`` flight force and moment coefficients from smoothed states
 ``inversion``          angle of attack and sideslip from the preflight force database
 ``derivatives``        zero-phase low-pass of vanes, smoothing derivatives (alpha-dot, beta-dot)
-``eiv``                errors in the regressors: SIMEX correction for air-data vane noise
+``eiv``                errors in the regressors: SIMEX's numerics (the angles', rates' and controls' noise)
+``eiv_fit``            the fits corrected by SIMEX, the regressors' noise the flight data declare, control-noise warnings
+``prior_structure``    after the fit: the pitch-damping prior, model-structure uncertainty, wrong-sign damping
 ``regression``         linear least squares with the coloured-residual covariance (``fit_linear``)
 ``residual_covariance`` residual autocovariance, lag window, Morelli-Klein covariance
 ``linear_fit``         ``LinearFit``, the result of ``fit_linear``

@@ -2,10 +2,10 @@
 
 Why.  The regressors carry the sensors' noise: the vanes' in alpha and beta (and in alpha-dot,
 their derivative), the gyros' in p, q, r and the surfaces' in the controls.  SIMEX
-(aerosid.identification.eiv) corrects the angles' part by extrapolating to no noise.  Where the
-noise is a large share of a regressor it under-corrects (its quadratic extrapolant saturates), the
-rates' part is corrected only on request (gyro_eiv) and the surfaces' not at all.  The reported
-sigma know none of this.  Measured on seven JSBSim aircraft the project had never flown (five seeds each,
+(aerosid.identification.eiv) corrects the angles' and the surfaces' parts (the latter since
+2026-11-28, identify's control_eiv) by extrapolating to no noise.  Where the noise is a large share
+of a regressor it under-corrects (its quadratic extrapolant saturates), and the rates' part is
+corrected only on request (gyro_eiv).  The reported sigma know none of this.  Measured on seven JSBSim aircraft the project had never flown (five seeds each,
 bench/results/generalisation_unseen3.md): Boeing314 C_m,delta -13 % with 40 % coverage, the
 minisgs model glider C_l,p -11 % with 0 % (its roll mode is so fast that p follows the aileron,
 VIF 114, and the surfaces' 0.05 deg of noise alone moves C_l,p by 7 %).
@@ -38,7 +38,8 @@ more than NAMED_GROWTH (5 %).  Part of what it measures, SIMEX's under-correctio
 attenuation, is also in SIMEX's own sigma (a share of the correction, eiv.CORRECTION_SHARE, since
 2026-11-27): the two add in quadrature, so where both are large the sigma can count that part
 up to twice (at most a factor sqrt(2)); kept, as the check does not see the under-correction on
-every flight (F4N's C_m_alpha) and the correction's term does not see the gyros' or surfaces'.
+every flight (F4N's C_m_alpha) and the correction's term does not see the gyros' (nor, before
+2026-11-28, the surfaces').
 Where a prior follows (C_m of an aircraft), counting b in full is conservative: the prior passes
 only part of the pre-prior estimator's bias into its posterior.
 """
@@ -198,7 +199,7 @@ def with_estimator_bias(fd: pd.DataFrame, vehicle, models: dict, corrected: dict
     mixture, which the check leaves out: a prior applied to a world whose coefficients already hold
     it would count as bias).  Channels in ``skip`` (identities by construction) and channels the
     check cannot run on (estimator_bias) are left as they are."""
-    from aerosid.identification.identify import angle_cutoff_hz, angle_eiv_sigma
+    from aerosid.identification.eiv_fit import angle_cutoff_hz, angle_eiv_sigma
     from aerosid.modelling.models import vehicle_signals
 
     def regressors(frame: pd.DataFrame) -> dict[str, np.ndarray]:

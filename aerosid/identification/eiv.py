@@ -1,4 +1,4 @@
-"""Errors in the regressors: SIMEX correction for the noise in the angles and the body rates.
+"""Errors in the regressors: SIMEX correction for the noise in the angles, the body rates and the controls.
 
 With alpha and beta read from vanes, the regressors carry the vanes' noise (after the
 vane low-pass) and so do the signals derived from them (alpha-dot, beta-dot, alpha_r,
@@ -40,6 +40,16 @@ band-limited gyro noise) has no correlation with the rates' noise at zero lag, a
 (identify(gyro_eiv=False), or flight data without or with zero eiv_sigma_p/q/r), the result is
 bit-identical to the angle-only correction (tested).
 
+The controls. The mixed controls in the band-limited flight data carry the surfaces' white noise
+through the same low-pass (the flight data's eiv_sigma_delta_p/y/r_rad, measured from the fins'
+second differences; zero for quantised or held surfaces).  The same draws add noise of variance
+lambda sigma_d^2 to them (CONTROL_COLUMNS, their own generator).  A small share of a control's
+variance can still bias a fit a lot where the control and a state nearly cancel: on the minisgs
+model glider p follows the aileron through a fast roll mode, and the aileron's 0.05 deg noise
+(0.4 % of its variance in the band) put C_l_p and C_l_delta 8-15 % low; the true controls in its
+place leave 0.4-7.8 %, the correction 2-10 % (2 cached flights; docs/estimation.md, "Errors in the
+controls").  identify does it by default (control_eiv).
+
 The information. The same draws average X^T X at each lambda; extrapolated to lambda = -1 by a
 line (:func:`noise_free_gram`: exact for columns linear in the noise; the others, found by their
 sums moving with lambda, are left out) it is the regressors' noise-free information, and its
@@ -48,7 +58,7 @@ what the flight seems to know there is noise.  identify uses it for the pitch-da
 (aerosid.identification.damping_prior), where a noisy alpha_dot_hat makes the split look
 determined.
 
-The draws. Every draw, the angles' and the rates', is a common random number across lambda and
+The draws. Every draw, the angles', the rates' and the controls', is a common random number across lambda and
 comes in an antithetic pair (:func:`simex_frames`): pair k adds the same noise, times +sqrt(lambda)
 and -sqrt(lambda), at every lambda. With independent draws the Monte-Carlo error of 40 replicates
 passed for a curvature the quadratic amplified: the rates' part moved OV10's C_m_alpha by -3.8 %

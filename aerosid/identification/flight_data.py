@@ -349,8 +349,8 @@ def _control_noise(raw: dict, vehicle: Vehicle, bl, n: int) -> dict[str, np.ndar
     motion, slow next to the sample rate, cancels there where it would bias first differences),
     through the linear mixing.  0 where it cannot be measured this way: a surface quantised, or
     held between updates and interpolated by the preprocessing (its noise is then not seen, and
-    identify does not warn).  The controls are regressors taken as exact; identify warns where
-    this noise is a sizeable share of one's variation."""
+    identify does not warn).  identify corrects the estimates for this noise by SIMEX (control_eiv)
+    and warns where it is a sizeable share of one's variation."""
     runs = [slice(a, b) for a, b in bl.filter_runs]
     fin = np.nan_to_num([white_noise_sigma(raw[c], runs, order=2) for c in FIN_COLUMNS], nan=0.0)
     mixed = dict(zip(("delta_r", "delta_p", "delta_y"), (math.sqrt(float(np.sum((np.asarray(row, float) * fin) ** 2)))

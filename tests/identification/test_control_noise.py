@@ -1,12 +1,12 @@
-"""The controls are regressors taken as exact: their surface sensors' white noise is measured
-(aerosid.identification.flight_data._control_noise) and identify warns where it is a sizeable
-share of a control's variation in the band (control_noise_warnings)."""
+"""The controls' surface sensors' white noise is measured (aerosid.identification.flight_data.
+_control_noise), identify corrects the estimates for it by SIMEX (control_eiv, the default) and
+warns where it is a sizeable share of a control's variation in the band (control_noise_warnings)."""
 import numpy as np
 import pandas as pd
 import pytest
 
 from aerosid.identification.band import band_noise_gain, low_pass_runs
-from aerosid.identification.identify import CONTROL_NOISE_SHARE, control_noise_warnings
+from aerosid.identification.eiv_fit import CONTROL_NOISE_SHARE, control_noise_warnings
 from aerosid.modelling.models import default_models
 from aerosid.vehicles.vehicle import load_vehicle
 
@@ -70,8 +70,9 @@ def test_identify_warns_where_a_controls_noise_is_a_sizeable_share_of_its_variat
     assert 0.01 < CONTROL_NOISE_SHARE
     assert control_noise_warnings(_flight_data(n, fs, band, 1e-2, in_band), models) == {}
     # with the estimates corrected for it (identify's control_eiv), the warning says so
-    text = control_noise_warnings(_flight_data(n, fs, band, 2e-3, in_band), models, corrected=True)["Cm"]
-    assert "corrected for it by SIMEX" in text and "not corrected" not in text
+    both = control_noise_warnings(_flight_data(n, fs, band, 2e-3, in_band), models, corrected=("Cm",))
+    assert "corrected for it by SIMEX" in both["Cm"] and "not corrected" not in both["Cm"]
+    assert "not corrected" in both["CN"]  # a channel the correction left alone keeps "low by"
     # flight data without the columns (smoother path, older files): nothing
     fd = _flight_data(n, fs, band, 2e-3, in_band).drop(columns=["eiv_sigma_delta_p_rad"])
     assert control_noise_warnings(fd, models) == {}
@@ -106,10 +107,14 @@ def test_identify_corrects_for_the_controls_noise_by_default_and_zero_noise_chan
     def table(ident):
         return ident.table().set_index("coefficient")
 
+    declared = fd.copy()  # the noise declared, not added
+    for col in CONTROL_NOISE_COLUMNS.values():
+        declared[col] = noisy[col]
     exact = table(identify(fd, veh, models))
-    t_zero = table(identify(zero, veh, models))
-    for c in ("estimate", "std_error"):
-        np.testing.assert_array_equal(t_zero[c].to_numpy(), exact[c].to_numpy())
+    for same in (identify(zero, veh, models), identify(declared, veh, models, control_eiv=False)):
+        for c in ("estimate", "std_error"):
+            np.testing.assert_array_equal(table(same)[c].to_numpy(float), exact[c].to_numpy(float))
+        assert list(table(same)["warnings"]) == list(exact["warnings"])
     naive = table(identify(noisy, veh, models, control_eiv=False))
     on = table(identify(noisy, veh, models))
     assert "in the band-limited controls" not in " ".join(naive["warnings"].astype(str))
@@ -118,3 +123,20 @@ def test_identify_corrects_for_the_controls_noise_by_default_and_zero_noise_chan
     assert abs(b_on - b0) < 0.5 * abs(b_naive - b0)
     assert on.loc["Cm_delta_p", "std_error"] > naive.loc["Cm_delta_p", "std_error"]
     assert "surface-sensor noise in the band-limited controls" in on.loc["Cm_delta_p", "warnings"]
+
+
+def test_the_controls_sigma_come_in_the_order_simex_adds_them():
+    """identify's control_eiv_sigma reads (delta_p, delta_y, delta_r), eiv.CONTROL_COLUMNS' order, and
+    gives None (the controls taken as exact) for zero or non-finite noise or no columns."""
+    from aerosid.identification.eiv import CONTROL_COLUMNS
+    from aerosid.identification.eiv_fit import control_eiv_sigma
+    from aerosid.identification.flight_data import CONTROL_NOISE_COLUMNS
+
+    fd = pd.DataFrame({CONTROL_NOISE_COLUMNS[c]: [v, v] for c, v in (("delta_p", 1e-3), ("delta_y", 2e-3),
+                                                                     ("delta_r", 3e-3))})
+    got = control_eiv_sigma(fd)
+    assert [float(x[0]) for x in got] == [1e-3, 2e-3, 3e-3]
+    assert [c.replace("_rad", "") for c in CONTROL_COLUMNS] == ["delta_p", "delta_y", "delta_r"]
+    assert control_eiv_sigma(fd * 0.0) is None
+    assert control_eiv_sigma(fd.assign(**{CONTROL_NOISE_COLUMNS["delta_y"]: np.nan})) is None
+    assert control_eiv_sigma(fd.drop(columns=[CONTROL_NOISE_COLUMNS["delta_r"]])) is None

@@ -11,7 +11,7 @@ import pandas as pd
 import pytest
 
 from aerosid.identification.damping_prior import PRIOR_SHARE, PRIOR_SHARE_SIGMA, damping_terms, split_update
-from aerosid.identification.identify import _with_structure_uncertainty, with_pitch_damping_prior
+from aerosid.identification.prior_structure import with_pitch_damping_prior, with_structure_uncertainty
 from aerosid.identification.regression import fit_linear
 from aerosid.modelling.models import default_models
 from aerosid.vehicles.vehicle import VehicleError, load_vehicle
@@ -303,8 +303,8 @@ def test_the_structure_mixture_leaves_the_split_to_the_prior():
     lo, hi = f.conf_int()[ia]
     assert lo < 0 < hi
     fd, fixed = pd.DataFrame({"Cm": y}), {"Cm": _Fixed(models["Cm"], cols)}
-    mixed = _with_structure_uncertainty(fd, {}, fixed, post, {}, None)["Cm"]
-    kept = _with_structure_uncertainty(fd, {}, fixed, post, {}, covered)["Cm"]
+    mixed = with_structure_uncertainty(fd, {}, fixed, post, {}, None)["Cm"]
+    kept = with_structure_uncertainty(fd, {}, fixed, post, {}, covered)["Cm"]
     assert mixed.std_error[jalpha] > 1.5 * f.std_error[jalpha]  # what double counting would do
     assert kept.std_error[jalpha] == f.std_error[jalpha]
 
@@ -312,14 +312,14 @@ def test_the_structure_mixture_leaves_the_split_to_the_prior():
 def test_a_wrong_sign_alpha_dot_the_flight_pins_down_still_takes_the_mixture():
     """A positive C_m,alpha_dot the flight determines (the vane-noise case of pa28) is the data's,
     not the prior's: its wrong-sign mark (taken before the prior) still widens its partners."""
-    from aerosid.identification.identify import wrong_sign_terms
+    from aerosid.identification.prior_structure import wrong_sign_terms
 
     veh, models, fits, cols, y = _c172x_flight(alpha_dot_truth=+5.0, seed=9, collinear=0.1)
     flagged = wrong_sign_terms(models, fits)
     assert "Cm_alpha_dot" in flagged
     post, covered = with_pitch_damping_prior(veh, models, fits)
     fd, fixed = pd.DataFrame({"Cm": y}), {"Cm": _Fixed(models["Cm"], cols)}
-    out = _with_structure_uncertainty(fd, {}, fixed, post, flagged, covered)["Cm"]
+    out = with_structure_uncertainty(fd, {}, fixed, post, flagged, covered)["Cm"]
     j = out.names.index("Cm_alpha")
     assert out.std_error[j] > 1.5 * post["Cm"].std_error[j]
     assert any("positive at 95 %" in w for w in out.warnings)

@@ -68,7 +68,7 @@ def test_the_correction_share_follows_the_angle_source():
     noise alone the vanes' share; a source nobody measured is refused, not given a share."""
     from types import SimpleNamespace
 
-    from aerosid.identification.identify import correction_share
+    from aerosid.identification.eiv_fit import correction_share
 
     assert correction_share(SimpleNamespace(air_data_source="vanes")) == 1.0
     assert correction_share(SimpleNamespace(air_data_source="database")) == 0.6
@@ -324,12 +324,12 @@ def test_the_vanes_levels_leave_less_of_an_attenuation_than_the_usual_ones(relia
 @pytest.mark.parametrize("source, angles, expected", [("vanes", True, "vanes"), ("database", True, "database"),
                                                       ("database", False, "rates")])
 def test_identify_runs_simex_at_the_levels_of_the_noise_source(monkeypatch, source, angles, expected):
-    """identify's SIMEX (_eiv_corrected) refits at the vanes' levels for vane angles, at the usual
+    """identify's SIMEX (eiv_fit.eiv_corrected) refits at the vanes' levels for vane angles, at the usual
     ones for angles inverted from the force database, and at the usual ones for the gyros' noise
     alone (measured there, bench/results/gyro_simex.md); an unknown source is refused."""
     from types import SimpleNamespace
 
-    import aerosid.identification.identify as idm
+    import aerosid.identification.eiv_fit as eiv_fit
     from aerosid.identification.regression import fit_linear
 
     seen = {}
@@ -339,7 +339,7 @@ def test_identify_runs_simex_at_the_levels_of_the_noise_source(monkeypatch, sour
         k = 2
         return {ch: eiv.SimexResult.from_curve(np.array([0.0, 0.5, 1.0]), np.zeros((3, k))) for ch in y_by_channel}
 
-    monkeypatch.setattr(idm, "simex_estimates", spy)
+    monkeypatch.setattr(eiv_fit, "simex_estimates", spy)
     t = np.arange(200) * 0.01
     alpha = 0.01 * np.sin(t)
     fd = _frame(alpha, t).assign(Cm=-1.8 * alpha, band_hz=2.0)
@@ -347,12 +347,12 @@ def test_identify_runs_simex_at_the_levels_of_the_noise_source(monkeypatch, sour
     vehicle = SimpleNamespace(air_data_source=source, vane_cutoff_hz=None)
     sigma = (np.full(t.size, 0.01), np.full(t.size, 0.01)) if angles else None
     rate_sigma = None if angles else tuple(np.full(t.size, 1e-3) for _ in range(3))
-    idm._eiv_corrected(fd, vehicle, {"Cm": None}, fits, sigma, rate_sigma)
+    eiv_fit.eiv_corrected(fd, vehicle, {"Cm": None}, fits, sigma, rate_sigma, skip=())
     assert seen["lambdas"] == {"vanes": eiv.LAMBDAS_BY_SOURCE["vanes"], "database": eiv.LAMBDAS,
                                "rates": eiv.LAMBDAS}[expected]
     assert max(eiv.LAMBDAS_BY_SOURCE["vanes"]) < max(eiv.LAMBDAS)
     with pytest.raises(KeyError):
-        idm.simex_lambdas(SimpleNamespace(air_data_source="laser"))
+        eiv_fit.simex_lambdas(SimpleNamespace(air_data_source="laser"))
 
 
 def _roll_frame(t: np.ndarray, p: np.ndarray, delta: np.ndarray) -> pd.DataFrame:
@@ -435,7 +435,12 @@ def test_control_draws_have_their_own_generator_and_leave_the_angles_and_rates_a
         m = np.array(moved[lam])
         np.testing.assert_allclose(m[0::2], -m[1::2], atol=1e-15)
         np.testing.assert_allclose(m, np.array(moved[LAMBDAS[0]]), atol=1e-12)
-    assert set(CONTROL_COLUMNS) == {"delta_p_rad", "delta_y_rad", "delta_r_rad"}
-    # the controls' unit draw is not the rates' (each its own generator)
-    rate_move = with_controls[0][1]["p_rad_s"].to_numpy() - fd["p_rad_s"].to_numpy()
-    assert not np.allclose(rate_move, with_controls[0][1]["delta_r_rad"].to_numpy() - d)
+    assert CONTROL_COLUMNS == ("delta_p_rad", "delta_y_rad", "delta_r_rad")  # the order of control_sigma
+    # pair 0's unit draw is the (SEED, 0, 2) generator's, in that order (not the rates' (SEED, 0, 1)
+    # nor the angles' (SEED, 0))
+    groups, first = np.zeros(t.size), with_controls[0]
+    unit = eiv.rate_noise(np.random.default_rng([eiv.SEED, 0, 2]), groups, t, (s, 0 * s, s), 2.0)
+    np.testing.assert_allclose(first[1]["delta_r_rad"].to_numpy() - d, np.sqrt(first[0]) * unit[:, 2], atol=1e-15)
+    np.testing.assert_allclose(first[1]["delta_p_rad"].to_numpy(), np.sqrt(first[0]) * unit[:, 0], atol=1e-15)
+    rates = eiv.rate_noise(np.random.default_rng([eiv.SEED, 0, 1]), groups, t, (s, 0 * s, s), 2.0)
+    assert not np.allclose(unit, rates)

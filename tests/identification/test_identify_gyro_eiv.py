@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 
 from aerosid.diagnosis.synthetic import MEASURED_NOISE, flight_data_from_truth
-from aerosid.identification.identify import RATE_EIV_COLUMNS, identify
+from aerosid.identification.eiv_fit import RATE_EIV_COLUMNS
+from aerosid.identification.identify import identify
 from aerosid.modelling.models import default_models, parse_term
 
 COLUMNS = ("estimate", "std_error", "ci_low", "ci_high")

@@ -97,7 +97,7 @@ def test_its_partners_sigma_include_the_model_without_it():
     looks at the sign only) widens C_m_alpha's sigma by the two-point mixture with the model
     without it; the estimates are unchanged; with the same data but a negative alpha-dot, nothing
     changes."""
-    from aerosid.identification.identify import _with_structure_uncertainty, wrong_sign_terms
+    from aerosid.identification.prior_structure import with_structure_uncertainty, wrong_sign_terms
     from aerosid.identification.regression import fit_linear
     from aerosid.modelling.models import ChannelModel, Term
 
@@ -113,7 +113,7 @@ def test_its_partners_sigma_include_the_model_without_it():
     for sign in (+1.0, -1.0):
         y = 0.01 - 1.0 * alpha - 10.0 * q_hat + sign * 3.0 * adot + rng.normal(0, 0.002, n)
         fit = fit_linear(y, X, names=model.names, channel="Cm")
-        out = _with_structure_uncertainty(pd.DataFrame({"Cm": y}), signals, {"Cm": model}, {"Cm": fit})["Cm"]
+        out = with_structure_uncertainty(pd.DataFrame({"Cm": y}), signals, {"Cm": model}, {"Cm": fit})["Cm"]
         flagged = wrong_sign_terms({"Cm": model}, {"Cm": fit})
         assert np.allclose(out.estimate, fit.estimate)
         lo = fit.conf_int()[3][0]
@@ -152,7 +152,8 @@ def test_damping_terms_are_recognised_as_written():
 def test_a_wrong_sign_term_is_widened_and_named_even_when_no_partner_moves():
     """p_hat orthogonal to the other columns: dropping it moves nothing, but the term's own
     interval must still include the model without it, as the table and the run say."""
-    from aerosid.identification.identify import Identification, _with_structure_uncertainty, wrong_sign_terms
+    from aerosid.identification.identify import Identification
+    from aerosid.identification.prior_structure import with_structure_uncertainty, wrong_sign_terms
     from aerosid.identification.regression import fit_linear
     from aerosid.modelling.models import ChannelModel, Term
 
@@ -165,7 +166,7 @@ def test_a_wrong_sign_term_is_widened_and_named_even_when_no_partner_moves():
     y = -0.1 * beta + 0.05 * p_hat + rng.normal(0, 1e-4, n)
     fit = fit_linear(y, model.regressors(signals), names=model.names, channel="Cl")
     assert fit.conf_int()[2][0] > 0
-    out = _with_structure_uncertainty(pd.DataFrame({"Cl": y}), signals, {"Cl": model}, {"Cl": fit})["Cl"]
+    out = with_structure_uncertainty(pd.DataFrame({"Cl": y}), signals, {"Cl": model}, {"Cl": fit})["Cl"]
     assert out is not fit and np.isclose(out.std_error[2], np.hypot(fit.std_error[2], 0.5 * fit.estimate[2]))
     assert np.isclose(out.std_error[1], fit.std_error[1], rtol=0.05)
     assert any("Cl_p: positive at 95 %" in w and "p_hat" in w for w in out.warnings)
@@ -177,7 +178,7 @@ def test_a_wrong_sign_term_is_widened_and_named_even_when_no_partner_moves():
 def test_the_flag_does_not_depend_on_the_mixture():
     """A channel with a term that is not identifiable (NaN estimate) skips the mixture; its
     wrong-sign damping term is still named (the flag is computed on the fits themselves)."""
-    from aerosid.identification.identify import wrong_sign_terms
+    from aerosid.identification.prior_structure import wrong_sign_terms
     from aerosid.identification.regression import fit_linear
     from aerosid.modelling.models import ChannelModel, Term
 
