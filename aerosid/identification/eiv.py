@@ -217,7 +217,8 @@ def simex_frames(fd: pd.DataFrame, sigma_rad, cutoff_hz: float | None, rate_sigm
     curve is smooth in lambda (common numbers), and within each pair the terms odd in the noise
     cancel (antithetic): with independent draws at each lambda, 40 replicates left the
     corrected F4N C_n_r depending on the draws' seed by 14 % (1 sd over three seeds), C_m_alpha
-    by 0.35-0.9 %; with these 0.16 % and 0.14-0.6 % (bench/results/simex_mc.md).  Without
+    by 0.35-0.9 %; with these 0.16 % and 0.14-0.6 % (bench/results/simex_mc.md; 0.16-0.99 % at the
+    vanes' levels 0.25..1).  Without
     rate_sigma the angles' frames are the same whatever the rates' generator would draw.  The
     frames share no arrays with ``fd`` or with each other, except that ``fd`` itself is yielded
     when there is no noise to add: read them, do not write them."""
