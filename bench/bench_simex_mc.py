@@ -75,9 +75,9 @@ def legacy_simex(mode: str, master: int):
                         f = eiv.with_angles_moved(f, np.sqrt(lam) * angles[b][0], np.sqrt(lam) * angles[b][1])
                 if rate_sigma is not None:
                     if b not in rates:
-                        rates[b] = eiv.rate_noise(np.random.default_rng([master + 1, b]), groups, t, rate_sigma,
+                        rates[b] = eiv.column_noise(np.random.default_rng([master + 1, b]), groups, t, rate_sigma,
                                                   rate_cutoff_hz)
-                    f = eiv.with_rate_noise(f, np.sqrt(lam) * rates[b], copy=f is fd)
+                    f = eiv.with_column_noise(f, np.sqrt(lam) * rates[b], copy=f is fd)
                 for ch, est in fit_all(f).items():
                     acc[ch] += est / eiv.REPLICATES
             for ch in curves:

@@ -182,16 +182,17 @@ def with_angle_noise(fd: pd.DataFrame, rng: np.random.Generator, groups: np.ndar
     return with_angles_moved(fd, *angle_noise(rng, groups, fd["t_s"].to_numpy(float), sigma, cutoff_hz))
 
 
-def rate_noise(rng: np.random.Generator, groups: np.ndarray, t_s: np.ndarray, sigma: tuple,
-               cutoff_hz) -> np.ndarray:
-    """(N, 3) noise for p, q, r: sigma = (sigma_p, sigma_q, sigma_r) [rad/s], the gyros'
-    white-noise 1-sigma (numbers or arrays per sample) before the low-pass; cutoff_hz: the band
-    the rates went through (a number, or one per sample), None: white."""
+def column_noise(rng: np.random.Generator, groups: np.ndarray, t_s: np.ndarray, sigma: tuple,
+                 cutoff_hz) -> np.ndarray:
+    """(N, len(sigma)) noise for band-limited columns: sigma = one white-noise 1-sigma per column
+    (numbers or arrays per sample) before the low-pass, e.g. (sigma_p, sigma_q, sigma_r) [rad/s]
+    for the gyros, (sigma_delta_p, sigma_delta_y, sigma_delta_r) [rad] for the controls;
+    cutoff_hz: the band the columns went through (a number, or one per sample), None: white."""
     return np.column_stack([filtered_noise(rng, groups, t_s, sig, cutoff_hz) for sig in sigma])
 
 
-def with_rate_noise(fd: pd.DataFrame, noise: np.ndarray, copy: bool = True,
-                    columns: tuple = RATE_COLUMNS) -> pd.DataFrame:
+def with_column_noise(fd: pd.DataFrame, noise: np.ndarray, copy: bool = True,
+                      columns: tuple = RATE_COLUMNS) -> pd.DataFrame:
     """The flight data with `noise` (N, len(columns)) added to ``columns`` (p, q, r; or
     CONTROL_COLUMNS), a copy unless copy=False."""
     f = fd.copy() if copy else fd
@@ -206,7 +207,7 @@ def simex_frames(fd: pd.DataFrame, sigma_rad, cutoff_hz: float | None, rate_sigm
     """The remeasured flight data SIMEX refits: yields (lambda, frame) `replicates` times (even;
     REPLICATES) for each lambda in `lambdas` (LAMBDAS), the frame being ``fd`` with extra noise
     of variance lambda x sigma^2 on the angles (sigma_rad: as angle_noise; None: the angles are
-    exact), given rate_sigma, on p, q, r (rate_noise; None: the rates are exact) and, given
+    exact), given rate_sigma, on p, q, r (column_noise; None: the rates are exact) and, given
     control_sigma (sigma_delta_p, sigma_delta_y, sigma_delta_r [rad], the mixed surfaces' white
     noise before the band control_cutoff_hz), on the controls CONTROL_COLUMNS.
 
@@ -227,11 +228,12 @@ def simex_frames(fd: pd.DataFrame, sigma_rad, cutoff_hz: float | None, rate_sigm
     groups = segment_keys(fd)
     t = fd["t_s"].to_numpy(float)
     for k in range(replicates // 2):
+        # numpy seeds [seed, k] as [seed, k, 0]: a further noise source takes the suffix 3
         d_angles = (angle_noise(np.random.default_rng([seed, k]), groups, t, sigma_rad, cutoff_hz)
                     if sigma_rad is not None else None)
-        d_rates = (rate_noise(np.random.default_rng([seed, k, 1]), groups, t, rate_sigma, rate_cutoff_hz)
+        d_rates = (column_noise(np.random.default_rng([seed, k, 1]), groups, t, rate_sigma, rate_cutoff_hz)
                    if rate_sigma is not None else None)
-        d_controls = (rate_noise(np.random.default_rng([seed, k, 2]), groups, t, control_sigma, control_cutoff_hz)
+        d_controls = (column_noise(np.random.default_rng([seed, k, 2]), groups, t, control_sigma, control_cutoff_hz)
                       if control_sigma is not None else None)
         for lam in lambdas:
             for sign in (1.0, -1.0):
@@ -240,9 +242,9 @@ def simex_frames(fd: pd.DataFrame, sigma_rad, cutoff_hz: float | None, rate_sigm
                 if d_angles is not None:
                     f = with_angles_moved(f, scale * d_angles[0], scale * d_angles[1])
                 if d_rates is not None:
-                    f = with_rate_noise(f, scale * d_rates, copy=f is fd)
+                    f = with_column_noise(f, scale * d_rates, copy=f is fd)
                 if d_controls is not None:
-                    f = with_rate_noise(f, scale * d_controls, copy=f is fd, columns=CONTROL_COLUMNS)
+                    f = with_column_noise(f, scale * d_controls, copy=f is fd, columns=CONTROL_COLUMNS)
                 yield lam, f
 
 

@@ -439,8 +439,8 @@ def test_control_draws_have_their_own_generator_and_leave_the_angles_and_rates_a
     # pair 0's unit draw is the (SEED, 0, 2) generator's, in that order (not the rates' (SEED, 0, 1)
     # nor the angles' (SEED, 0))
     groups, first = np.zeros(t.size), with_controls[0]
-    unit = eiv.rate_noise(np.random.default_rng([eiv.SEED, 0, 2]), groups, t, (s, 0 * s, s), 2.0)
+    unit = eiv.column_noise(np.random.default_rng([eiv.SEED, 0, 2]), groups, t, (s, 0 * s, s), 2.0)
     np.testing.assert_allclose(first[1]["delta_r_rad"].to_numpy() - d, np.sqrt(first[0]) * unit[:, 2], atol=1e-15)
     np.testing.assert_allclose(first[1]["delta_p_rad"].to_numpy(), np.sqrt(first[0]) * unit[:, 0], atol=1e-15)
-    rates = eiv.rate_noise(np.random.default_rng([eiv.SEED, 0, 1]), groups, t, (s, 0 * s, s), 2.0)
+    rates = eiv.column_noise(np.random.default_rng([eiv.SEED, 0, 1]), groups, t, (s, 0 * s, s), 2.0)
     assert not np.allclose(unit, rates)
