@@ -126,20 +126,49 @@ def simex_channels(fits: dict, skip: tuple[str, ...]) -> tuple[str, ...]:
                  if np.all(np.isfinite(f.estimate)) and f.n_dropped == 0 and ch not in skip)
 
 
+#: Signals whose presence in a channel's model keeps the gyros' part of SIMEX out of that channel
+#: by default (identify's gyro_eiv="auto"): the angle rates read off the angles.
+ANGLE_RATE_SIGNALS = ("alpha_dot_hat", "beta_dot_hat")
+
+
+def angle_rate_free_channels(models: dict) -> tuple[str, ...]:
+    """The channels whose model reads no angle rate (ANGLE_RATE_SIGNALS): where the gyros' part of
+    SIMEX goes by default.  Joined to the angles' correction, which leaves part of the vane noise's
+    attenuation of alpha-dot, it made C_m_alpha worse (docs/estimation.md, "Errors in the rates")."""
+    from aerosid.modelling.expressions import signal_names
+    from aerosid.modelling.models import SIGNALS
+
+    return tuple(ch for ch, m in models.items()
+                 if not any(set(ANGLE_RATE_SIGNALS) & set(signal_names(t.expression, SIGNALS)) for t in m.terms))
+
+
+#: The model signals the rate columns p, q, r feed (aerosid.modelling.models.vehicle_signals): a
+#: channel left out of the gyros' part reads these from the un-noised flight data.
+RATE_SIGNALS = ("p", "q", "r", "p_hat", "q_hat", "r_hat")
+
+
 def eiv_corrected(fd: pd.DataFrame, vehicle: Vehicle, models: dict, fits: dict, sigma,
-                  rate_sigma=None, control_sigma=None, *, skip: tuple[str, ...]) -> dict:
+                  rate_sigma=None, control_sigma=None, *, skip: tuple[str, ...],
+                  rate_channels: tuple[str, ...] | None = None) -> dict:
     """The fits with their estimates corrected for the noise in alpha and beta and, given
-    rate_sigma, in the band-limited rates p, q, r, and, given control_sigma, in the band-limited
-    controls (aerosid.identification.eiv, SIMEX), on the channels simex_channels(fits, skip) names.
-    skip: the channels left as they are (for inverted angles, the force channels they come from:
-    identify.identity_channels)."""
-    ok = {ch: fits[ch] for ch in simex_channels(fits, skip)}
+    rate_sigma, in the band-limited rates p, q, r (on the channels in rate_channels; None: every
+    one), and, given control_sigma, in the band-limited controls (aerosid.identification.eiv,
+    SIMEX), on the channels simex_channels(fits, skip) names.  skip: the channels left as they are
+    (for inverted angles, the force channels they come from: identify.identity_channels).  One
+    set of draws serves every channel: those outside rate_channels read the rate signals
+    (RATE_SIGNALS) of the flight data as it is, so their answer is the one without rate_sigma."""
+    ok = simex_channels(fits, skip)
+    noisy_rates = tuple(ch for ch in ok if rate_sigma is not None and (rate_channels is None or ch in rate_channels))
+    if sigma is None and control_sigma is None:
+        ok = noisy_rates  # the others get no noise at all: left as they are
     if not ok:
         return fits
+    base = vehicle_signals(fd, vehicle) if len(noisy_rates) < len(ok) and rate_sigma is not None else None
 
     def design(frame: pd.DataFrame) -> dict:
         sig = vehicle_signals(frame, vehicle)
-        return {ch: models[ch].regressors(sig).to_numpy(float) for ch in ok}
+        exact = sig if base is None else {**sig, **{k: base[k] for k in RATE_SIGNALS if k in base}}
+        return {ch: models[ch].regressors(sig if ch in noisy_rates else exact).to_numpy(float) for ch in ok}
 
     band = fd["band_hz"].to_numpy(float) if "band_hz" in fd.columns else None
     corrected = simex_estimates(fd, {ch: fd[ch].to_numpy(float) for ch in ok}, design, sigma,
@@ -147,6 +176,16 @@ def eiv_corrected(fd: pd.DataFrame, vehicle: Vehicle, models: dict, fits: dict, 
                                 lambdas=simex_lambdas(vehicle, angles=sigma is not None),
                                 control_sigma=control_sigma,
                                 control_cutoff_hz=band if control_sigma is not None else None)
+    notes = {ch: _simex_note(vehicle, sigma, rate_sigma if ch in noisy_rates else None, control_sigma) for ch in ok}
+    share = correction_share(vehicle, angles=sigma is not None)
+    return {ch: with_corrected_estimate(f, corrected[ch].corrected, notes[ch],
+                                        corrected[ch].std_error(f.std_error, correction_share=share),
+                                        corrected[ch].information())
+            if ch in corrected else f for ch, f in fits.items()}
+
+
+def _simex_note(vehicle: Vehicle, sigma, rate_sigma, control_sigma) -> str:
+    """What a SIMEX-corrected fit says of its correction."""
     what = ("the vane noise" if vehicle.air_data_source == "vanes"
             else "the noise the accelerometers put into the inverted angles")
     parts = [text for text, sig, unit in (("the gyro noise in the band-limited rates (SIMEX, median sigma p, q, r ",
@@ -162,13 +201,9 @@ def eiv_corrected(fd: pd.DataFrame, vehicle: Vehicle, models: dict, fits: dict, 
                 f"beta {float(np.median(sigma[1])):.2g} rad)" + (f" and {rates}" if rates else ""))
     share = correction_share(vehicle, angles=sigma is not None)
     part = "the correction itself" if share == 1 else f"{share:.0%} of the correction"
-    note = head + (f"; sigma scaled by the correction and combined with the correction's own error (at least {part}: "
+    return head + (f"; sigma scaled by the correction and combined with the correction's own error (at least {part}: "
                    "SIMEX's quadratic extrapolant leaves part of a large attenuation, or overshoots it); residual "
                    "statistics are the uncorrected fit's")
-    return {ch: with_corrected_estimate(f, corrected[ch].corrected, note,
-                                        corrected[ch].std_error(f.std_error, correction_share=share),
-                                        corrected[ch].information())
-            if ch in corrected else f for ch, f in fits.items()}
 
 
 def correction_share(vehicle: Vehicle, angles: bool = True) -> float:

@@ -14,8 +14,8 @@ import pandas as pd
 
 from aerosid.modelling.aeromodel import AeroModel
 from aerosid.identification.crb import identification_bounds
-from aerosid.identification.eiv_fit import (angle_eiv_sigma, control_eiv_sigma, eiv_corrected, rate_eiv_sigma,
-                                            simex_channels)
+from aerosid.identification.eiv_fit import (angle_eiv_sigma, angle_rate_free_channels, control_eiv_sigma,
+                                            eiv_corrected, rate_eiv_sigma, simex_channels)
 from aerosid.identification.prior_structure import with_prior_and_structure
 from aerosid.modelling.models import ChannelModel, default_models, vehicle_signals
 from aerosid.plausibility.estimates import preflight_departure
@@ -155,13 +155,16 @@ def mach_window_mask(mach: np.ndarray, reference: float, half_width: float | Non
     return np.abs(mach - reference) <= half_width
 
 
-#: The rates' part of SIMEX is off by default.  Right in isolation (it moves C_m_alpha toward the
-#: true-rates answer on F4N, OV10 and pa28, bench/results/gyro_simex.md), but joined to the
-#: angles' SIMEX, which under-corrects the vane noise in alpha_dot_hat, it made the estimates
-#: worse on three of the four aircraft measured, including T37, which it had not been developed
-#: on (generalisation bench, 10 seeds, C_m_alpha mean error off -> on: OV10 +3.0 -> +0.9 %,
-#: T37 -1.4 -> -5.2 %, F4N -4.6 -> -6.1 %, pa28 -4.0 -> -4.6 %; docs/estimation.md).
-GYRO_EIV_DEFAULT = False
+#: The rates' part of SIMEX by default ("auto") only in the channels whose model reads no angle
+#: rate (eiv_fit.angle_rate_free_channels: the lateral-directional ones).  Right in isolation (it
+#: moves C_m_alpha toward the true-rates answer on F4N, OV10 and pa28, bench/results/gyro_simex.md),
+#: but joined to the angles' SIMEX, which under-corrects the vane noise in alpha_dot_hat, it made
+#: C_m_alpha worse on three of the four aircraft measured (generalisation bench, 10 seeds, mean
+#: error off -> on: OV10 +3.0 -> +0.9 %, T37 -1.4 -> -5.2 %, F4N -4.6 -> -6.1 %, pa28 -4.0 -> -4.6 %),
+#: and still did on 2026-11-28 (cached flights: F4N -5.9 -> -7.8 %, J3Cub -8.7 -> -9.7 %); in the
+#: channels without alpha_dot_hat it removes the gyro noise's attenuation (minisgs C_l_p, C_n_r;
+#: docs/estimation.md, "Errors in the rates").  True: every channel; False: none.
+GYRO_EIV_DEFAULT = "auto"
 #: The controls' part of SIMEX (the surfaces' white noise, flight data eiv_sigma_delta_*_rad) is on
 #: by default: see docs/estimation.md, "Errors in the controls".
 CONTROL_EIV_DEFAULT = True
@@ -197,14 +200,15 @@ def _checked_bias_pairs(pairs: int, where: str = "bias_pairs = ") -> int:
 
 def identify(flight_data: pd.DataFrame, vehicle: Vehicle, models: dict[str, ChannelModel] | None = None,
              mach_half_width: float | None = 0.5, cov: str = "morelli_klein",
-             gyro_eiv: bool = GYRO_EIV_DEFAULT, bias_pairs: int | None = None,
+             gyro_eiv: bool | str = GYRO_EIV_DEFAULT, bias_pairs: int | None = None,
              instrumental: bool | None = None, control_eiv: bool = CONTROL_EIV_DEFAULT) -> Identification:
     """Fit every channel's model on the samples with |M - M_ref| <= mach_half_width.
     Pooled flights (several values of ``flight``: manoeuvres of one aircraft) are fitted
     together; the coloured-residual correction treats each flight as its own record
     (``fit_linear(groups=...)``).  The estimates are corrected for the noise in the angles
     and (gyro_eiv, the flight data's eiv_sigma_p/q/r columns) in the rates by SIMEX
-    (aerosid.identification.eiv); gyro_eiv=False (the default, GYRO_EIV_DEFAULT): not the rates.
+    (aerosid.identification.eiv); gyro_eiv: "auto" (the default, GYRO_EIV_DEFAULT) the rates' noise in
+    the channels whose model reads no angle rate, True in every channel, False in none.
     control_eiv (default CONTROL_EIV_DEFAULT, True): the same for the controls' surface-sensor
     noise (the flight data's eiv_sigma_delta_*_rad; zero for quantised or held surfaces).
     bias_pairs: +/- pairs of re-draws of the parametric check of the estimator's own bias at this
@@ -256,7 +260,7 @@ def _band_limited(fd: pd.DataFrame) -> bool:
     return "band_hz" in fd.columns and bool(np.all(np.isfinite(fd["band_hz"].to_numpy(float))))
 
 
-def _corrected_fits(fd: pd.DataFrame, vehicle: Vehicle, models: dict, cov: str, gyro_eiv: bool,
+def _corrected_fits(fd: pd.DataFrame, vehicle: Vehicle, models: dict, cov: str, gyro_eiv: bool | str,
                     signals: dict | None = None, instrumental: bool = False,
                     control_eiv: bool = CONTROL_EIV_DEFAULT) -> dict[str, LinearFit]:
     """Every channel's fit on the window's flight data ``fd`` (sorted, inside the Mach window):
@@ -287,9 +291,12 @@ def _corrected_fits(fd: pd.DataFrame, vehicle: Vehicle, models: dict, cov: str, 
                 for ch, fit in fits.items()}
     sigma = angle_eiv_sigma(fd, vehicle)
     band_limited = _band_limited(fd)
+    if gyro_eiv not in (True, False, "auto"):
+        raise ValueError(f"gyro_eiv={gyro_eiv!r}: True, False or 'auto'")
     rate_sigma = rate_eiv_sigma(fd) if gyro_eiv and band_limited else None
     control_sigma = control_eiv_sigma(fd) if control_eiv and band_limited else None
     if sigma is not None or rate_sigma is not None or control_sigma is not None:
         fits = eiv_corrected(fd, vehicle, models, fits, sigma, rate_sigma, control_sigma,
-                             skip=identity_channels(vehicle, fits))
+                             skip=identity_channels(vehicle, fits),
+                             rate_channels=angle_rate_free_channels(models) if gyro_eiv == "auto" else None)
     return fits

@@ -1,6 +1,7 @@
 """identify() with the gyro part of the SIMEX correction (aerosid.identification.eiv): the
 switch off, a flight data frame without the eiv_sigma_p/q/r columns (written before them) and
-one with zero gyro noise all give today's angle-only answer bit for bit; gyro noise moves it."""
+one with zero gyro noise all give the angle-only answer bit for bit; gyro noise moves it, by
+default only in the channels whose model reads no angle rate."""
 from __future__ import annotations
 
 import numpy as np
@@ -42,8 +43,7 @@ def test_zero_gyro_noise_and_the_switch_off_are_bit_identical_to_the_angle_only_
     assert _same(identify(zero, veh, models), before)
     assert _same(identify(noisy, veh, models, gyro_eiv=False), before)
     assert "gyro noise" not in " ".join(before.table()["warnings"])
-    assert _same(identify(noisy, veh, models), before)  # off by default (identify.GYRO_EIV_DEFAULT)
-    on = identify(noisy, veh, models, gyro_eiv=True)  # the comparison above can fail: the gyro noise moves the rate terms
+    on = identify(noisy, veh, models, gyro_eiv=True)  # the comparisons above can fail: the gyro noise moves the rate terms
     est_on = on.table().set_index("coefficient")["estimate"]
     est_off = before.table().set_index("coefficient")["estimate"]
     # the move undoes the attenuation the DECLARED rate noise would make (eiv_sigma_q, white, through
@@ -57,6 +57,31 @@ def test_zero_gyro_noise_and_the_switch_off_are_bit_identical_to_the_angle_only_
     expected = (band_noise_gain(fs, 2.0) * MEASURED_NOISE.rates_rad_s / noisy["q_rad_s"].std()) ** 2
     assert 0.5 * expected < est_on["Cm_q"] / est_off["Cm_q"] - 1 < 2.0 * expected
     assert "gyro noise in the band-limited rates" in " ".join(on.table()["warnings"])
+    # the default ("auto", identify.GYRO_EIV_DEFAULT) corrects the channels whose model reads no angle
+    # rate: here every one (C_m reads q_hat, not alpha_dot_hat)
+    assert _same(identify(noisy, veh, models), on)
+
+
+def test_by_default_the_gyro_correction_leaves_out_the_channels_that_read_an_angle_rate(frames):
+    """gyro_eiv="auto": a C_m with an alpha_dot_hat term gets the angles' correction alone (as
+    gyro_eiv=False), the other channels the rates' too (as gyro_eiv=True), row for row."""
+    from aerosid.identification.eiv_fit import angle_rate_free_channels
+
+    veh, models, _, _, noisy = frames
+    models = dict(models)
+    models["Cm"] = models["Cm"].with_term(parse_term("Cm_alpha_dot = alpha_dot_hat", "Cm"))
+    models["Cn"] = models["Cn"].with_term(parse_term("Cn_r = r_hat", "Cn"))  # a rate regressor outside C_m
+    assert "Cm" not in angle_rate_free_channels(models) and "Cn" in angle_rate_free_channels(models)
+    auto, off, on = (identify(noisy, veh, models, gyro_eiv=g).table().set_index("coefficient")
+                     for g in ("auto", False, True))
+    for coef in auto.index:
+        ref = off if coef.startswith("Cm_") else on
+        for c in COLUMNS:
+            assert np.array_equal(np.asarray(auto.loc[coef, c], float), np.asarray(ref.loc[coef, c], float),
+                                  equal_nan=True), (coef, c)
+    assert not np.isclose(on.loc["Cn_r", "estimate"], off.loc["Cn_r", "estimate"], rtol=1e-6)  # the test can fail
+    with pytest.raises(ValueError, match="gyro_eiv"):
+        identify(noisy, veh, models, gyro_eiv="lateral")
 
 
 def test_the_gyro_noise_is_the_filters_R_else_the_band_estimate_and_zero_for_the_smoothers_rates():
