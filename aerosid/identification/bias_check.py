@@ -5,7 +5,7 @@ their derivative), the gyros' in p, q, r and the surfaces' in the controls.  SIM
 (aerosid.identification.eiv) corrects the angles' and the surfaces' parts (the latter since
 2026-11-28, identify's control_eiv) by extrapolating to no noise.  Where the noise is a large share
 of a regressor it under-corrects (its quadratic extrapolant saturates), and the rates' part is
-corrected only on request (gyro_eiv).  The reported sigma know none of this.  Measured on seven JSBSim aircraft the project had never flown (five seeds each,
+corrected only in the channels that read no angle rate (identify's gyro_eiv="auto").  The reported sigma know none of this.  Measured on seven JSBSim aircraft the project had never flown (five seeds each,
 bench/results/generalisation_unseen3.md): Boeing314 C_m,delta -13 % with 40 % coverage, the
 minisgs model glider C_l,p -11 % with 0 % (its roll mode is so fast that p follows the aileron,
 VIF 114, and the surfaces' 0.05 deg of noise alone moves C_l,p by 7 %).

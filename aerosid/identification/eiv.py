@@ -38,7 +38,8 @@ regressors get the noise; the response is left alone. Its noise (the derivative 
 band-limited gyro noise) has no correlation with the rates' noise at zero lag, and it costs
 <= 0.4 % (finding 4). The rates' draws come from their own generator. Without gyro noise
 (identify(gyro_eiv=False), or flight data without or with zero eiv_sigma_p/q/r), the result is
-bit-identical to the angle-only correction (tested).
+bit-identical to the angle-only correction (tested).  identify's default (gyro_eiv="auto") adds
+it only to the channels whose model reads no angle rate (eiv_fit.angle_rate_free_channels).
 
 The controls. The mixed controls in the band-limited flight data carry the surfaces' white noise
 through the same low-pass (the flight data's eiv_sigma_delta_p/y/r_rad, measured from the fins'
