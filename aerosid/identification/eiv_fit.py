@@ -40,9 +40,15 @@ def rate_eiv_sigma(fd: pd.DataFrame):
     band-limited part is in the flight data's rates, or None when the rates are taken as
     exact: flight data without the eiv_sigma_p/q/r columns (written before they existed, or
     the smoother's rates), or with them all zero or not finite."""
-    if not set(RATE_EIV_COLUMNS) <= set(fd.columns):
+    return _declared_sigma(fd, RATE_EIV_COLUMNS)
+
+
+def _declared_sigma(fd: pd.DataFrame, cols: tuple[str, ...]):
+    """The flight data's 1-sigma columns ``cols`` as arrays, or None when any is missing or not
+    finite, or all are zero."""
+    if not set(cols) <= set(fd.columns):
         return None
-    sig = tuple(fd[c].to_numpy(float) for c in RATE_EIV_COLUMNS)
+    sig = tuple(fd[c].to_numpy(float) for c in cols)
     if all(np.all(np.isfinite(x)) for x in sig) and max(float(x.max(initial=0.0)) for x in sig) > 0:
         return sig
     return None
@@ -56,13 +62,7 @@ def control_eiv_sigma(fd: pd.DataFrame):
     finite."""
     from aerosid.identification.flight_data import CONTROL_NOISE_COLUMNS
 
-    cols = tuple(CONTROL_NOISE_COLUMNS[c] for c in ("delta_p", "delta_y", "delta_r"))
-    if not set(cols) <= set(fd.columns):
-        return None
-    sig = tuple(fd[c].to_numpy(float) for c in cols)
-    if all(np.all(np.isfinite(x)) for x in sig) and max(float(x.max(initial=0.0)) for x in sig) > 0:
-        return sig
-    return None
+    return _declared_sigma(fd, tuple(CONTROL_NOISE_COLUMNS[c] for c in ("delta_p", "delta_y", "delta_r")))
 
 
 #: A control whose white noise through the band is more than this share of its variance in the
