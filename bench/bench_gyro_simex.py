@@ -10,7 +10,8 @@ preprocessed and smoothed frames) is turned into flight data by the CURRENT code
 eiv_sigma_p/q/r_rad_s) and identified with identify()'s defaults, in these variants:
 
   off            identify(gyro_eiv=False): the angles' SIMEX only (the code before this change)
-  on             identify(): angles' and gyros' noise in the same SIMEX draws (the default now)
+  on             identify(gyro_eiv=True): angles' and gyros' noise in the same SIMEX draws in
+                 every channel (the default is "auto": only the channels without alpha_dot_hat)
   rates true     p, q, r replaced by the band-limited truth (the same low-pass and runs the
                  flight data went through), gyro_eiv=False: what a perfect gyro correction
                  would give on top of the angles' SIMEX

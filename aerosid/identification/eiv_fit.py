@@ -10,8 +10,9 @@ import math
 import numpy as np
 import pandas as pd
 
-from aerosid.identification.eiv import CORRECTION_SHARE, LAMBDAS, LAMBDAS_BY_SOURCE, simex_estimates
+from aerosid.identification.eiv import CORRECTION_SHARE, LAMBDAS, LAMBDAS_BY_SOURCE, RATE_COLUMNS, simex_estimates
 from aerosid.identification.regression import with_corrected_estimate
+from aerosid.modelling import models as model_signals
 from aerosid.modelling.models import vehicle_signals
 from aerosid.vehicles.vehicle import Vehicle
 
@@ -167,7 +168,7 @@ def eiv_corrected(fd: pd.DataFrame, vehicle: Vehicle, models: dict, fits: dict, 
 
     def design(frame: pd.DataFrame) -> dict:
         sig = vehicle_signals(frame, vehicle)
-        exact = sig if base is None else {**sig, **{k: base[k] for k in RATE_SIGNALS if k in base}}
+        exact = sig if base is None else _with_measured_rates(frame, fd, vehicle, sig, base)
         return {ch: models[ch].regressors(sig if ch in noisy_rates else exact).to_numpy(float) for ch in ok}
 
     band = fd["band_hz"].to_numpy(float) if "band_hz" in fd.columns else None
@@ -176,16 +177,27 @@ def eiv_corrected(fd: pd.DataFrame, vehicle: Vehicle, models: dict, fits: dict, 
                                 lambdas=simex_lambdas(vehicle, angles=sigma is not None),
                                 control_sigma=control_sigma,
                                 control_cutoff_hz=band if control_sigma is not None else None)
-    notes = {ch: _simex_note(vehicle, sigma, rate_sigma if ch in noisy_rates else None, control_sigma) for ch in ok}
     share = correction_share(vehicle, angles=sigma is not None)
+    notes = {ch: _simex_note(vehicle, sigma, rate_sigma if ch in noisy_rates else None, control_sigma, share)
+             for ch in ok}
     return {ch: with_corrected_estimate(f, corrected[ch].corrected, notes[ch],
                                         corrected[ch].std_error(f.std_error, correction_share=share),
                                         corrected[ch].information())
             if ch in corrected else f for ch, f in fits.items()}
 
 
-def _simex_note(vehicle: Vehicle, sigma, rate_sigma, control_sigma) -> str:
-    """What a SIMEX-corrected fit says of its correction."""
+def _with_measured_rates(frame: pd.DataFrame, fd: pd.DataFrame, vehicle: Vehicle, sig: dict, base: dict) -> dict:
+    """The signals of a SIMEX frame with its rates as fd measured them: for the channels the gyros'
+    part leaves out.  The rates feed RATE_SIGNALS alone unless alpha_dot_hat (and alpha) come from
+    the flight-path kinematics (aerosid.modelling.models.KINEMATIC_ALPHA_DOT, off by default),
+    which read p, q, r too: then the signals are rebuilt from the frame with fd's rate columns."""
+    if model_signals.KINEMATIC_ALPHA_DOT:
+        return vehicle_signals(frame.assign(**{c: fd[c].to_numpy() for c in RATE_COLUMNS}), vehicle)
+    return {**sig, **{k: base[k] for k in RATE_SIGNALS if k in base}}
+
+
+def _simex_note(vehicle: Vehicle, sigma, rate_sigma, control_sigma, share: float) -> str:
+    """What a SIMEX-corrected fit says of its correction (share: correction_share's)."""
     what = ("the vane noise" if vehicle.air_data_source == "vanes"
             else "the noise the accelerometers put into the inverted angles")
     parts = [text for text, sig, unit in (("the gyro noise in the band-limited rates (SIMEX, median sigma p, q, r ",
@@ -199,7 +211,6 @@ def _simex_note(vehicle: Vehicle, sigma, rate_sigma, control_sigma) -> str:
     else:
         head = (f"estimates corrected for {what} (SIMEX, median sigma alpha {float(np.median(sigma[0])):.2g} rad, "
                 f"beta {float(np.median(sigma[1])):.2g} rad)" + (f" and {rates}" if rates else ""))
-    share = correction_share(vehicle, angles=sigma is not None)
     part = "the correction itself" if share == 1 else f"{share:.0%} of the correction"
     return head + (f"; sigma scaled by the correction and combined with the correction's own error (at least {part}: "
                    "SIMEX's quadratic extrapolant leaves part of a large attenuation, or overshoots it); residual "

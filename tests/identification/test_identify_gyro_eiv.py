@@ -72,14 +72,43 @@ def test_by_default_the_gyro_correction_leaves_out_the_channels_that_read_an_ang
     models["Cm"] = models["Cm"].with_term(parse_term("Cm_alpha_dot = alpha_dot_hat", "Cm"))
     models["Cn"] = models["Cn"].with_term(parse_term("Cn_r = r_hat", "Cn"))  # a rate regressor outside C_m
     assert "Cm" not in angle_rate_free_channels(models) and "Cn" in angle_rate_free_channels(models)
-    auto, off, on = (identify(noisy, veh, models, gyro_eiv=g).table().set_index("coefficient")
-                     for g in ("auto", False, True))
+    _same_by_channel(*(identify(noisy, veh, models, gyro_eiv=g).table().set_index("coefficient")
+                       for g in ("auto", False, True)))
+
+
+def _same_by_channel(auto, off, on) -> None:
+    """auto equals off row for row (estimates, intervals and warnings) on C_m, and on elsewhere; and
+    on differs from off on both C_m and C_n (so that each comparison can fail)."""
     for coef in auto.index:
         ref = off if coef.startswith("Cm_") else on
         for c in COLUMNS:
             assert np.array_equal(np.asarray(auto.loc[coef, c], float), np.asarray(ref.loc[coef, c], float),
                                   equal_nan=True), (coef, c)
-    assert not np.isclose(on.loc["Cn_r", "estimate"], off.loc["Cn_r", "estimate"], rtol=1e-6)  # the test can fail
+        assert auto.loc[coef, "warnings"] == ref.loc[coef, "warnings"], coef
+    for coef in ("Cn_r", "Cm_alpha_dot"):
+        assert not np.isclose(on.loc[coef, "estimate"], off.loc[coef, "estimate"], rtol=1e-6), coef
+    assert "gyro noise" in auto.loc["Cn_r", "warnings"] and "gyro noise" not in auto.loc["Cm_alpha_dot", "warnings"]
+
+
+def test_the_rate_free_channels_stay_gyro_free_when_alpha_dot_comes_from_the_kinematics(frames, monkeypatch):
+    """With models.KINEMATIC_ALPHA_DOT (off by default) alpha_dot_hat of a vane aircraft reads p, q, r:
+    the channel left out of the gyros' part must then read alpha_dot_hat from the measured rates."""
+    from dataclasses import replace
+
+    from aerosid.modelling import models as model_signals
+
+    veh, models, _, _, noisy = frames
+    veh = replace(veh, air_data_source="vanes")
+    models = dict(models)
+    models["Cm"] = models["Cm"].with_term(parse_term("Cm_alpha_dot = alpha_dot_hat", "Cm"))
+    models["Cn"] = models["Cn"].with_term(parse_term("Cn_r = r_hat", "Cn"))
+    monkeypatch.setattr(model_signals, "KINEMATIC_ALPHA_DOT", True)
+    kin = model_signals.vehicle_signals(noisy, veh)["alpha_dot_hat"]
+    monkeypatch.setattr(model_signals, "KINEMATIC_ALPHA_DOT", False)
+    assert not np.allclose(kin, model_signals.vehicle_signals(noisy, veh)["alpha_dot_hat"])  # the switch acts
+    monkeypatch.setattr(model_signals, "KINEMATIC_ALPHA_DOT", True)
+    _same_by_channel(*(identify(noisy, veh, models, gyro_eiv=g, bias_pairs=0).table().set_index("coefficient")
+                       for g in ("auto", False, True)))
     with pytest.raises(ValueError, match="gyro_eiv"):
         identify(noisy, veh, models, gyro_eiv="lateral")
 
