@@ -97,7 +97,7 @@ def default_vehicles() -> list[str]:
 
 def simulate(vehicle: str, seed: int, workdir: Path, turbulence: str = "none"):
     """(flight, Vehicle) as a user would have them; turbulence: a JSBSim flight's level
-    (aerosid.simulation.jsbsim_flight.TURBULENCE_SEVERITY; seed-rlv flies in calm air only)."""
+    (aerosid.simulation.jsbsim_turbulence.TURBULENCE_SEVERITY; seed-rlv flies in calm air only)."""
     from aerosid.vehicles.vehicle import load_vehicle
 
     if vehicle == "seed-rlv":

@@ -4,7 +4,7 @@
                                      [--levels none,light] [--jobs 2]
 
 Each (vehicle, seed, level): ``simulate_jsbsim(vehicle, "3211", seed, turbulence=level)`` (JSBSim's
-MIL-F-8785C model in its Tustin form, rotational gusts included: aerosid.simulation.jsbsim_flight.
+MIL-F-8785C model in its Tustin form, rotational gusts included: aerosid.simulation.jsbsim_turbulence.
 TURBULENCE_SEVERITY), the pipeline in memory (``process_telemetry``, default settings), then
 ``identify`` twice on the same flight data: least squares + SIMEX (the default) and the
 instrumental-variable fit (``instrumental=True``, what ``[estimation] turbulent_air = true`` selects;

@@ -31,8 +31,8 @@ from aerosid.simulation import SimulatedFlight
 from aerosid.simulation.jsbsim_design import (DT_S, FT, INCH, LBF, PSF, SLUG, SLUG_FT2, FlightDesign, in_catalogue,
                                               UnsupportedAircraft, flight_design, symmetric_loading)
 from aerosid.simulation.jsbsim_linear import abs_beta_slope, mach_slopes, model_coefficients
-from aerosid.simulation.jsbsim_flight import (COMMON_PROPERTIES, _fly, _import_jsbsim, _schedule, _takeup_steps,
-                                              checked_turbulence, start_turbulence)
+from aerosid.simulation.jsbsim_flight import COMMON_PROPERTIES, _fly, _import_jsbsim, _schedule, _takeup_steps
+from aerosid.simulation.jsbsim_turbulence import checked_turbulence, start_turbulence
 from aerosid.simulation.jsbsim_columns import coefficient_columns, make_telemetry, state_columns
 from aerosid.simulation.jsbsim_truth import flight_statistics, _truth_check
 from aerosid.simulation.jsbsim_tables import DEG, AeroTables
@@ -114,7 +114,7 @@ def simulate_aircraft(aircraft: str, seed: int = 0, *, faults: bool = True, prog
                       input_table: pd.DataFrame | None = None, turbulence: str = "none") -> SimulatedFlight:
     """Fly JSBSim's `aircraft` through the generated flight design (or a designed input,
     ``input_table``: aerosid.simulation.jsbsim_input); noise, faults and the turbulence
-    (aerosid.simulation.jsbsim_flight.TURBULENCE_SEVERITY) from `seed`.
+    (aerosid.simulation.jsbsim_turbulence.TURBULENCE_SEVERITY) from `seed`.
     progress: an optional callback progress(stage, fraction)."""
     checked_turbulence(turbulence)
     if input_table is not None and "throttle_cmd_norm" in input_table.columns:

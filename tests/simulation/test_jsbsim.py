@@ -272,7 +272,8 @@ def test_turbulence_levels_seeds_and_rotational_gusts():
     """start_turbulence: calm air stays calm; a level turns JSBSim's gusts on (the rates relative to
     the air part from the gyros' rates), moderate is stronger than light, the seed sets the sequence,
     and an unknown level is refused by name."""
-    from aerosid.simulation.jsbsim_flight import _import_jsbsim, _trimmed_fdm, start_turbulence
+    from aerosid.simulation.jsbsim_flight import _import_jsbsim, _trimmed_fdm
+    from aerosid.simulation.jsbsim_turbulence import start_turbulence
 
     jsbsim = _import_jsbsim()
     cfg, _ = load_jsbsim_config("c172x")
