@@ -143,8 +143,9 @@ def angle_rate_free_channels(models: dict) -> tuple[str, ...]:
                  if not any(set(ANGLE_RATE_SIGNALS) & set(signal_names(t.expression, SIGNALS)) for t in m.terms))
 
 
-#: The model signals the rate columns p, q, r feed (aerosid.modelling.models.vehicle_signals): a
-#: channel left out of the gyros' part reads these from the un-noised flight data.
+#: The model signals the rate columns p, q, r feed (aerosid.modelling.models.vehicle_signals),
+#: unless alpha_dot_hat comes from the flight-path kinematics (_rates_feed_the_angles): a channel
+#: left out of the gyros' part reads these from the un-noised flight data (_with_measured_rates).
 RATE_SIGNALS = ("p", "q", "r", "p_hat", "q_hat", "r_hat")
 
 
@@ -156,19 +157,21 @@ def eiv_corrected(fd: pd.DataFrame, vehicle: Vehicle, models: dict, fits: dict, 
     one), and, given control_sigma, in the band-limited controls (aerosid.identification.eiv,
     SIMEX), on the channels simex_channels(fits, skip) names.  skip: the channels left as they are
     (for inverted angles, the force channels they come from: identify.identity_channels).  One
-    set of draws serves every channel: those outside rate_channels read the rate signals
-    (RATE_SIGNALS) of the flight data as it is, so their answer is the one without rate_sigma."""
+    set of draws serves every channel: those outside rate_channels read their signals with the
+    rates of the flight data as it is (_with_measured_rates), so their answer is the one without
+    rate_sigma."""
     ok = simex_channels(fits, skip)
     noisy_rates = tuple(ch for ch in ok if rate_sigma is not None and (rate_channels is None or ch in rate_channels))
     if sigma is None and control_sigma is None:
         ok = noisy_rates  # the others get no noise at all: left as they are
     if not ok:
         return fits
-    base = vehicle_signals(fd, vehicle) if len(noisy_rates) < len(ok) and rate_sigma is not None else None
+    mixed = rate_sigma is not None and len(noisy_rates) < len(ok)  # some channels read the measured rates
+    base = vehicle_signals(fd, vehicle) if mixed and not _rates_feed_the_angles(fd, vehicle) else None
 
     def design(frame: pd.DataFrame) -> dict:
         sig = vehicle_signals(frame, vehicle)
-        exact = sig if base is None else _with_measured_rates(frame, fd, vehicle, sig, base)
+        exact = _with_measured_rates(frame, fd, vehicle, sig, base) if mixed else sig
         return {ch: models[ch].regressors(sig if ch in noisy_rates else exact).to_numpy(float) for ch in ok}
 
     band = fd["band_hz"].to_numpy(float) if "band_hz" in fd.columns else None
@@ -186,12 +189,23 @@ def eiv_corrected(fd: pd.DataFrame, vehicle: Vehicle, models: dict, fits: dict, 
             if ch in corrected else f for ch, f in fits.items()}
 
 
-def _with_measured_rates(frame: pd.DataFrame, fd: pd.DataFrame, vehicle: Vehicle, sig: dict, base: dict) -> dict:
+def _rates_feed_the_angles(fd: pd.DataFrame, vehicle: Vehicle) -> bool:
+    """alpha_dot_hat (and, with KINEMATIC_ALPHA, alpha) of this flight data come from the
+    flight-path kinematics, which read p, q, r (aerosid.modelling.models.vehicle_signals: a vane
+    aircraft, KINEMATIC_ALPHA_DOT set, off by default, and the kinematic columns present)."""
+    from aerosid.modelling.flight_path import KINEMATIC_COLUMNS
+
+    return (model_signals.KINEMATIC_ALPHA_DOT and vehicle.air_data_source == "vanes"
+            and set(KINEMATIC_COLUMNS) <= set(fd.columns))
+
+
+def _with_measured_rates(frame: pd.DataFrame, fd: pd.DataFrame, vehicle: Vehicle, sig: dict,
+                         base: dict | None) -> dict:
     """The signals of a SIMEX frame with its rates as fd measured them: for the channels the gyros'
-    part leaves out.  The rates feed RATE_SIGNALS alone unless alpha_dot_hat (and alpha) come from
-    the flight-path kinematics (aerosid.modelling.models.KINEMATIC_ALPHA_DOT, off by default),
-    which read p, q, r too: then the signals are rebuilt from the frame with fd's rate columns."""
-    if model_signals.KINEMATIC_ALPHA_DOT:
+    part leaves out.  base: vehicle_signals(fd), whose RATE_SIGNALS replace sig's; None when the
+    rates feed the angles too (_rates_feed_the_angles): then the signals are rebuilt from the frame
+    with fd's rate columns."""
+    if base is None:
         return vehicle_signals(frame.assign(**{c: fd[c].to_numpy() for c in RATE_COLUMNS}), vehicle)
     return {**sig, **{k: base[k] for k in RATE_SIGNALS if k in base}}
 

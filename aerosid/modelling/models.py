@@ -263,8 +263,9 @@ def vehicle_signals(fd: pd.DataFrame, vehicle) -> dict[str, np.ndarray]:
     KINEMATIC_ALPHA alpha too (alpha_r, phi_r recomputed).  Both are off by default: on 10 cached
     JSBSim flights each (identify, SIMEX on) C_m_alpha mean / RMS error went pa28 -4.0 / 5.7 ->
     -6.0 / 9.7 %, F4N -4.9 / 5.2 -> -13.1 / 16.7 %, OV10 +3.0 / 3.2 -> -2.3 / 2.6 %
-    (bench/results/kinematic_adot.md).  SIMEX (aerosid.identification.eiv) needs no change
-    either way: its design() calls this function on the perturbed frame."""
+    (bench/results/kinematic_adot.md).  SIMEX (aerosid.identification.eiv) calls this function
+    on each perturbed frame; with the kinematics on, the channels its gyro part leaves out rebuild
+    their signals from the measured rates (aerosid.identification.eiv_fit._with_measured_rates)."""
     sig = signals_from_flight_data(fd, vehicle.length_pitch_m, vehicle.length_lateral_m,
                                    vehicle.derivative_half_window_s)
     if KINEMATIC_ALPHA_DOT and getattr(vehicle, "air_data_source", None) == "vanes" and len(fd):

@@ -90,9 +90,12 @@ def _same_by_channel(auto, off, on) -> None:
     assert "gyro noise" in auto.loc["Cn_r", "warnings"] and "gyro noise" not in auto.loc["Cm_alpha_dot", "warnings"]
 
 
-def test_the_rate_free_channels_stay_gyro_free_when_alpha_dot_comes_from_the_kinematics(frames, monkeypatch):
-    """With models.KINEMATIC_ALPHA_DOT (off by default) alpha_dot_hat of a vane aircraft reads p, q, r:
-    the channel left out of the gyros' part must then read alpha_dot_hat from the measured rates."""
+@pytest.mark.parametrize("kinematic_alpha", [False, True])
+def test_the_rate_free_channels_stay_gyro_free_when_alpha_dot_comes_from_the_kinematics(frames, monkeypatch,
+                                                                                    kinematic_alpha):
+    """With models.KINEMATIC_ALPHA_DOT (off by default) alpha_dot_hat of a vane aircraft reads p, q, r
+    (and with KINEMATIC_ALPHA alpha too): the channel left out of the gyros' part must then read them
+    from the measured rates."""
     from dataclasses import replace
 
     from aerosid.modelling import models as model_signals
@@ -107,7 +110,8 @@ def test_the_rate_free_channels_stay_gyro_free_when_alpha_dot_comes_from_the_kin
     monkeypatch.setattr(model_signals, "KINEMATIC_ALPHA_DOT", False)
     assert not np.allclose(kin, model_signals.vehicle_signals(noisy, veh)["alpha_dot_hat"])  # the switch acts
     monkeypatch.setattr(model_signals, "KINEMATIC_ALPHA_DOT", True)
-    _same_by_channel(*(identify(noisy, veh, models, gyro_eiv=g, bias_pairs=0).table().set_index("coefficient")
+    monkeypatch.setattr(model_signals, "KINEMATIC_ALPHA", kinematic_alpha)
+    _same_by_channel(*(identify(noisy, veh, models, gyro_eiv=g).table().set_index("coefficient")
                        for g in ("auto", False, True)))
     with pytest.raises(ValueError, match="gyro_eiv"):
         identify(noisy, veh, models, gyro_eiv="lateral")
