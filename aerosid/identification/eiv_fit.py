@@ -144,8 +144,9 @@ def angle_rate_free_channels(models: dict) -> tuple[str, ...]:
 
 
 #: The model signals the rate columns p, q, r feed (aerosid.modelling.models.vehicle_signals),
-#: unless alpha_dot_hat comes from the flight-path kinematics (_rates_feed_the_angles): a channel
-#: left out of the gyros' part reads these from the un-noised flight data (_with_measured_rates).
+#: unless alpha_dot_hat comes from the flight-path kinematics (models.kinematic_angles): a
+#: channel left out of the gyros' part reads these from the un-noised flight data
+#: (_with_measured_rates).
 RATE_SIGNALS = ("p", "q", "r", "p_hat", "q_hat", "r_hat")
 
 
@@ -167,7 +168,7 @@ def eiv_corrected(fd: pd.DataFrame, vehicle: Vehicle, models: dict, fits: dict, 
     if not ok:
         return fits
     mixed = rate_sigma is not None and len(noisy_rates) < len(ok)  # some channels read the measured rates
-    base = vehicle_signals(fd, vehicle) if mixed and not _rates_feed_the_angles(fd, vehicle) else None
+    base = vehicle_signals(fd, vehicle) if mixed and not model_signals.kinematic_angles(fd, vehicle) else None
 
     def design(frame: pd.DataFrame) -> dict:
         sig = vehicle_signals(frame, vehicle)
@@ -189,22 +190,12 @@ def eiv_corrected(fd: pd.DataFrame, vehicle: Vehicle, models: dict, fits: dict, 
             if ch in corrected else f for ch, f in fits.items()}
 
 
-def _rates_feed_the_angles(fd: pd.DataFrame, vehicle: Vehicle) -> bool:
-    """alpha_dot_hat (and, with KINEMATIC_ALPHA, alpha) of this flight data come from the
-    flight-path kinematics, which read p, q, r (aerosid.modelling.models.vehicle_signals: a vane
-    aircraft, KINEMATIC_ALPHA_DOT set, off by default, and the kinematic columns present)."""
-    from aerosid.modelling.flight_path import KINEMATIC_COLUMNS
-
-    return (model_signals.KINEMATIC_ALPHA_DOT and vehicle.air_data_source == "vanes"
-            and set(KINEMATIC_COLUMNS) <= set(fd.columns))
-
-
 def _with_measured_rates(frame: pd.DataFrame, fd: pd.DataFrame, vehicle: Vehicle, sig: dict,
                          base: dict | None) -> dict:
     """The signals of a SIMEX frame with its rates as fd measured them: for the channels the gyros'
     part leaves out.  base: vehicle_signals(fd), whose RATE_SIGNALS replace sig's; None when the
-    rates feed the angles too (_rates_feed_the_angles): then the signals are rebuilt from the frame
-    with fd's rate columns."""
+    rates feed the angles too (aerosid.modelling.models.kinematic_angles): then the signals are
+    rebuilt from the frame with fd's rate columns."""
     if base is None:
         return vehicle_signals(frame.assign(**{c: fd[c].to_numpy() for c in RATE_COLUMNS}), vehicle)
     return {**sig, **{k: base[k] for k in RATE_SIGNALS if k in base}}

@@ -254,6 +254,16 @@ KINEMATIC_ALPHA_DOT = False
 KINEMATIC_ALPHA = False
 
 
+def kinematic_angles(fd: pd.DataFrame, vehicle) -> bool:
+    """vehicle_signals takes alpha_dot_hat (and, with KINEMATIC_ALPHA, alpha) of this flight data
+    from the flight-path kinematics, which read the rates p, q, r: KINEMATIC_ALPHA_DOT set (off by
+    default), a vane aircraft, and the kinematic columns present."""
+    from aerosid.modelling.flight_path import KINEMATIC_COLUMNS
+
+    return (KINEMATIC_ALPHA_DOT and getattr(vehicle, "air_data_source", None) == "vanes" and len(fd) > 0
+            and set(KINEMATIC_COLUMNS) <= set(fd.columns))
+
+
 def vehicle_signals(fd: pd.DataFrame, vehicle) -> dict[str, np.ndarray]:
     """signals_from_flight_data with the vehicle's pitch and lateral reference lengths.
 
@@ -268,20 +278,19 @@ def vehicle_signals(fd: pd.DataFrame, vehicle) -> dict[str, np.ndarray]:
     their signals from the measured rates (aerosid.identification.eiv_fit._with_measured_rates)."""
     sig = signals_from_flight_data(fd, vehicle.length_pitch_m, vehicle.length_lateral_m,
                                    vehicle.derivative_half_window_s)
-    if KINEMATIC_ALPHA_DOT and getattr(vehicle, "air_data_source", None) == "vanes" and len(fd):
-        from aerosid.modelling.flight_path import KINEMATIC_COLUMNS, flight_data_alpha
+    if kinematic_angles(fd, vehicle):
+        from aerosid.modelling.flight_path import flight_data_alpha
         from aerosid.identification.inversion import total_angles
 
-        if set(KINEMATIC_COLUMNS) <= set(fd.columns):
-            band = fd["band_hz"].to_numpy(float) if "band_hz" in fd.columns else np.array([np.nan])
-            # the band edge of band-limited flight data, else the Savitzky-Golay window's corner
-            edge = (float(np.min(band)) if np.all(np.isfinite(band))
-                    else 1.0 / (2.0 * vehicle.derivative_half_window_s))
-            groups = ((fd["flight"].astype(str) + "/" + fd["segment"].astype(str)).to_numpy()
-                      if {"flight", "segment"} <= set(fd.columns) else None)
-            kin = flight_data_alpha(fd, sig, vehicle, edge, groups)
-            if KINEMATIC_ALPHA:
-                sig["alpha"] = kin.alpha
-                sig["alpha_r"], sig["phi_r"] = total_angles(kin.alpha, sig["beta"])
-            sig["alpha_dot_hat"] = kin.alpha_dot * vehicle.length_pitch_m / (2 * sig["V"])
+        band = fd["band_hz"].to_numpy(float) if "band_hz" in fd.columns else np.array([np.nan])
+        # the band edge of band-limited flight data, else the Savitzky-Golay window's corner
+        edge = (float(np.min(band)) if np.all(np.isfinite(band))
+                else 1.0 / (2.0 * vehicle.derivative_half_window_s))
+        groups = ((fd["flight"].astype(str) + "/" + fd["segment"].astype(str)).to_numpy()
+                  if {"flight", "segment"} <= set(fd.columns) else None)
+        kin = flight_data_alpha(fd, sig, vehicle, edge, groups)
+        if KINEMATIC_ALPHA:
+            sig["alpha"] = kin.alpha
+            sig["alpha_r"], sig["phi_r"] = total_angles(kin.alpha, sig["beta"])
+        sig["alpha_dot_hat"] = kin.alpha_dot * vehicle.length_pitch_m / (2 * sig["V"])
     return sig
