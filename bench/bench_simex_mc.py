@@ -76,7 +76,7 @@ def legacy_simex(mode: str, master: int):
                 if rate_sigma is not None:
                     if b not in rates:
                         rates[b] = eiv.column_noise(np.random.default_rng([master + 1, b]), groups, t, rate_sigma,
-                                                  rate_cutoff_hz)
+                                                    rate_cutoff_hz)
                     f = eiv.with_column_noise(f, np.sqrt(lam) * rates[b], copy=f is fd)
                 for ch, est in fit_all(f).items():
                     acc[ch] += est / eiv.REPLICATES

@@ -217,7 +217,8 @@ def identify(flight_data: pd.DataFrame, vehicle: Vehicle, models: dict[str, Chan
     identities is fitted by instrumental variables, the controls as instruments, in place of least
     squares and SIMEX (aerosid.identification.instrumental); None: the vehicle file's
     ``[estimation] turbulent_air`` (default false)."""
-    _checked_gyro_eiv(gyro_eiv)
+    if gyro_eiv not in (True, False, "auto"):
+        raise ValueError(f"gyro_eiv={gyro_eiv!r}: True, False or 'auto'")
     models = models or default_models(vehicle)
     fd = flight_data.sort_values(["flight", "t_s"], kind="stable").reset_index(drop=True)
     mask = mach_window_mask(fd["mach"].to_numpy(), vehicle.mach_reference, mach_half_width)
@@ -256,11 +257,6 @@ def identify(flight_data: pd.DataFrame, vehicle: Vehicle, models: dict[str, Chan
                           crb.std, wrong_sign, bias_pairs)
 
 
-def _checked_gyro_eiv(gyro_eiv) -> None:
-    if gyro_eiv not in (True, False, "auto"):
-        raise ValueError(f"gyro_eiv={gyro_eiv!r}: True, False or 'auto'")
-
-
 def _band_limited(fd: pd.DataFrame) -> bool:
     """The flight data went through the band path (a finite band_hz on every row)."""
     return "band_hz" in fd.columns and bool(np.all(np.isfinite(fd["band_hz"].to_numpy(float))))
@@ -297,7 +293,6 @@ def _corrected_fits(fd: pd.DataFrame, vehicle: Vehicle, models: dict, cov: str, 
                 for ch, fit in fits.items()}
     sigma = angle_eiv_sigma(fd, vehicle)
     band_limited = _band_limited(fd)
-    _checked_gyro_eiv(gyro_eiv)
     rate_sigma = rate_eiv_sigma(fd) if gyro_eiv and band_limited else None
     control_sigma = control_eiv_sigma(fd) if control_eiv and band_limited else None
     if sigma is not None or rate_sigma is not None or control_sigma is not None:

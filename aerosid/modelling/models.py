@@ -258,9 +258,11 @@ def kinematic_angles(fd: pd.DataFrame, vehicle) -> bool:
     """vehicle_signals takes alpha_dot_hat (and, with KINEMATIC_ALPHA, alpha) of this flight data
     from the flight-path kinematics, which read the rates p, q, r: KINEMATIC_ALPHA_DOT set (off by
     default), a vane aircraft, and the kinematic columns present."""
+    if not KINEMATIC_ALPHA_DOT:  # the default: nothing more to look at (called per SIMEX frame)
+        return False
     from aerosid.modelling.flight_path import KINEMATIC_COLUMNS
 
-    return (KINEMATIC_ALPHA_DOT and getattr(vehicle, "air_data_source", None) == "vanes" and len(fd) > 0
+    return (getattr(vehicle, "air_data_source", None) == "vanes" and len(fd) > 0
             and set(KINEMATIC_COLUMNS) <= set(fd.columns))
 
 
