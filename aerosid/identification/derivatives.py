@@ -2,6 +2,8 @@
 derivatives of the model language (alpha-dot, beta-dot)."""
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 import pandas as pd
 import scipy.signal
@@ -18,6 +20,31 @@ def zero_phase_low_pass(x: np.ndarray, fs_hz: float, cutoff_hz: float | None) ->
         return x
     sos = scipy.signal.butter(2, cutoff_hz, fs=fs_hz, output="sos")
     return scipy.signal.sosfiltfilt(sos, x, padlen=min(len(x) - 1, 3 * int(fs_hz / cutoff_hz)))
+
+
+@functools.lru_cache(maxsize=64)
+def _savgol_operators(win: int, dt: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The quadratic Savitzky-Golay first derivative of an odd window `win` at step dt [s] as
+    linear operators: the interior kernel, and the two edge maps of scipy's mode="interp" (a
+    quadratic fitted to the first / last `win` samples, its slope read at the first / last
+    win // 2).  Built once per window (SIMEX differentiates ~160 frames of the same grid)."""
+    kernel = scipy.signal.savgol_coeffs(win, 2, deriv=1, delta=dt)
+    x = np.arange(win, dtype=float)
+    fit = np.linalg.pinv(np.vander(x, 3))  # (3, win): the quadratic's coefficients a, b, c
+    half = win // 2
+    slope = lambda i: (np.column_stack([2.0 * i, np.ones_like(i), np.zeros_like(i)]) @ fit) / dt  # noqa: E731
+    return kernel, slope(x[:half]), slope(x[win - half:])
+
+
+def _savgol_slope(y: np.ndarray, win: int, dt: float) -> np.ndarray:
+    """scipy.signal.savgol_filter(y, win, 2, deriv=1, delta=dt, mode="interp") for len(y) >= win,
+    with its operators cached (the same numbers to rounding; scipy refits the edges each call)."""
+    kernel, left, right = _savgol_operators(win, float(dt))
+    out = np.convolve(y, kernel, mode="same")
+    half = win // 2
+    out[:half] = left @ y[:win]
+    out[-half:] = right @ y[-win:]
+    return out
 
 
 def smooth_derivative(t_s: np.ndarray, y: np.ndarray, groups: np.ndarray | None = None,
@@ -54,6 +81,6 @@ def smooth_derivative(t_s: np.ndarray, y: np.ndarray, groups: np.ndarray | None 
         if win < 5:
             out[idx] = np.gradient(v, t)
             continue
-        d = scipy.signal.savgol_filter(vg, win, 2, deriv=1, delta=dt, mode="interp")
+        d = _savgol_slope(vg, win, dt)
         out[idx] = np.interp(t, grid, d)
     return out
