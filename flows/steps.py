@@ -223,8 +223,10 @@ def _finish_flight(job: FlightJob, p: dict, plan: dict, futures: list, summary: 
         coeffs = regression_task([fd["path"]], job.run_dir, job.context(), job.vehicle, job.model_spec,
                                  job.mach_half_width)
         summary.update(flight_data=fd, coefficients=coeffs, air_data=_air_data(fd["path"]))
-        # a run with findings (gated runs, NIS out of band, database edge, departures) is not "ok"
-        summary["findings"] = [f for d in done for f in d.get("findings", [])] + list(fd.get("findings", []))
+        # a run with findings (timestamps off the grid, gated runs, NIS out of band, database edge,
+        # departures) is not "ok"
+        summary["findings"] = (list(p.get("findings", [])) + [f for d in done for f in d.get("findings", [])]
+                               + list(fd.get("findings", [])))
         if summary["findings"] and summary["status"] == "ok":
             summary["status"] = "ok with findings"
         _artifacts(job, summary)

@@ -63,7 +63,9 @@ def preprocess_task(raw_path: str, run_dir: str, ctx: StageContext, params: dict
     done = execute("preprocess", ctx, [raw_path], out, params, PreprocessedTelemetry, produce)
     from aerosid.io import read_parquet_metadata
 
-    share = read_parquet_metadata(out).get("aerosid.preprocess.usable_share")  # also when reused
+    meta = read_parquet_metadata(out)  # also when the output is reused
+    share = meta.get("aerosid.preprocess.usable_share")
+    done = {**done, "findings": json.loads(meta.get("aerosid.findings", "[]"))}
     return {**done, "usable_share": json.loads(share)} if share else done
 
 

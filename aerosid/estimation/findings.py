@@ -25,6 +25,9 @@ regression (with a margin) and the rest of the segment is kept:
   seed (RMS 5.0 % over 10 against 2.8 % when cut);
 * ``database_edge``: alpha/beta inverted at an edge of the force database (the table is
   clamped there: the angle would be made up), or Mach outside it -- cut.
+
+The preprocessing adds ``time_jitter`` (segment "preprocess"): rows whose timestamps lie off
+the grid, which it treats as missing (aerosid.preprocess.result.PreprocessResult.findings).
 """
 from __future__ import annotations
 

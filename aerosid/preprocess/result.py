@@ -6,6 +6,7 @@ from __future__ import annotations
 import json
 from dataclasses import dataclass, field
 
+import numpy as np
 import pandas as pd
 
 from schemas.telemetry import PHYSICAL_BOUNDS, UNITS
@@ -14,6 +15,10 @@ from . import sensors
 from .flags import QualityFlag
 from .params import PreprocessParams
 
+#: Rows whose timestamps lie off the grid, within this span of each other, are one finding [s].
+JITTER_MERGE_S = 2.0
+#: ... reported from this many rows on (a stray timestamp or two is interpolated over and left unsaid).
+JITTER_MIN_ROWS = 5
 #: Version of the output layout / algorithm (of core.py), recorded in the metadata.
 PREPROCESS_VERSION = "2"
 
@@ -95,6 +100,32 @@ class PreprocessResult:
                 "by_channel": {c: {"used": u, "share": u / rec} for c, u in self.n_used_by_channel.items()}}
 
     @property
+    def findings(self) -> list:
+        """The preprocessing's findings (aerosid.estimation.findings.Finding, segment "preprocess"):
+        the spans of rows whose timestamp lies off the grid (``TIME_JITTER``), runs closer than
+        JITTER_MERGE_S merged, reported from JITTER_MIN_ROWS rows on.  Those rows are treated as
+        missing (interpolated across when short, the flight cut at them when longer than
+        ``max_interp_gap_s``), so a run over them is not "ok": the clock or the sample phase of
+        the record is the engineer's to check."""
+        from aerosid.estimation.findings import Finding, merge_close, true_runs
+
+        if self.frame.empty or "flags" not in self.frame:
+            return []
+        jitter = (self.frame["flags"].to_numpy().astype(np.int64) & int(QualityFlag.TIME_JITTER)) != 0
+        t = self.frame["t_s"].to_numpy(float)
+        merged = merge_close(jitter, max(1, int(round(JITTER_MERGE_S * self.nominal_rate_hz))))
+        out = []
+        for a, b in true_runs(merged):
+            n = int(jitter[a:b].sum())
+            if n >= JITTER_MIN_ROWS:
+                out.append(Finding(
+                    "time_jitter", "preprocess", "t_s", float(t[a]), float(t[b - 1]), n, True,
+                    f"{n} timestamp(s) lie more than snap_tolerance = {self.params.snap_tolerance:g} of a step from "
+                    f"the {self.nominal_rate_hz:.6g} Hz grid (clock jitter, or the sample phase moved after a "
+                    "dropout); those rows are treated as missing: check the record's clock or nominal_rate_hz"))
+        return out
+
+    @property
     def summary_counts(self) -> dict:
         """Rows of each kind: ``raw``, ``grid``, ``inserted``, ``usable`` and one entry
         per flag bit (rows with that bit in any channel)."""
@@ -125,6 +156,7 @@ class PreprocessResult:
             p + "physical_bounds": json.dumps(PHYSICAL_BOUNDS, sort_keys=True),
             p + "usable_share": json.dumps(self.usable_share, sort_keys=True),
             p + "sensors": json.dumps(self.sensors, sort_keys=True),
+            "aerosid.findings": json.dumps([f.as_dict() for f in self.findings]),
         }
 
     def summary(self) -> str:

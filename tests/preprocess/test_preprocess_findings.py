@@ -1,0 +1,50 @@
+"""Timestamps off the grid are a finding of the run (PreprocessResult.findings), not only a flag count."""
+import json
+
+import numpy as np
+
+from aerosid.preprocess import preprocess
+from aerosid.preprocess.result import JITTER_MIN_ROWS
+from tests.preprocess.test_preprocess import make_flight
+
+
+def _shifted(rows: slice, steps: float, seed: int = 5):
+    """A clean 100 Hz flight whose rows `rows` carry timestamps `steps` sample steps late."""
+    fl = make_flight(seed=seed, duration_s=20.0, faults=False)
+    raw = fl.raw.copy()
+    t = raw["t_s"].to_numpy().copy()
+    t[rows] += steps / 100.0
+    raw["t_s"] = t
+    return raw
+
+
+def test_a_run_of_timestamps_off_the_grid_is_one_finding_with_its_span():
+    raw = _shifted(slice(800, 840), 0.4)  # 0.4 step late: beyond snap_tolerance (0.25)
+    res = preprocess(raw)
+    (f,) = res.findings
+    assert (f.kind, f.segment, f.channel, f.n_samples, f.cut) == ("time_jitter", "preprocess", "t_s", 40, True)
+    t = res.frame["t_s"].to_numpy()
+    assert np.isclose(f.t0_s, t[800], atol=0.006) and np.isclose(f.t1_s, t[839], atol=0.006)
+    assert "snap_tolerance" in f.detail
+    stored = json.loads(res.metadata()["aerosid.findings"])  # what the flow reads back from the Parquet file
+    assert stored == [f.as_dict()]
+
+
+def test_a_few_stray_timestamps_and_jitter_inside_the_tolerance_are_not_findings():
+    assert preprocess(_shifted(slice(800, 800 + JITTER_MIN_ROWS - 1), 0.4)).findings == []
+    assert preprocess(_shifted(slice(800, 840), 0.2)).findings == []  # snapped to the grid, not flagged
+
+
+def test_the_preprocess_stage_hands_the_finding_on_computed_and_reused(tmp_path):
+    """The flow reads the stage's findings (flows.steps: a run with findings is not "ok")."""
+    from tasks.runner import StageContext
+    from tasks.stages import preprocess_task
+
+    raw_path = tmp_path / "telemetry.parquet"
+    _shifted(slice(800, 840), 0.4).to_parquet(raw_path, index=False)
+    run_dir = tmp_path / "run"
+    ctx = StageContext(str(run_dir / "ledger.jsonl"), "local", "f")
+    first = preprocess_task.fn(str(raw_path), str(run_dir), ctx, {})
+    again = preprocess_task.fn(str(raw_path), str(run_dir), ctx, {})  # the output reused
+    assert [f["kind"] for f in first["findings"]] == ["time_jitter"] and first["findings"][0]["n_samples"] == 40
+    assert again["findings"] == first["findings"]
