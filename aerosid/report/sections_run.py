@@ -65,9 +65,26 @@ def _s_header(run: _Run, generated: str) -> str:
     if run.ledger and run.ledger[-1].get("run_id"):
         rows.insert(5, ("last run id", run.ledger[-1]["run_id"]))
     body = _table(["", ""], rows, id="run-facts", cls="facts")
+    body += _findings_table([*(run.run.get("findings") or []),
+                             *(f for s in subs or () for f in (s.run.get("findings") or []))])
     if run.errors:
         body += "".join(_note(e) for e in run.errors)
     return body
+
+
+def _findings_table(findings: list) -> str:
+    """The run's findings (aerosid.estimation.findings; run.json ``findings``), one row each with
+    its time span: why the status is "ok with findings" and what was cut ('' when there are none)."""
+    rows = [(str(f.get("kind", "")), str(f.get("segment", "")), str(f.get("channel", "")),
+             _span(f.get("t0_s"), f.get("t1_s")), f.get("n_samples", "—"),
+             "cut from the regression" if f.get("cut") else "reported", str(f.get("detail", "")))
+            for f in findings if isinstance(f, dict)]
+    if not rows:
+        return ""
+    return (_p(f"{len(rows)} finding(s): what went wrong where. The spans marked 'cut' were left out of the "
+               "regression (with a margin); the rest of each segment was used.")
+            + _table(["finding", "segment", "channel", "time span", "samples", "action", "detail"], rows,
+                     id="run-findings", caption="Findings"))
 
 
 def _air_data_text(run: _Run) -> str:
