@@ -26,8 +26,9 @@ regression (with a margin) and the rest of the segment is kept:
 * ``database_edge``: alpha/beta inverted at an edge of the force database (the table is
   clamped there: the angle would be made up), or Mach outside it -- cut.
 
-The preprocessing adds ``time_jitter`` (segment "preprocess"): rows whose timestamps lie off
-the grid, which it treats as missing (aerosid.preprocess.result.PreprocessResult.findings).
+The preprocessing adds ``time_jitter``, ``frozen``, ``sentinel`` and ``out_of_range`` (segment
+"preprocess"): timestamps off the grid and sensor faults, whose samples it treats as missing
+(aerosid.preprocess.result.PreprocessResult.findings).
 """
 from __future__ import annotations
 

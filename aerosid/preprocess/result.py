@@ -15,10 +15,14 @@ from . import sensors
 from .flags import QualityFlag
 from .params import PreprocessParams
 
-#: Rows whose timestamps lie off the grid, within this span of each other, are one finding [s].
-JITTER_MERGE_S = 2.0
-#: ... reported from this many rows on (a stray timestamp or two is interpolated over and left unsaid).
+#: Flagged samples of one kind and channel within this span of each other are one finding [s].
+MERGE_S = 2.0
+#: Rows whose timestamps lie off the grid are a finding from this many rows on (a stray timestamp
+#: or two is interpolated over and left unsaid).
 JITTER_MIN_ROWS = 5
+#: A stuck sensor, sentinel or out-of-range values are a finding from this duration on [s] (a
+#: single bad value is an outlier's business: interpolated over).
+SENSOR_FAULT_MIN_S = 0.1
 #: Version of the output layout / algorithm (of core.py), recorded in the metadata.
 PREPROCESS_VERSION = "2"
 
@@ -101,28 +105,55 @@ class PreprocessResult:
 
     @property
     def findings(self) -> list:
-        """The preprocessing's findings (aerosid.estimation.findings.Finding, segment "preprocess"):
-        the spans of rows whose timestamp lies off the grid (``TIME_JITTER``), runs closer than
-        JITTER_MERGE_S merged, reported from JITTER_MIN_ROWS rows on.  Those rows are treated as
-        missing (interpolated across when short, the flight cut at them when longer than
-        ``max_interp_gap_s``), so a run over them is not "ok": the clock or the sample phase of
-        the record is the engineer's to check."""
+        """The preprocessing's findings (aerosid.estimation.findings.Finding, segment "preprocess"),
+        the data a run lost to its clock or its sensors, each with its span:
+
+        * ``time_jitter`` (channel t_s): rows whose timestamp lies off the grid (``TIME_JITTER``),
+          reported from JITTER_MIN_ROWS rows on -- the clock or the sample phase of the record is
+          the engineer's to check;
+        * ``frozen``, ``sentinel``, ``out_of_range`` (per channel): a stuck sensor, sentinel values,
+          values outside the physical bounds, reported from SENSOR_FAULT_MIN_S on.
+
+        Runs closer than MERGE_S are one finding.  The samples are missing to the preprocessing
+        (interpolated across when short); ``cut`` when part of the span is left empty (a gap
+        longer than ``max_interp_gap_s``: no measurement there for the regression)."""
         from aerosid.estimation.findings import Finding, merge_close, true_runs
 
         if self.frame.empty or "flags" not in self.frame:
             return []
-        jitter = (self.frame["flags"].to_numpy().astype(np.int64) & int(QualityFlag.TIME_JITTER)) != 0
         t = self.frame["t_s"].to_numpy(float)
-        merged = merge_close(jitter, max(1, int(round(JITTER_MERGE_S * self.nominal_rate_hz))))
+        rate = self.nominal_rate_hz
+        empty_bits = int(QualityFlag.LONG_GAP | QualityFlag.EDGE_GAP)
         out = []
-        for a, b in true_runs(merged):
-            n = int(jitter[a:b].sum())
-            if n >= JITTER_MIN_ROWS:
-                out.append(Finding(
-                    "time_jitter", "preprocess", "t_s", float(t[a]), float(t[b - 1]), n, True,
-                    f"{n} timestamp(s) lie more than snap_tolerance = {self.params.snap_tolerance:g} of a step from "
-                    f"the {self.nominal_rate_hz:.6g} Hz grid (clock jitter, or the sample phase moved after a "
-                    "dropout); those rows are treated as missing: check the record's clock or nominal_rate_hz"))
+
+        def spans(kind: str, channel: str, flags: np.ndarray, bit: int, min_n: int, detail) -> None:
+            hit = (flags & bit) != 0
+            for a, b in true_runs(merge_close(hit, max(1, int(round(MERGE_S * rate))))):
+                n = int(hit[a:b].sum())
+                if n >= min_n:
+                    cut = bool(np.any(flags[a:b][hit[a:b]] & empty_bits))
+                    out.append(Finding(kind, "preprocess", channel, float(t[a]), float(t[b - 1]), n, cut, detail(n)))
+
+        spans("time_jitter", "t_s", self.frame["flags"].to_numpy().astype(np.int64), int(QualityFlag.TIME_JITTER),
+              JITTER_MIN_ROWS,
+              lambda n: f"{n} timestamp(s) lie more than snap_tolerance = {self.params.snap_tolerance:g} of a step "
+                        f"from the {rate:.6g} Hz grid (clock jitter, or the sample phase moved after a dropout); "
+                        "those rows are treated as missing: check the record's clock or nominal_rate_hz")
+        min_n = max(2, int(round(SENSOR_FAULT_MIN_S * rate)))
+        for col in [c for c in self.frame.columns if c.startswith("flags_")]:
+            ch = col[len("flags_"):]
+            flags = self.frame[col].to_numpy().astype(np.int64)
+            lo, hi = PHYSICAL_BOUNDS.get(ch, (-np.inf, np.inf))
+            unit = UNITS.get(ch, "")
+            for kind, bit, what in (
+                    ("frozen", QualityFlag.FROZEN, "repeats one value far beyond its update interval (a stuck "
+                                                   "or dead sensor)"),
+                    ("sentinel", QualityFlag.SENTINEL, "holds sentinel values (e.g. -9999: no measurement)"),
+                    ("out_of_range", QualityFlag.OUT_OF_RANGE, f"lies outside its physical bounds {lo:g}..{hi:g} "
+                                                               f"{unit} (a unit or scaling error?)")):
+                spans(kind, ch, flags, int(bit), min_n,
+                      lambda n, what=what, ch=ch: f"{ch} {what} on {n} sample(s); those samples are treated as "
+                                                  "missing")
         return out
 
     @property

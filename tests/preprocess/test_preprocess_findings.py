@@ -21,13 +21,35 @@ def _shifted(rows: slice, steps: float, seed: int = 5):
 def test_a_run_of_timestamps_off_the_grid_is_one_finding_with_its_span():
     raw = _shifted(slice(800, 840), 0.4)  # 0.4 step late: beyond snap_tolerance (0.25)
     res = preprocess(raw)
-    (f,) = res.findings
-    assert (f.kind, f.segment, f.channel, f.n_samples, f.cut) == ("time_jitter", "preprocess", "t_s", 40, True)
+    (f,) = res.findings  # 0.4 s: interpolated across (max_interp_gap_s 0.5 s), so not cut
+    assert (f.kind, f.segment, f.channel, f.n_samples, f.cut) == ("time_jitter", "preprocess", "t_s", 40, False)
     t = res.frame["t_s"].to_numpy()
     assert np.isclose(f.t0_s, t[800], atol=0.006) and np.isclose(f.t1_s, t[839], atol=0.006)
     assert "snap_tolerance" in f.detail
     stored = json.loads(res.metadata()["aerosid.findings"])  # what the flow reads back from the Parquet file
     assert stored == [f.as_dict()]
+
+
+def test_a_span_longer_than_the_interpolation_limit_is_cut():
+    (f,) = preprocess(_shifted(slice(800, 880), 0.4)).findings
+    assert (f.kind, f.n_samples, f.cut) == ("time_jitter", 80, True)
+
+
+def test_a_stuck_sensor_and_sentinel_values_are_findings_of_their_channel():
+    raw = make_flight(seed=6, duration_s=20.0, faults=False).raw.copy()
+    q = raw["q_rad_s"].to_numpy().copy()
+    q[500:600] = q[500]  # stuck for 1 s
+    raw["q_rad_s"] = q
+    v = raw["V_m_s"].to_numpy().copy()
+    v[1200:1220] = -9999.0  # 0.2 s of sentinels
+    raw["V_m_s"] = v
+    found = {(f.kind, f.channel): f for f in preprocess(raw).findings}
+    assert set(found) == {("frozen", "q_rad_s"), ("sentinel", "V_m_s")}
+    frozen, sentinel = found["frozen", "q_rad_s"], found["sentinel", "V_m_s"]
+    assert frozen.n_samples >= 90 and frozen.cut  # 1 s > max_interp_gap_s: left empty
+    t = raw["t_s"].to_numpy()
+    assert abs(frozen.t0_s - t[500]) <= 0.1 and abs(frozen.t1_s - t[599]) <= 0.1
+    assert sentinel.n_samples == 20 and not sentinel.cut and "sentinel" in sentinel.detail
 
 
 def test_a_few_stray_timestamps_and_jitter_inside_the_tolerance_are_not_findings():
