@@ -30,9 +30,12 @@ class EBMRun:
 
     @property
     def findings(self) -> list[dict]:
-        """Every finding of the run (aerosid.estimation.findings): the smoother's and the
-        flight data's, in segment order."""
-        return [f.as_dict() for s in self.smoothed for f in s.findings] + list(self.flight_data.attrs.get("findings", []))
+        """Every finding of the run (aerosid.estimation.findings): the preprocessing's (timestamps
+        off the grid, sensor faults), the smoother's and the flight data's, in segment order (as
+        the flow's run.json)."""
+        return ([f.as_dict() for f in self.preprocessed.findings]
+                + [f.as_dict() for s in self.smoothed for f in s.findings]
+                + list(self.flight_data.attrs.get("findings", [])))
 
     def summary(self) -> str:
         found = [Finding(**f).summary() for f in self.findings]

@@ -52,6 +52,20 @@ def test_an_excursion_out_of_the_database_at_the_end_is_cut_and_named(reference_
     assert run.findings and all("cut" in f for f in run.findings)
 
 
+def test_timestamps_off_the_grid_are_a_finding_of_the_in_memory_run(reference_flight):
+    tel = reference_flight.telemetry.copy()
+    t = tel["t_s"].to_numpy().copy()
+    late = (t > 60.0) & (t < 60.8)  # 0.8 s of timestamps 0.4 step late: left empty, cut
+    t[late] += 0.004
+    tel["t_s"] = t
+    run = _run(tel)
+    jitter = [Finding(**f) for f in run.findings if f["kind"] == "time_jitter"]
+    assert len(jitter) == 1 and jitter[0].cut and jitter[0].segment == "preprocess"
+    assert abs(jitter[0].t0_s - 60.0) < 0.05 and abs(jitter[0].t1_s - 60.8) < 0.05
+    assert "time_jitter at t = 60.0" in run.summary()
+    assert _kept(run, 60.05, 60.75) == 0
+
+
 def test_a_clean_reference_flight_has_no_finding(reference_run):
     assert reference_run.findings == []
 
