@@ -327,16 +327,25 @@ def run_pooled(pool: PoolJob) -> dict:
                 write_run_summary_task(job.run_dir, fs)
                 pre_future.result()  # raises the stage's own error
             done = _collect_segments(job, plan, futures, fs, logger)
+            # each manoeuvre's own findings (its preprocessing's and its segments'); the pooled flight
+            # data's are the pool's (summary["findings"] below), so nothing is listed twice
+            fs["findings"] = list(p.get("findings", [])) + [f for d in done for f in d.get("findings", [])]
+            if fs["findings"] and fs["status"] == "ok":
+                fs["status"] = "ok with findings"
             write_run_summary_task(job.run_dir, fs)
             if done:
                 groups.append({"flight": job.flight, "preprocessed": p["path"], "smoothed": [d["path"] for d in done]})
         states = [fs["status"] for fs in summary["flights"]]
-        summary["status"] = "failed" if not groups else ("ok" if all(s == "ok" for s in states) else "partial")
+        summary["status"] = ("failed" if not groups else "ok" if all(s in ("ok", "ok with findings") for s in states)
+                             else "partial")
         if groups:
             fd = pooled_flight_data_task(groups, pool.run_dir, pool.context(), pool.vehicle)
             coeffs = regression_task([fd["path"]], pool.run_dir, pool.context(), pool.vehicle, pool.model_spec,
                                      pool.mach_half_width)
             summary.update(flight_data=fd, coefficients=coeffs, air_data=_air_data(fd["path"]))
+            summary["findings"] = list(fd.get("findings", []))
+        if summary["status"] == "ok" and (summary.get("findings") or any(fs.get("findings") for fs in summary["flights"])):
+            summary["status"] = "ok with findings"
             _artifacts(pool, summary)
         write_run_summary_task(pool.run_dir, summary)
         if groups:

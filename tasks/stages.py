@@ -153,10 +153,14 @@ def pooled_flight_data_task(flights: list[dict], run_dir: str, ctx: StageContext
             pooled.append((f["flight"], pre, [read_validated(p, SmoothedSegment) for p in f["smoothed"]]))
             sources[f["flight"]] = flight_air_data_sources(pre.columns)
         frame = build_pooled_flight_data(pooled, veh, load_database(veh))
-        return Produced(frame, {"aerosid.air_data": sources}, rows_in=sum(len(sm) for _, _, s in pooled for sm in s))
+        findings_seen.extend(frame.attrs.get("findings", []))
+        return Produced(frame, {"aerosid.air_data": sources, "aerosid.findings": json.dumps(list(findings_seen))},
+                        rows_in=sum(len(sm) for _, _, s in pooled for sm in s))
 
-    return execute("flight_data", ctx, [*inputs, *vehicle_files(vehicle)], out,
-                   {"vehicle": vehicle, "flights": [f["flight"] for f in flights]}, FlightData, produce)
+    findings_seen: list = []
+    result = execute("flight_data", ctx, [*inputs, *vehicle_files(vehicle)], out,
+                     {"vehicle": vehicle, "flights": [f["flight"] for f in flights]}, FlightData, produce)
+    return {**result, "findings": findings_seen or stored_findings(result["path"])}
 
 
 @task(name="regression", **IO_RETRIES)

@@ -155,3 +155,30 @@ def test_a_failed_segment_leaves_the_pool_partial_and_retry_reruns_the_pool(pref
     smooth = [r for r in recs if r["stage"] == "smooth" and r["run_id"] == recs[-1]["run_id"]]
     assert sorted((r["flight"], r["segment"], r["status"]) for r in smooth) == [
         ("m1", "seg00", "reused"), ("m1", "seg01", "reused"), ("m2", "seg00", "reused"), ("m2", "seg01", "ok")]
+
+
+def test_a_manoeuvres_findings_reach_the_pools_status_output_and_report(prefect_harness, manoeuvres, tmp_path):
+    """One manoeuvre with 0.8 s of timestamps off the grid: its run.json entry carries the
+    time_jitter finding, the pool says "ok with findings", the CLI lists it and the report's run
+    section names it with its manoeuvre, once."""
+    from aerosid.cli import main
+
+    raw = pd.read_parquet(manoeuvres["m1"])
+    t = raw["t_s"].to_numpy().copy()
+    t[(t > 12.0) & (t < 12.8)] += 0.004  # 0.4 sample step late
+    raw["t_s"] = t
+    jittered = tmp_path / "mj" / "telemetry.parquet"
+    jittered.parent.mkdir()
+    write_parquet_atomic(raw, jittered, metadata={"aerosid.case": "seed-rlv"})
+    out = tmp_path / "run"
+    res = CliRunner().invoke(main, ["run", str(jittered), str(manoeuvres["m2"]), "--out", str(out)])
+    assert res.exit_code == 0, res.output
+    state = json.loads((out / "run.json").read_text())
+    kinds = {fs["flight"]: [f["kind"] for f in fs["findings"]] for fs in state["flights"]}
+    assert "time_jitter" in kinds["mj"] and "time_jitter" not in kinds["m2"]
+    assert state["status"] == "ok with findings" and state["flights"][0]["status"] == "ok with findings"
+    assert "preprocess t_s: time_jitter at t = 12.0" in res.output
+    html = (out / "report.html").read_text()
+    run_section = html[html.index('<section id="run"'):]
+    run_section = run_section[:run_section.index("</section>")]
+    assert run_section.count("time_jitter") == 1 and "mj preprocess" in run_section

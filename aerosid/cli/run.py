@@ -143,7 +143,10 @@ def run(telemetry, vehicle, out_dir, flight, windows, model_spec, mach_half_widt
                    f"{[d['segment'] for d in fs['segments_ok']]}, failed {fs['segments_failed']}")
     for fid, src in (summary.get("air_data") or {}).items():
         click.echo(f"air data of {fid}: " + "; ".join(f"{k} from {v}" for k, v in src.items()))
-    findings = [f for fs in summary.get("flights", [summary]) for f in fs.get("findings", [])]
+    # one flight: its own; pooled manoeuvres: each one's (preprocessing, segments), then the pool's
+    # (its flight data)
+    findings = [f for fs in summary.get("flights", []) for f in fs.get("findings", [])] + list(
+        summary.get("findings", []))
     if findings:
         from aerosid.estimation.findings import Finding
 

@@ -29,11 +29,14 @@ def _savgol_operators(win: int, dt: float) -> tuple[np.ndarray, np.ndarray, np.n
     quadratic fitted to the first / last `win` samples, its slope read at the first / last
     win // 2).  Built once per window (SIMEX differentiates ~160 frames of the same grid)."""
     kernel = scipy.signal.savgol_coeffs(win, 2, deriv=1, delta=dt)
-    x = np.arange(win, dtype=float)
-    fit = np.linalg.pinv(np.vander(x, 3))  # (3, win): the quadratic's coefficients a, b, c
     half = win // 2
+    x = np.arange(win, dtype=float) - half  # centred: a well-conditioned fit for long windows too
+    fit = np.linalg.pinv(np.vander(x, 3))  # (3, win): the quadratic's coefficients a, b, c
     slope = lambda i: (np.column_stack([2.0 * i, np.ones_like(i), np.zeros_like(i)]) @ fit) / dt  # noqa: E731
-    return kernel, slope(x[:half]), slope(x[win - half:])
+    ops = kernel, slope(x[:half]), slope(x[win - half:])
+    for op in ops:
+        op.flags.writeable = False  # shared by every caller through the cache
+    return ops
 
 
 def _savgol_slope(y: np.ndarray, win: int, dt: float) -> np.ndarray:

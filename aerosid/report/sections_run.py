@@ -65,8 +65,10 @@ def _s_header(run: _Run, generated: str) -> str:
     if run.ledger and run.ledger[-1].get("run_id"):
         rows.insert(5, ("last run id", run.ledger[-1]["run_id"]))
     body = _table(["", ""], rows, id="run-facts", cls="facts")
-    body += _findings_table([*(run.run.get("findings") or []),
-                             *(f for s in subs or () for f in (s.run.get("findings") or []))])
+    # pooled manoeuvres: each one's findings (its segments named with the flight), then the pool's
+    body += _findings_table([*({**f, "segment": f"{s.flight} {f.get('segment', '')}"}
+                               for s in subs or () for f in (s.run.get("findings") or []) if isinstance(f, dict)),
+                             *(run.run.get("findings") or [])])
     if run.errors:
         body += "".join(_note(e) for e in run.errors)
     return body

@@ -69,4 +69,4 @@ def test_the_preprocess_stage_hands_the_finding_on_computed_and_reused(tmp_path)
     first = preprocess_task.fn(str(raw_path), str(run_dir), ctx, {})
     again = preprocess_task.fn(str(raw_path), str(run_dir), ctx, {})  # the output reused
     assert [f["kind"] for f in first["findings"]] == ["time_jitter"] and first["findings"][0]["n_samples"] == 40
-    assert again["findings"] == first["findings"]
+    assert again["status"] == "reused" and again["findings"] == first["findings"]
