@@ -232,8 +232,9 @@ def _s_residuals(run: _Run, shown: Shown, series: dict) -> str:
         c = series["channels"][ch]
         terms = [tm for tm in c["terms"] if np.ptp(tm[3]) > 0]
         ncols = max(len(terms), len(extra), 1)
-        fig, axes = _figure((2.4 * ncols, 6.6), nrows=3, ncols=ncols)
-        axes = axes.reshape(3, ncols)
+        nrows = 3 if terms else 1  # a model of constants only: the residual against Mach, qbar, t alone
+        fig, axes = _figure((2.4 * ncols, 2.2 * nrows), nrows=nrows, ncols=ncols)
+        axes = axes.reshape(nrows, ncols)
         for j, (name, expr, est, x) in enumerate(terms):
             k, xlabel = _axis(expr)
             grid = np.linspace(float(np.min(x)), float(np.max(x)), 2)
@@ -241,11 +242,12 @@ def _s_residuals(run: _Run, shown: Shown, series: dict) -> str:
                           line=(grid * k, est * grid))
             scatter_panel(axes[1, j], x * k, c["residual"], xlabel=xlabel, ylabel=f"{ch} residual")
         for j, (xlabel, x) in enumerate(extra):
-            scatter_panel(axes[2, j], x, c["residual"], xlabel=xlabel, ylabel=f"{ch} residual")
-        for row, used in ((0, len(terms)), (1, len(terms)), (2, len(extra))):
+            scatter_panel(axes[nrows - 1, j], x, c["residual"], xlabel=xlabel, ylabel=f"{ch} residual")
+        for row, used in enumerate((len(terms), len(terms), len(extra)) if terms else (len(extra),)):
             for ax in axes[row, used:]:
                 ax.set_visible(False)
         out.append(f'<h3 id={_q("res-" + ch)}>{_e(ch)}</h3>')
-        out.append(_svg(fig, f"res{i}", f"{ch}, model {label}: partial residuals (top), residual against each "
-                                        "regressor (middle) and against Mach, dynamic pressure and time (bottom)"))
+        out.append(_svg(fig, f"res{i}", f"{ch}, model {label}: " + (
+            "partial residuals (top), residual against each regressor (middle) and against Mach, dynamic "
+            "pressure and time (bottom)" if terms else "residual against Mach, dynamic pressure and time")))
     return "\n".join(out)
