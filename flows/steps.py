@@ -344,8 +344,9 @@ def run_pooled(pool: PoolJob) -> dict:
                                      pool.mach_half_width)
             summary.update(flight_data=fd, coefficients=coeffs, air_data=_air_data(fd["path"]))
             summary["findings"] = list(fd.get("findings", []))
-        if summary["status"] == "ok" and (summary.get("findings") or any(fs.get("findings") for fs in summary["flights"])):
-            summary["status"] = "ok with findings"
+            found = summary["findings"] or any(fs.get("findings") for fs in summary["flights"])
+            if found and summary["status"] == "ok":
+                summary["status"] = "ok with findings"
             _artifacts(pool, summary)
         write_run_summary_task(pool.run_dir, summary)
         if groups:

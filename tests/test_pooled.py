@@ -177,8 +177,13 @@ def test_a_manoeuvres_findings_reach_the_pools_status_output_and_report(prefect_
     kinds = {fs["flight"]: [f["kind"] for f in fs["findings"]] for fs in state["flights"]}
     assert "time_jitter" in kinds["mj"] and "time_jitter" not in kinds["m2"]
     assert state["status"] == "ok with findings" and state["flights"][0]["status"] == "ok with findings"
-    assert "preprocess t_s: time_jitter at t = 12.0" in res.output
+    assert "mj: preprocess t_s: time_jitter at t = 12." in res.output
     html = (out / "report.html").read_text()
-    run_section = html[html.index('<section id="run"'):]
-    run_section = run_section[:run_section.index("</section>")]
-    assert run_section.count("time_jitter") == 1 and "mj preprocess" in run_section
+    table = html[html.index('<table id="run-findings"'):]
+    table = table[:table.index("</table>")]
+    assert table.count("<td>time_jitter</td>") == 1 and "<td>mj preprocess</td>" in table
+    # the pool's own findings (its flight data's) are stored with the flight data and handed on
+    import pyarrow.parquet as pq
+
+    stored = json.loads((pq.read_schema(out / "flight_data.parquet").metadata or {}).get(b"aerosid.findings", b"[]"))
+    assert stored == state.get("findings", [])

@@ -145,14 +145,14 @@ def run(telemetry, vehicle, out_dir, flight, windows, model_spec, mach_half_widt
         click.echo(f"air data of {fid}: " + "; ".join(f"{k} from {v}" for k, v in src.items()))
     # one flight: its own; pooled manoeuvres: each one's (preprocessing, segments), then the pool's
     # (its flight data)
-    findings = [f for fs in summary.get("flights", []) for f in fs.get("findings", [])] + list(
-        summary.get("findings", []))
+    findings = [(f"{fs['flight']}: ", f) for fs in summary.get("flights", []) for f in fs.get("findings", [])] + [
+        ("", f) for f in summary.get("findings", [])]
     if findings:
         from aerosid.estimation.findings import Finding
 
         click.echo(f"{len(findings)} finding(s) -- the spans marked 'cut' were left out of the regression:")
-        for f in findings:
-            click.echo(f"  {Finding(**f).summary()}")
+        for manoeuvre, f in findings:
+            click.echo(f"  {manoeuvre}{Finding(**f).summary()}")
     if "coefficients" in summary:
         import pandas as pd
 

@@ -406,5 +406,7 @@ def build_pooled_flight_data(flights: list[tuple[str, pd.DataFrame, list[pd.Data
         raise ValueError(f"pooled flights need distinct ids, got {ids}")
     parts = [build_flight_data_segments(pre, smoothed, vehicle, db, fid) for fid, pre, smoothed in flights]
     frame = pd.concat(parts, ignore_index=True)
-    frame.attrs["findings"] = [f for part in parts for f in part.attrs.get("findings", [])]
+    # every manoeuvre has a seg00: a finding names its manoeuvre with its segment ("m1 seg00")
+    frame.attrs["findings"] = [{**f, "segment": f"{fid} {f['segment']}"}
+                               for fid, part in zip(ids, parts) for f in part.attrs.get("findings", [])]
     return frame

@@ -66,7 +66,7 @@ def _s_header(run: _Run, generated: str) -> str:
         rows.insert(5, ("last run id", run.ledger[-1]["run_id"]))
     body = _table(["", ""], rows, id="run-facts", cls="facts")
     # pooled manoeuvres: each one's findings (its segments named with the flight), then the pool's
-    body += _findings_table([*({**f, "segment": f"{s.flight} {f.get('segment', '')}"}
+    body += _findings_table([*({**f, "segment": f"{s.flight} {f.get('segment', '')}".strip()}
                                for s in subs or () for f in (s.run.get("findings") or []) if isinstance(f, dict)),
                              *(run.run.get("findings") or [])])
     if run.errors:
