@@ -240,16 +240,35 @@ def _finish_flight(job: FlightJob, p: dict, plan: dict, futures: list, summary: 
 def _artifacts(job, summary: dict) -> None:
     """Markdown tables of the results in Prefect's UI (keys: lowercase, digits, dashes)."""
     key = re.sub(r"[^a-z0-9-]+", "-", job.flight.lower()).strip("-") or "flight"
-    table = pd.read_parquet(summary["coefficients"]["path"])
-    md = [f"# Coefficients of flight `{job.flight}`", "",
+    md = artifact_markdown(job.flight, pd.read_parquet(summary["coefficients"]["path"]), summary)
+    create_markdown_artifact(md, key=f"coefficients-{key}", description=f"EBM results of {job.flight}")
+
+
+def artifact_markdown(flight: str, table: pd.DataFrame, summary: dict) -> str:
+    """The run's artifact in Markdown: the coefficients, each segment's status and the findings
+    (a pooled run's segments and findings named with their manoeuvre)."""
+    md = [f"# Coefficients of flight `{flight}`", "",
           "SI per radian, moments about the CG; sigma corrected for coloured residuals.", "",
           markdown_table(table[["channel", "coefficient", "estimate", "std_error", "std_error_ols", "ci_low",
                                 "ci_high", "reference"]])]
+    parts = [(f"{f['flight']}/", f) for f in summary["flights"]] if "flights" in summary else [("", summary)]
     segs = [f"| {pre}{s} | {'ok' if any(d['segment'] == s for d in fs['segments_ok']) else 'failed'} |"
-            for pre, fs in ([(f"{f['flight']}/", f) for f in summary["flights"]] if "flights" in summary
-                            else [("", summary)]) for s in fs["segments"]]
+            for pre, fs in parts for s in fs["segments"]]
     md += ["", "## Segments", "", "| segment | status |", "|---|---|", *segs]
-    create_markdown_artifact("\n".join(md), key=f"coefficients-{key}", description=f"EBM results of {job.flight}")
+    found = [(pre, f) for pre, fs in parts if "flights" in summary for f in fs.get("findings", [])] + [
+        ("", f) for f in summary.get("findings", [])]
+    if found:
+        md += ["", f"## Findings (status: {summary.get('status')})", "",
+               "| segment | finding | channel | time span [s] | samples | action | detail |",
+               "|---|---|---|---|---|---|---|", *(_finding_row(pre, f) for pre, f in found)]
+    return "\n".join(md)
+
+
+def _finding_row(prefix: str, f: dict) -> str:
+    cells = [prefix + str(f.get("segment", "")), f.get("kind", ""), f.get("channel", ""),
+             f"{float(f.get('t0_s', float('nan'))):.2f}–{float(f.get('t1_s', float('nan'))):.2f}",
+             f.get("n_samples", ""), "cut" if f.get("cut") else "reported", f.get("detail", "")]
+    return "| " + " | ".join(str(c).replace("|", "\\|").replace("\n", " ") for c in cells) + " |"
 
 
 # ------------------------------------------------------------- several manoeuvres, one model

@@ -130,3 +130,28 @@ def test_campaign_on_dask_equals_the_core(prefect_harness, flights, tmp_path):
         tb = pd.read_parquet(b["coefficients"]["path"])[COLS]
         pd.testing.assert_frame_equal(ta, tb, check_exact=True)
     assert np.isfinite(tb["estimate"]).any()
+
+
+def test_the_prefect_artifact_lists_segments_and_findings_named_with_their_manoeuvre():
+    import pandas as pd
+
+    from flows.steps import artifact_markdown
+
+    table = pd.DataFrame({"channel": ["Cm"], "coefficient": ["Cm_alpha"], "estimate": [-0.25], "std_error": [0.01],
+                          "std_error_ols": [0.001], "ci_low": [-0.27], "ci_high": [-0.23], "reference": [-0.38]})
+    jitter = {"kind": "time_jitter", "segment": "preprocess", "channel": "t_s", "t0_s": 12.0, "t1_s": 12.8,
+              "n_samples": 80, "cut": True, "detail": "off the grid | check the clock"}
+    edge = {"kind": "database_edge", "segment": "m2 seg01", "channel": "", "t0_s": 40.0, "t1_s": 41.5,
+            "n_samples": 150, "cut": True, "detail": "alpha at the table's edge"}
+    pooled = {"status": "ok with findings", "findings": [edge],
+              "flights": [{"flight": "m1", "segments": ["seg00"], "segments_ok": [{"segment": "seg00"}],
+                           "findings": [jitter]},
+                          {"flight": "m2", "segments": ["seg00", "seg01"], "segments_ok": [{"segment": "seg00"}],
+                           "findings": []}]}
+    md = artifact_markdown("pool", table, pooled)
+    assert "| m1/seg00 | ok |" in md and "| m2/seg01 | failed |" in md
+    assert "## Findings (status: ok with findings)" in md
+    assert "| m1/preprocess | time_jitter | t_s | 12.00–12.80 | 80 | cut | off the grid \\| check the clock |" in md
+    assert "| m2 seg01 | database_edge |" in md
+    single = {"status": "ok", "segments": ["seg00"], "segments_ok": [{"segment": "seg00"}], "findings": []}
+    assert "## Findings" not in artifact_markdown("f", table, single)
