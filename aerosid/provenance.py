@@ -24,16 +24,33 @@ def params_hash(params) -> str:
     return hashlib.sha256(text.encode()).hexdigest()
 
 
+#: Packages beside the core whose code shapes what a stage writes (the adapters that write each
+#: stage's Parquet and its metadata, the schemas that validate it): in the code version, so a
+#: change there is not served a cached output either.  The flows (the order of stages) are not.
+STAGE_PACKAGES = ("tasks", "schemas")
+
+
+def hashed_source_files() -> list[Path]:
+    """The files code_version hashes: the core's sources and built-in data (``*.py``, ``*.toml``,
+    ``*.csv`` under aerosid/) and the sources of STAGE_PACKAGES where they sit beside it."""
+    root = Path(__file__).parent
+    files = [p for pattern in ("*.py", "*.toml", "*.csv") for p in root.rglob(pattern)]
+    for name in STAGE_PACKAGES:
+        pkg = root.parent / name
+        if (pkg / "__init__.py").is_file():
+            files += list(pkg.rglob("*.py"))
+    return sorted(p for p in files if "__pycache__" not in p.parts)
+
+
 @functools.lru_cache(maxsize=1)
 def code_version() -> str:
-    """``<package version>+<12 hex of the SHA-256 of the core's source files and data>``:
-    changes whenever any numerical code or built-in data changes."""
-    root = Path(__file__).parent
+    """``<package version>+<12 hex of the SHA-256 of hashed_source_files()>``: changes whenever
+    any numerical code, built-in data, stage adapter or schema changes (a stage's cache key holds
+    it, so no output written by other code is reused)."""
+    base = Path(__file__).parent.parent
     h = hashlib.sha256()
-    for path in sorted(list(root.rglob("*.py")) + list(root.rglob("*.toml")) + list(root.rglob("*.csv"))):
-        if "__pycache__" in path.parts:
-            continue
-        h.update(str(path.relative_to(root)).encode())
+    for path in hashed_source_files():
+        h.update(str(path.relative_to(base)).encode())
         h.update(path.read_bytes())
     try:
         version = metadata.version("aerosid")

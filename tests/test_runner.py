@@ -113,3 +113,17 @@ def test_an_output_the_ledger_does_not_know_is_recomputed(stage):
     again, calls = stage()
     assert again["status"] == "ok" and calls == 2
     assert "no record" in last(stage.ledger)["reason"]
+
+
+def test_the_code_version_covers_the_stage_adapters_and_schemas_not_the_flows():
+    """A stage's cache key holds the code version: a change to what a task writes (tasks/) or to
+    the schema that validates it (schemas/) must not be served an output written before it."""
+    from pathlib import Path
+
+    from aerosid.provenance import hashed_source_files
+
+    root = Path(__file__).resolve().parent.parent
+    rel = {p.resolve().relative_to(root).as_posix() for p in hashed_source_files()}
+    assert {"tasks/stages.py", "tasks/runner.py", "schemas/telemetry.py", "aerosid/provenance.py",
+            "aerosid/data/seed-rlv/vehicle.toml"} <= rel
+    assert not any(r.startswith("flows/") or r.startswith("tests/") for r in rel)
