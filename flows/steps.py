@@ -166,6 +166,20 @@ def _collect_segments(job: FlightJob, plan: dict, futures: list, summary: dict, 
     return done
 
 
+def _own_findings(p: dict, done: list[dict]) -> list:
+    """A flight's findings before its flight data: its preprocessing's and its segments'."""
+    return list(p.get("findings", [])) + [f for d in done for f in d.get("findings", [])]
+
+
+def _record_findings(summary: dict, findings, inherited: bool = False) -> None:
+    """summary["findings"] = findings; a run with findings (timestamps off the grid, sensor faults,
+    gated runs, NIS out of band, database edge, departures), or whose manoeuvres have some
+    (`inherited`, a pool), is not "ok"."""
+    summary["findings"] = list(findings)
+    if (summary["findings"] or inherited) and summary["status"] == "ok":
+        summary["status"] = "ok with findings"
+
+
 def _air_data(flight_data_path: str) -> dict:
     """flight -> where its density, temperature, Mach and dynamic pressure came from."""
     from aerosid.io import read_parquet_metadata
@@ -223,12 +237,7 @@ def _finish_flight(job: FlightJob, p: dict, plan: dict, futures: list, summary: 
         coeffs = regression_task([fd["path"]], job.run_dir, job.context(), job.vehicle, job.model_spec,
                                  job.mach_half_width)
         summary.update(flight_data=fd, coefficients=coeffs, air_data=_air_data(fd["path"]))
-        # a run with findings (timestamps off the grid, gated runs, NIS out of band, database edge,
-        # departures) is not "ok"
-        summary["findings"] = (list(p.get("findings", [])) + [f for d in done for f in d.get("findings", [])]
-                               + list(fd.get("findings", [])))
-        if summary["findings"] and summary["status"] == "ok":
-            summary["status"] = "ok with findings"
+        _record_findings(summary, _own_findings(p, done) + list(fd.get("findings", [])))
         _artifacts(job, summary)
     write_run_summary_task(job.run_dir, summary)
     if done:
@@ -346,11 +355,9 @@ def run_pooled(pool: PoolJob) -> dict:
                 write_run_summary_task(job.run_dir, fs)
                 pre_future.result()  # raises the stage's own error
             done = _collect_segments(job, plan, futures, fs, logger)
-            # each manoeuvre's own findings (its preprocessing's and its segments'); the pooled flight
-            # data's are the pool's (summary["findings"] below), so nothing is listed twice
-            fs["findings"] = list(p.get("findings", [])) + [f for d in done for f in d.get("findings", [])]
-            if fs["findings"] and fs["status"] == "ok":
-                fs["status"] = "ok with findings"
+            # each manoeuvre's own findings; the pooled flight data's are the pool's (below), so
+            # nothing is listed twice
+            _record_findings(fs, _own_findings(p, done))
             write_run_summary_task(job.run_dir, fs)
             if done:
                 groups.append({"flight": job.flight, "preprocessed": p["path"], "smoothed": [d["path"] for d in done]})
@@ -362,10 +369,8 @@ def run_pooled(pool: PoolJob) -> dict:
             coeffs = regression_task([fd["path"]], pool.run_dir, pool.context(), pool.vehicle, pool.model_spec,
                                      pool.mach_half_width)
             summary.update(flight_data=fd, coefficients=coeffs, air_data=_air_data(fd["path"]))
-            summary["findings"] = list(fd.get("findings", []))
-            found = summary["findings"] or any(fs.get("findings") for fs in summary["flights"])
-            if found and summary["status"] == "ok":
-                summary["status"] = "ok with findings"
+            _record_findings(summary, fd.get("findings", []),
+                             inherited=any(fs.get("findings") for fs in summary["flights"]))
             _artifacts(pool, summary)
         write_run_summary_task(pool.run_dir, summary)
         if groups:

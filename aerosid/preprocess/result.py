@@ -15,8 +15,6 @@ from . import sensors
 from .flags import QualityFlag
 from .params import PreprocessParams
 
-#: Flagged samples of one kind and channel within this span of each other are one finding [s].
-MERGE_S = 2.0
 #: Rows whose timestamps lie off the grid are a finding from this many rows on (a stray timestamp
 #: or two is interpolated over and left unsaid).
 JITTER_MIN_ROWS = 5
@@ -114,10 +112,11 @@ class PreprocessResult:
         * ``frozen``, ``sentinel``, ``out_of_range`` (per channel): a stuck sensor, sentinel values,
           values outside the physical bounds, reported from SENSOR_FAULT_MIN_S on.
 
-        Runs closer than MERGE_S are one finding.  The samples are missing to the preprocessing
-        (interpolated across when short); ``cut`` when part of the span is left empty (a gap
-        longer than ``max_interp_gap_s``: no measurement there for the regression)."""
-        from aerosid.estimation.findings import Finding, merge_close, true_runs
+        Runs closer than aerosid.estimation.findings.MERGE_GAP_S (as gated runs) are one finding.
+        The samples are missing to the preprocessing (interpolated across when short); ``cut`` when
+        part of the span is left empty (a gap longer than ``max_interp_gap_s``: no measurement there
+        for the regression)."""
+        from aerosid.estimation.findings import MERGE_GAP_S, Finding, merge_close, true_runs
 
         if self.frame.empty or "flags" not in self.frame:
             return []
@@ -128,7 +127,7 @@ class PreprocessResult:
 
         def spans(kind: str, channel: str, flags: np.ndarray, bit: int, min_n: int, detail) -> None:
             hit = (flags & bit) != 0
-            for a, b in true_runs(merge_close(hit, max(1, int(round(MERGE_S * rate))))):
+            for a, b in true_runs(merge_close(hit, max(1, int(round(MERGE_GAP_S * rate))))):
                 n = int(hit[a:b].sum())
                 if n >= min_n:
                     cut = bool(np.any(flags[a:b][hit[a:b]] & empty_bits))
