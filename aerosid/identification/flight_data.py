@@ -18,6 +18,7 @@ from aerosid.identification.derivatives import zero_phase_low_pass
 from aerosid.estimation.findings import DEPARTURE_MIN_S, DEPARTURE_SIGMA, Finding, dilate, span_findings
 from aerosid.identification.band import (accel_at_cg, band_limited_signals, band_noise_gain, bridge_spikes,
                                          finite_runs, low_pass_runs, white_noise_sigma)
+from aerosid.identification.airdata_timing import advance, vane_delay
 from aerosid.identification.crb import R_COLUMNS
 from aerosid.identification.inversion import invert_alpha_beta, total_angles
 from aerosid.vehicles.vehicle import Vehicle
@@ -45,13 +46,14 @@ def load_database(vehicle: Vehicle) -> AeroDatabase | None:
     return AeroDatabase.load(vehicle.database_path)
 
 
-def _vane_angles(measured: pd.DataFrame, ok: np.ndarray, vehicle: Vehicle, t: np.ndarray):
+def _vane_angles(clean: dict, ok: np.ndarray, vehicle: Vehicle, t: np.ndarray):
     """alpha, beta [rad] from the vanes' clean columns (zero-phase low-passed) minus the
     calibration bias, and the total angle of attack alpha_r and aerodynamic roll angle
-    phi_r derived from them.  build_flight_data has checked that the columns exist."""
+    phi_r derived from them.  clean: build_flight_data's clean signals (the vanes advanced
+    by the vehicle file's delay)."""
     ts = t[ok]
     fs = 1.0 / float(np.median(np.diff(ts))) if ts.size > 1 else 1.0
-    a, b = (zero_phase_low_pass(measured[f"{col}_clean"].to_numpy(dtype=float)[ok], fs, vehicle.vane_cutoff_hz)
+    a, b = (zero_phase_low_pass(clean[col][ok], fs, vehicle.vane_cutoff_hz)
             - bias for col, bias in ((vehicle.alpha_column, vehicle.alpha_bias_rad),
                                      (vehicle.beta_column, vehicle.beta_bias_rad)))
     return (a, b, *total_angles(a, b))
@@ -100,6 +102,9 @@ def build_flight_data(smoothed: pd.DataFrame, measured: pd.DataFrame, vehicle: V
         raise ValueError(f"segment {segment}: the preprocessed telemetry has no column(s) "
                          f"{[c + '_clean' for c in missing]} (vehicle {vehicle.name}, {vehicle.source})")
     clean = {c: measured[f"{c}_clean"].to_numpy(dtype=float) for c in cols}
+    if vanes and vehicle.vane_delay_s:  # the vanes read later than the IMU: advance them
+        for c in (vehicle.alpha_column, vehicle.beta_column):
+            clean[c] = advance(t, clean[c], vehicle.vane_delay_s)
     ok = np.all(np.isfinite(np.column_stack(list(clean.values()))), axis=1) & (clean["V_m_s"] > 0)
     h_out = ok & ~((clean["h_m"] >= H_MIN_M) & (clean["h_m"] <= H_MAX_M))
     if h_out.any():
@@ -144,8 +149,9 @@ def build_flight_data(smoothed: pd.DataFrame, measured: pd.DataFrame, vehicle: V
         beta = clean[vehicle.beta_column][ok] - vehicle.beta_bias_rad
         alpha_r, phi_r = total_angles(alpha, beta)
         inv_J = np.zeros(len(alpha))
+        findings += _vane_timing(t, ok, clean, bl, vehicle, segment)
     elif vanes:
-        alpha, beta, alpha_r, phi_r = _vane_angles(measured, ok, vehicle, t)
+        alpha, beta, alpha_r, phi_r = _vane_angles(clean, ok, vehicle, t)
         inv_J = np.zeros(len(alpha))
     else:
         alpha, beta, alpha_r, phi_r, inv_J, edge = _inverted_angles(fc, s, delta_p, delta_y, vehicle, db, segment,
@@ -197,6 +203,27 @@ def build_flight_data(smoothed: pd.DataFrame, measured: pd.DataFrame, vehicle: V
                              f"({findings[-1].summary()})")
     frame.attrs["findings"] = [f.as_dict() for f in findings]
     return frame
+
+
+def _vane_timing(t, ok, clean: dict, bl, vehicle: Vehicle, segment: str) -> list[Finding]:
+    """The vanes' delay behind the IMU (aerosid.identification.airdata_timing) on the band
+    path's signals: a reported finding when it is detected, else nothing."""
+    def grid(x):
+        return np.where(ok, x, np.nan)
+
+    vd = vane_delay(t, grid(clean[vehicle.alpha_column] - vehicle.alpha_bias_rad),
+                    grid(clean[vehicle.beta_column] - vehicle.beta_bias_rad),
+                    *(grid(bl.rates_rad_s[:, j]) for j in range(3)), *(grid(bl.accel_cg_m_s2[:, j]) for j in range(3)),
+                    grid(clean["V_m_s"]), applied_s=vehicle.vane_delay_s)
+    if vd is None or not vd.detected:
+        return []
+    total = vd.delay_s + vd.applied_s
+    ts = t[ok]
+    return [Finding("airdata_delay", segment, vehicle.alpha_column, float(ts[0]), float(ts[-1]), vd.n, False,
+                    f"{vd.summary()}; equation error pairs each coefficient with the angle read at the same time "
+                    f"stamp, so a late vane biases C_N,delta, C_m,alpha and C_m,q. If the air-data system has this "
+                    f"delay, set `delay_s = {total:.3f}` in the vehicle file's [air_data] table (the vanes are "
+                    f"then advanced by it) and run again")]
 
 
 def gyro_eiv_sigma(smoothed: pd.DataFrame, band_white_rad_s) -> dict[str, np.ndarray]:

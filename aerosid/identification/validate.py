@@ -31,6 +31,7 @@ from aerosid.identification.identified import (IdentifiedModel, load_identified_
 from aerosid.identification.output_prediction import (AXIS_CHANNELS, AXIS_OUTPUTS, BIAS_MODES, OUTPUT_UNITS,
                                                       predict_axis, prediction_inputs,
                                                       theil_inequality)
+from aerosid.identification.airdata_timing import advance
 from aerosid.identification.identify import mach_window_mask
 from aerosid.modelling.models import vehicle_signals
 from aerosid.vehicles.vehicle import Vehicle
@@ -244,8 +245,9 @@ def measured_outputs(pre: pd.DataFrame, fd: pd.DataFrame, vehicle: Vehicle,
     for out, col, bias in (("alpha_rad", vehicle.alpha_column, vehicle.alpha_bias_rad),
                            ("beta_rad", vehicle.beta_column, vehicle.beta_bias_rad)):
         if vehicle.air_data_source == "vanes" and f"{col}_clean" in pre:
-            cols[out] = pre[f"{col}_clean"].to_numpy(float)[idx] - bias
-            src[out] = f"telemetry {col}" + (f" less its calibration bias {bias:g} rad" if bias else "")
+            cols[out] = advance(t_pre, pre[f"{col}_clean"].to_numpy(float), vehicle.vane_delay_s)[idx] - bias
+            src[out] = (f"telemetry {col}" + (f" less its calibration bias {bias:g} rad" if bias else "")
+                        + (f", advanced by the vanes' delay {vehicle.vane_delay_s:g} s" if vehicle.vane_delay_s else ""))
         elif wideband and f"{out[:-4]}_wideband_rad" in fd:
             cols[out] = fd[f"{out[:-4]}_wideband_rad"].to_numpy(float)
             src[out] = "EBM flight data before the band's low-pass (from the force-database inversion; no vane)"

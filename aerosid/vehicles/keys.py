@@ -114,6 +114,7 @@ TABLES: dict[str, dict[str, Key] | None] = {
         "alpha_column": Key("string"), "beta_column": Key("string"),
         "alpha_bias_rad": num(-0.5, 0.5), "beta_bias_rad": num(-0.5, 0.5), "noise_rad": num(0.0, 0.5),
         "cutoff_hz": pos(1e4), "derivative_half_window_s": pos(60.0),
+        "delay_s": num(-0.5, 0.5, doc="the vanes' delay behind the IMU [s]: the vane angles are advanced by it"),
     },
     "aero": {
         "database": Key("path", doc="the aerodynamic database, a file in the vehicle's folder"),

@@ -1,0 +1,228 @@
+"""The air-data vanes' timing against the inertial sensors: a data-compatibility check.
+
+Why
+---
+Equation-error regression pairs every sample of the flight-derived coefficients (from the
+accelerometers and gyros) with the angle of attack read at the same time stamp.  If the
+vane's reading reaches the telemetry later than the IMU's (a slower air-data computer, a
+filter, a logging skew), the regression pairs C_N(t) with alpha(t - tau) and makes up the
+difference with whatever regressor leads alpha: the elevator (C_N,delta), the pitch rate
+(C_m,q).  Measured on the NASA Twin Otter's manoeuvre 018 (bench/results/
+airdata_timing.md): the vane angle lags the alpha integrated from the IMU by about 20 ms
+(checked on the raw data with the recorded attitude: the fit's residual halves at +20 ms on
+018 and on 017); with alpha advanced by 20 ms the C_N residual falls from 3.7e-3 to 2.0e-3,
+C_N,delta moves from 0.19 to 0.41 and C_m,alpha from -1.47 to -1.52, SIDPAC's own
+output-error estimates being 0.409 and -1.543.  An output-error fit, which weights q and
+a_z as much as alpha, barely feels such a skew; equation error does.
+
+What is measured
+----------------
+Flight-path kinematics give alpha-dot from the rates, the CG specific forces and the attitude:
+
+    alpha_dot = K + G,   K = q - tan b (p cos a + r sin a) + (cos a a_z - sin a a_x) / (V cos b),
+                         G = g (cos a cos th cos ph + sin a sin th) / (V cos b)
+
+(aerosid.modelling.flight_path).  The estimation carries no attitude, so theta and phi are
+integrated from the gyros (Euler's kinematic equations), started from the specific force's
+direction over the segment's first INITIAL_S seconds (quasi-steady flight: f = (g sin th,
+-g cos th sin ph, -g cos th cos ph)).  A wrong start, the gyros' bias, the accelerometers' bias
+and the vane's calibration make slow errors of the integrated alpha; an intercept and a slope
+per run of samples take them.  On each run
+
+    alpha_vane(t) = c0 + c1 t + gain A(t - tau) ~ c0 + c1 t + gain A(t) - gain tau (K + G)(t),
+    A = int (K + G) dt,
+
+is fitted by least squares with the coloured-residual sigma (Morelli & Klein,
+aerosid.identification.regression.fit_linear, runs as groups); tau is refined by shifting A by
+the estimate and fitting again.  Every signal is the band path's (one low-pass for all), so the
+band adds no relative delay.  Measured (seed 0, the default pipeline's flight data): Twin Otter
+018 24.9 +- 2.4 ms (gain 0.994); JSBSim flights whose vanes are the true alpha 6.0 +- 1.3 (pa28),
+6.1 +- 2.1 (c172p), 13 +- 5.5 ms (T37) -- JSBSim's accelerations are half an integration step
+off the state's alpha (the same fit on its noise-free truth: 4.3 ms), so the simulated data
+themselves are that far from exact kinematics; with 25 ms added to the vanes the estimate rises
+by 25.0 (pa28) and 25.3 ms (T37).  A high-pass instead of the attitude (no G, the slow parts
+filtered out) gave the same estimates with 2-4 x the sigma on the Twin Otter's 8 s.
+
+What is done with it
+--------------------
+Reported, not applied: a run whose vanes lag (or lead) by at least one sample interval with
+p < DELAY_P_MAX is a finding ("airdata_delay") with the estimate, and the vehicle file's
+``[air_data] delay_s`` advances the vane angles by a known or measured delay before
+anything reads them (the band path, the smoother path, ``validate``).  The correction is
+not automatic: the estimate is a few milliseconds off on simulated data whose aerodynamic
+forces are consistent with the vane's sample (JSBSim's half step), where an automatic shift
+would put that error into the regression; the engineer who knows the air-data system can
+say whether the lag is real.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass
+
+import numpy as np
+import scipy.stats
+
+from aerosid.identification.regression import fit_linear
+from aerosid.modelling.flight_path import gravity_alpha_dot, kinematic_alpha_dot_no_gravity
+
+__all__ = ["VaneDelay", "vane_delay", "advance", "gyro_attitude", "DELAY_P_MAX", "MIN_RUN_S", "INITIAL_S"]
+
+#: A delay is reported when its two-sided p-value (coloured-residual sigma, normal) is below
+#: this, the significance level of the project's other findings (aerosid.diagnosis: P_MAX).
+DELAY_P_MAX = 0.001
+#: Runs of usable samples shorter than this [s] are left out (an intercept and a slope of
+#: their own would take most of what they carry).
+MIN_RUN_S = 2.0
+#: The initial attitude comes from the mean specific force over this long [s].
+INITIAL_S = 0.2
+#: Refinement passes (each shifts the integrated kinematic alpha by the current estimate).
+PASSES = 3
+G_M_S2 = 9.80665
+
+
+@dataclass(frozen=True)
+class VaneDelay:
+    """The vane angle of attack's delay behind the IMU's kinematics on one segment.
+
+    delay_s: tau [s], positive when the vane reads later than the IMU; sigma_s: its
+    1-sigma [s] (coloured residuals); gain: the vane's alpha per kinematic alpha (about 1);
+    n: samples fitted; sample_s: the segment's sample interval [s]; applied_s: the vehicle
+    file's ``[air_data] delay_s`` the vanes were already advanced by (the estimate is what is
+    left after it)."""
+
+    delay_s: float
+    sigma_s: float
+    gain: float
+    n: int
+    sample_s: float
+    applied_s: float = 0.0
+
+    @property
+    def p_value(self) -> float:
+        if not (self.sigma_s > 0 and math.isfinite(self.delay_s)):
+            return float("nan")
+        return float(2.0 * scipy.stats.norm.sf(abs(self.delay_s) / self.sigma_s))
+
+    @property
+    def detected(self) -> bool:
+        """p < DELAY_P_MAX and at least one sample interval: a skew the telemetry resolves."""
+        return bool(self.p_value < DELAY_P_MAX and abs(self.delay_s) >= self.sample_s * (1 - 1e-9))
+
+    def summary(self) -> str:
+        way = "lags" if self.delay_s >= 0 else "leads"
+        already = f" after the vehicle file's delay_s = {self.applied_s:g} s" if self.applied_s else ""
+        return (f"air-data timing: the vane alpha {way} the IMU's kinematic alpha by "
+                f"{abs(self.delay_s) * 1e3:.1f} +- {self.sigma_s * 1e3:.1f} ms{already} (p = {self.p_value:.2g}; "
+                f"gain {self.gain:.3f}, {self.n} samples, sample interval {self.sample_s * 1e3:.3g} ms)")
+
+    def as_dict(self) -> dict:
+        return {**asdict(self), "p_value": self.p_value, "detected": self.detected}
+
+
+def advance(t_s: np.ndarray, x: np.ndarray, delay_s: float) -> np.ndarray:
+    """x read delay_s [s] later: x(t + delay_s), linear interpolation between the finite
+    samples of each contiguous run; NaN where t + delay_s leaves its run.  delay_s = 0
+    returns x unchanged (a copy)."""
+    x = np.asarray(x, float)
+    if delay_s == 0.0:
+        return x.copy()
+    t = np.asarray(t_s, float)
+    out = np.full_like(x, np.nan)
+    for r in _runs(np.isfinite(x)):
+        if r.stop - r.start < 2:
+            continue
+        tr = t[r]
+        target = tr + delay_s
+        inside = (target >= tr[0] - 1e-9) & (target <= tr[-1] + 1e-9)
+        out[r][inside] = np.interp(target[inside], tr, x[r])
+    return out
+
+
+def _runs(ok: np.ndarray) -> list[slice]:
+    idx = np.flatnonzero(ok)
+    if idx.size == 0:
+        return []
+    breaks = np.flatnonzero(np.diff(idx) > 1) + 1
+    return [slice(int(r[0]), int(r[-1]) + 1) for r in np.split(idx, breaks)]
+
+
+def gyro_attitude(t_s, p_rad_s, q_rad_s, r_rad_s, f0_m_s2) -> tuple[np.ndarray, np.ndarray]:
+    """(theta, phi) [rad]: Euler's kinematic equations integrated from the gyros (forward
+    Euler), started where the specific force f0 = (f_x, f_y, f_z) [m/s^2] of quasi-steady
+    flight points (theta = asin(f_x / g), phi = atan2(-f_y, -f_z)).  Rates NaN inside the grid
+    are bridged linearly; t_s uniform or not."""
+    t = np.asarray(t_s, float)
+    rates = []
+    for w in (p_rad_s, q_rad_s, r_rad_s):
+        w = np.asarray(w, float)
+        ok = np.isfinite(w)
+        rates.append(np.interp(t, t[ok], w[ok]) if ok.any() else np.zeros_like(t))
+    p, q, r = rates
+    fx, fy, fz = (float(v) for v in f0_m_s2)
+    theta, phi = np.empty_like(t), np.empty_like(t)
+    theta[0] = math.asin(min(1.0, max(-1.0, fx / G_M_S2)))
+    phi[0] = math.atan2(-fy, -fz)
+    for i in range(t.size - 1):
+        h = t[i + 1] - t[i]
+        sp, cp = math.sin(phi[i]), math.cos(phi[i])
+        phi[i + 1] = phi[i] + h * (p[i] + math.tan(theta[i]) * (q[i] * sp + r[i] * cp))
+        theta[i + 1] = theta[i] + h * (q[i] * cp - r[i] * sp)
+    return theta, phi
+
+
+def vane_delay(t_s, alpha_vane_rad, beta_rad, p_rad_s, q_rad_s, r_rad_s, ax_cg_m_s2, ay_cg_m_s2, az_cg_m_s2,
+               V_m_s, *, applied_s: float = 0.0) -> VaneDelay | None:
+    """Estimate the vane alpha's delay behind the IMU's kinematics (module doc).
+
+    Every argument is on one segment's grid, NaN where unusable, and through the band path's
+    common low-pass: alpha_vane_rad (the vane angle less its bias), beta_rad, the rates
+    [rad/s], the CG specific forces [m/s^2], V [m/s]; applied_s: the delay the vanes were
+    already advanced by (reported only).  None when no run of MIN_RUN_S is left."""
+    t = np.asarray(t_s, float)
+    if t.size < 16:
+        return None
+    a = np.asarray(alpha_vane_rad, float)
+    b = np.asarray(beta_rad, float)
+    p, q, r = (np.asarray(x, float) for x in (p_rad_s, q_rad_s, r_rad_s))
+    fx, fy, fz = (np.asarray(x, float) for x in (ax_cg_m_s2, ay_cg_m_s2, az_cg_m_s2))
+    V = np.asarray(V_m_s, float)
+    dt = float(np.median(np.diff(t)))
+    usable = np.isfinite(a) & np.isfinite(b) & np.isfinite(p) & np.isfinite(q) & np.isfinite(r) \
+        & np.isfinite(fx) & np.isfinite(fy) & np.isfinite(fz) & np.isfinite(V) & (V > 0)
+    first = np.flatnonzero(usable)
+    if first.size == 0:
+        return None
+    head = first[t[first] <= t[first[0]] + INITIAL_S]
+    theta, phi = gyro_attitude(t, p, q, r, (fx[head].mean(), fy[head].mean(), fz[head].mean()))
+    rate = kinematic_alpha_dot_no_gravity(a, b, p, q, r, fx, fz, V) + gravity_alpha_dot(a, b, theta, phi, V)
+    runs = [s for s in _runs(usable) if t[s.stop - 1] - t[s.start] >= MIN_RUN_S]
+    if not runs:
+        return None
+    y = np.concatenate([a[s] for s in runs])
+    groups = np.concatenate([np.full(s.stop - s.start, i) for i, s in enumerate(runs)])
+    trend = np.zeros((y.size, 2 * len(runs)))
+    row = 0
+    for i, s in enumerate(runs):
+        n, ts = s.stop - s.start, t[s]
+        trend[row:row + n, 2 * i] = 1.0
+        trend[row:row + n, 2 * i + 1] = (ts - ts.mean()) / max(ts[-1] - ts[0], dt)
+        row += n
+    tau, fit = 0.0, None
+    for _ in range(PASSES):
+        cols = []
+        for s in runs:
+            ts, k = t[s], rate[s]
+            integral = np.concatenate([[0.0], np.cumsum(0.5 * (k[1:] + k[:-1]) * np.diff(ts))])
+            cols.append(np.column_stack([np.interp(ts - tau, ts, integral), np.interp(ts - tau, ts, k)]))
+        X = np.column_stack([trend, np.vstack(cols)])
+        fit = fit_linear(y, X, channel="alpha_vane", groups=groups if len(runs) > 1 else None)
+        g, m = (float(v) for v in fit.estimate[-2:])
+        if not (math.isfinite(g) and abs(g) > 1e-6):
+            return None
+        tau += -m / g
+    g, m = (float(v) for v in fit.estimate[-2:])
+    C = np.asarray(fit.cov, float)[-2:, -2:]
+    J = np.array([m / g ** 2, -1.0 / g])  # d(-m/g)/d(g, m)
+    sigma = float(math.sqrt(max(float(J @ C @ J), 0.0)))
+    return VaneDelay(delay_s=float(tau), sigma_s=sigma, gain=g, n=int(y.size), sample_s=dt,
+                     applied_s=float(applied_s))
