@@ -159,6 +159,7 @@ def run_bench(args, work: Path, t0: float) -> str:
     results = {bias: validate(run_dir, work / "m017" / "telemetry.parquet", bias=bias, axes="lon")
                for bias in ("none", "offsets", "intercepts")}
     oe_lines = output_error_section(args.data, run, run_dir, work)
+    delay_lines = delay_section(args.data, run, results["offsets"], work, veh)
     lines = [
         "# aerosid validate on the Twin Otter: identify on 018, predict 017",
         "",
@@ -203,8 +204,76 @@ def run_bench(args, work: Path, t0: float) -> str:
     lines += ["", "Coefficient prediction on 017 (bias offsets):", "",
               "| channel | TIC | RMS | RMS/std |", "|---|---|---|---|",
               *(f"| {m.name} | {m.tic:.3f} | {m.rms:.3g} | {m.nrms:.3f} |" for m in results["offsets"].coefficients),
-              "", "```", results["offsets"].summary().replace(str(work), "$TMP"), "```", "", *oe_lines]
+              "", "```", results["offsets"].summary().replace(str(work), "$TMP"), "```", "", *oe_lines,
+              *delay_lines]
     return "\n".join(lines)
+
+
+def delay_section(data: Path, run, val_none, work: Path, veh) -> list[str]:
+    """The run's air-data timing finding (aerosid.identification.airdata_timing) and the same
+    identification with the vehicle file's [air_data] delay_s set to its estimate, against
+    SIDPAC's equation-error and output-error estimates, and both models predicting 017."""
+    from aerosid.ebm import process_telemetry
+    from aerosid.identification.validate import validate
+    from aerosid.io import write_json_atomic, write_parquet_atomic
+    from aerosid.vehicles.vehicle import load_vehicle
+
+    found = [f for f in run.findings if f["kind"] == "airdata_delay"]
+    if not found:
+        return ["## 4. The vanes' delay", "", "No `airdata_delay` finding on 018.", ""]
+    delay = float(found[0]["detail"].split("`delay_s = ")[1].split("`")[0])
+    toml = (work / "twin-otter.toml").read_text().replace('source = "vanes"', f'source = "vanes"\ndelay_s = {delay}')
+    (work / "twin-otter-delay.toml").write_text(toml)
+    vd = load_vehicle(work / "twin-otter-delay.toml")
+    fixed = process_telemetry(pd.read_parquet(work / "m018" / "telemetry.parquet"), vd, flight="m018",
+                              preprocess_params=PREPROCESS, source="m018")
+    run_dir = work / "run018-delay"
+    write_parquet_atomic(fixed.flight_data, run_dir / "flight_data.parquet")
+    write_parquet_atomic(fixed.identification.table(), run_dir / "coefficients.parquet")
+    write_json_atomic({"vehicle": str(work / "twin-otter-delay.toml"),
+                       "job": {"preprocess_params": PREPROCESS, "smoothing_options": {}, "min_segment_s": 5.0,
+                               "mach_half_width": 0.5}}, run_dir / "run.json")
+    val = validate(run_dir, work / "m017" / "telemetry.parquet", bias="offsets", axes="lon")
+    p = sio.loadmat(data / "sidpac_results_018.mat", squeeze_me=True)
+    sign = {"CN_alpha": (-1, 0), "CN_delta_p": (-1, 1), "Cm_alpha": (1, 3), "Cm_q": (1, 4), "Cm_delta_p": (1, 5)}
+    before = run.identification.table().set_index("coefficient")
+    after = fixed.identification.table().set_index("coefficient")
+    rows = []
+    for k, (sg, i) in sign.items():
+        ee, oe = (sg * p["p0"][i], p["serr0"][i]), (sg * p["p"][i], p["serr"][i])
+        b, a = (before.loc[k, "estimate"], before.loc[k, "std_error"]), (after.loc[k, "estimate"], after.loc[k, "std_error"])
+        rows.append(f"| {k} | {b[0]:.4g} ± {b[1]:.2g} | {a[0]:.4g} ± {a[1]:.2g} | {ee[0]:.4g} ± {ee[1]:.2g} | "
+                    f"{oe[0]:.4g} ± {oe[1]:.2g} | {(b[0] - oe[0]) / math.hypot(b[1], oe[1]):+.1f} | "
+                    f"{(a[0] - oe[0]) / math.hypot(a[1], oe[1]):+.1f} |")
+    fits = (run.identification.fits["CN"], fixed.identification.fits["CN"])
+    pred = []
+    for o in ("alpha_rad", "q_rad_s", "az_m_s2"):
+        m0, m1 = val_none.metric(o), val.metric(o)
+        pred.append(f"| {o} | {m0.tic:.3f} | {m1.tic:.3f} | {m0.rms:.3g} | {m1.rms:.3g} |")
+    return [
+        "## 4. The vanes' delay (aerosid/identification/airdata_timing.py)",
+        "",
+        f"The run on 018 reports: {found[0]['detail'].split('; equation error')[0]}. The same identification with the vehicle "
+        f"file's `[air_data] delay_s = {delay}` (the vanes advanced by it; nothing else changed), against "
+        "SIDPAC's estimates on 018 (`sidpac_results_018.mat`: p0/serr0 equation error, p/serr output error). "
+        "z: (aerosid - SIDPAC output error) over the two sigmas in quadrature.",
+        "",
+        "| coefficient | aerosid (as recorded) | aerosid (delay_s) | SIDPAC equation error | SIDPAC output error | "
+        "z before | z after |",
+        "|---|---|---|---|---|---|---|",
+        *rows,
+        "",
+        f"C_N fit: residual RMS {fits[0].rms_residual:.3g} -> {fits[1].rms_residual:.3g}, R^2 {fits[0].rsquared:.4f} -> "
+        f"{fits[1].rsquared:.4f}.",
+        "",
+        "Predicting 017 (bias offsets; 017's vanes advanced by the same delay when delay_s is set, so the "
+        "alpha row compares different measurements: q and a_z are the IMU's in both):",
+        "",
+        "| output | TIC as recorded | TIC with delay_s | RMS as recorded | RMS with delay_s |",
+        "|---|---|---|---|---|",
+        *pred,
+        "",
+    ]
 
 
 def output_error_section(data: Path, run, run_dir: Path, work: Path) -> list[str]:

@@ -26,6 +26,9 @@ regression (with a margin) and the rest of the segment is kept:
 * ``database_edge``: alpha/beta inverted at an edge of the force database (the table is
   clamped there: the angle would be made up), or Mach outside it -- cut.
 
+The flight data add ``airdata_delay`` (reported): the vane alpha lags the IMU's kinematics
+by a sample or more (aerosid.identification.airdata_timing).
+
 The preprocessing adds ``time_jitter``, ``frozen``, ``sentinel`` and ``out_of_range`` (segment
 "preprocess"): timestamps off the grid and sensor faults, whose samples it treats as missing
 (aerosid.preprocess.result.PreprocessResult.findings).

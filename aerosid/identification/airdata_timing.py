@@ -46,9 +46,14 @@ filtered out) gave the same estimates with 2-4 x the sigma on the Twin Otter's 8
 What is done with it
 --------------------
 Reported, not applied: a run whose vanes lag (or lead) by at least one sample interval with
-p < DELAY_P_MAX is a finding ("airdata_delay") with the estimate, and the vehicle file's
-``[air_data] delay_s`` advances the vane angles by a known or measured delay before
-anything reads them (the band path, the smoother path, ``validate``).  The correction is
+p < DELAY_P_MAX is a finding ("airdata_delay") with the estimate (band path only), and the
+vehicle file's ``[air_data] delay_s`` advances both vane angles by a known or measured delay
+before anything reads them (the band path, the smoother path, ``validate``); beta's own delay
+is not estimated (a longitudinal manoeuvre hardly moves it) and is taken as alpha's, one
+air-data system.  Another cause looks alike: a vane ahead of the CG whose reading was not
+moved to the CG reads alpha - x_v q / V, and in a short period q leads alpha as alpha-dot
+does (x_v = 1 m at 50 m/s is about 20 ms); advancing the vanes is the wrong cure for that,
+which is why the engineer decides.  The correction is
 not automatic: the estimate is a few milliseconds off on simulated data whose aerodynamic
 forces are consistent with the vane's sample (JSBSim's half step), where an automatic shift
 would put that error into the regression; the engineer who knows the air-data system can
@@ -192,30 +197,33 @@ def vane_delay(t_s, alpha_vane_rad, beta_rad, p_rad_s, q_rad_s, r_rad_s, ax_cg_m
     first = np.flatnonzero(usable)
     if first.size == 0:
         return None
-    head = first[t[first] <= t[first[0]] + INITIAL_S]
-    theta, phi = gyro_attitude(t, p, q, r, (fx[head].mean(), fy[head].mean(), fz[head].mean()))
+    # the attitude from the first usable sample on (the band path's first rows are its filter's edge)
+    i0 = int(first[0])
+    head = first[t[first] <= t[i0] + INITIAL_S]
+    theta, phi = np.full_like(t, np.nan), np.full_like(t, np.nan)
+    theta[i0:], phi[i0:] = gyro_attitude(t[i0:], p[i0:], q[i0:], r[i0:],
+                                         (fx[head].mean(), fy[head].mean(), fz[head].mean()))
     rate = kinematic_alpha_dot_no_gravity(a, b, p, q, r, fx, fz, V) + gravity_alpha_dot(a, b, theta, phi, V)
     runs = [s for s in _runs(usable) if t[s.stop - 1] - t[s.start] >= MIN_RUN_S]
     if not runs:
         return None
-    y = np.concatenate([a[s] for s in runs])
-    groups = np.concatenate([np.full(s.stop - s.start, i) for i, s in enumerate(runs)])
-    trend = np.zeros((y.size, 2 * len(runs)))
-    row = 0
-    for i, s in enumerate(runs):
-        n, ts = s.stop - s.start, t[s]
-        trend[row:row + n, 2 * i] = 1.0
-        trend[row:row + n, 2 * i + 1] = (ts - ts.mean()) / max(ts[-1] - ts[0], dt)
-        row += n
-    tau, fit = 0.0, None
+    tau, fit, n = 0.0, None, 0
     for _ in range(PASSES):
-        cols = []
-        for s in runs:
+        ys, blocks, groups = [], [], []
+        for i, s in enumerate(runs):
             ts, k = t[s], rate[s]
             integral = np.concatenate([[0.0], np.cumsum(0.5 * (k[1:] + k[:-1]) * np.diff(ts))])
-            cols.append(np.column_stack([np.interp(ts - tau, ts, integral), np.interp(ts - tau, ts, k)]))
-        X = np.column_stack([trend, np.vstack(cols)])
-        fit = fit_linear(y, X, channel="alpha_vane", groups=groups if len(runs) > 1 else None)
+            keep = (ts - tau >= ts[0]) & (ts - tau <= ts[-1])  # the shifted kinematics exist there
+            trend = np.zeros((int(keep.sum()), 2 * len(runs)))
+            trend[:, 2 * i] = 1.0
+            trend[:, 2 * i + 1] = (ts[keep] - ts.mean()) / max(ts[-1] - ts[0], dt)
+            ys.append(a[s][keep])
+            blocks.append(np.column_stack([trend, np.interp(ts[keep] - tau, ts, integral),
+                                           np.interp(ts[keep] - tau, ts, k)]))
+            groups.append(np.full(int(keep.sum()), i))
+        y, X = np.concatenate(ys), np.vstack(blocks)
+        n = int(y.size)
+        fit = fit_linear(y, X, channel="alpha_vane", groups=np.concatenate(groups) if len(runs) > 1 else None)
         g, m = (float(v) for v in fit.estimate[-2:])
         if not (math.isfinite(g) and abs(g) > 1e-6):
             return None
@@ -224,5 +232,4 @@ def vane_delay(t_s, alpha_vane_rad, beta_rad, p_rad_s, q_rad_s, r_rad_s, ax_cg_m
     C = np.asarray(fit.cov, float)[-2:, -2:]
     J = np.array([m / g ** 2, -1.0 / g])  # d(-m/g)/d(g, m)
     sigma = float(math.sqrt(max(float(J @ C @ J), 0.0)))
-    return VaneDelay(delay_s=float(tau), sigma_s=sigma, gain=g, n=int(y.size), sample_s=dt,
-                     applied_s=float(applied_s))
+    return VaneDelay(delay_s=float(tau), sigma_s=sigma, gain=g, n=n, sample_s=dt, applied_s=float(applied_s))

@@ -207,7 +207,8 @@ def build_flight_data(smoothed: pd.DataFrame, measured: pd.DataFrame, vehicle: V
 
 def _vane_timing(t, ok, clean: dict, bl, vehicle: Vehicle, segment: str) -> list[Finding]:
     """The vanes' delay behind the IMU (aerosid.identification.airdata_timing) on the band
-    path's signals: a reported finding when it is detected, else nothing."""
+    path's signals: a reported finding when it is detected, else nothing (the smoother path
+    applies the vehicle file's delay_s but estimates none)."""
     def grid(x):
         return np.where(ok, x, np.nan)
 
@@ -222,8 +223,9 @@ def _vane_timing(t, ok, clean: dict, bl, vehicle: Vehicle, segment: str) -> list
     return [Finding("airdata_delay", segment, vehicle.alpha_column, float(ts[0]), float(ts[-1]), vd.n, False,
                     f"{vd.summary()}; equation error pairs each coefficient with the angle read at the same time "
                     f"stamp, so a late vane biases C_N,delta, C_m,alpha and C_m,q. If the air-data system has this "
-                    f"delay, set `delay_s = {total:.3f}` in the vehicle file's [air_data] table (the vanes are "
-                    f"then advanced by it) and run again")]
+                    f"delay, set `delay_s = {total:.3f}` in the vehicle file's [air_data] table (both vanes are "
+                    f"then advanced by it) and run again; a vane ahead of the CG whose angle was not moved to the "
+                    f"CG (it reads alpha - x q / V) looks alike, and a time shift is not its cure")]
 
 
 def gyro_eiv_sigma(smoothed: pd.DataFrame, band_white_rad_s) -> dict[str, np.ndarray]:
