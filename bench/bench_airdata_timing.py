@@ -1,4 +1,4 @@
-"""The vanes' delay behind the IMU (aerosid.identification.airdata_timing) on flights with known truth.
+"""The vanes' delay behind the IMU (aerosid.identification.vanes) on flights with known truth.
 
     python bench/bench_airdata_timing.py --vehicles pa28,OV10,T37,F4N,c172p --seeds 0-3 --jobs 2
 
@@ -45,7 +45,7 @@ RESULTS = ROOT / "bench" / "results"
 
 def delayed(telemetry: pd.DataFrame, vehicle, delay_s: float) -> pd.DataFrame:
     """The vanes read delay_s later: x_new(t) = x(t - delay_s)."""
-    from aerosid.identification.airdata_timing import advance
+    from aerosid.identification.vanes import advance
 
     out = telemetry.copy()
     t = out["t_s"].to_numpy(float)

@@ -210,7 +210,7 @@ def run_bench(args, work: Path, t0: float) -> str:
 
 
 def delay_section(data: Path, run, val_none, work: Path, veh) -> list[str]:
-    """The run's air-data timing finding (aerosid.identification.airdata_timing) and the same
+    """The run's air-data timing finding (aerosid.identification.vanes) and the same
     identification with the vehicle file's [air_data] delay_s set to its estimate, against
     SIDPAC's equation-error and output-error estimates, and both models predicting 017."""
     from aerosid.ebm import process_telemetry
@@ -251,7 +251,7 @@ def delay_section(data: Path, run, val_none, work: Path, veh) -> list[str]:
         m0, m1 = val_none.metric(o), val.metric(o)
         pred.append(f"| {o} | {m0.tic:.3f} | {m1.tic:.3f} | {m0.rms:.3g} | {m1.rms:.3g} |")
     return [
-        "## 4. The vanes' delay (aerosid/identification/airdata_timing.py)",
+        "## 4. The vanes' delay (aerosid/identification/vanes.py)",
         "",
         f"The run on 018 reports: {found[0]['detail'].split('; equation error')[0]}. The same identification with the vehicle "
         f"file's `[air_data] delay_s = {delay}` (the vanes advanced by it; nothing else changed), against "

@@ -27,7 +27,7 @@ regression (with a margin) and the rest of the segment is kept:
   clamped there: the angle would be made up), or Mach outside it -- cut.
 
 The flight data add ``airdata_delay`` (reported): the vane alpha lags the IMU's kinematics
-by a sample or more (aerosid.identification.airdata_timing).
+by a sample or more (aerosid.identification.vanes).
 
 The preprocessing adds ``time_jitter``, ``frozen``, ``sentinel`` and ``out_of_range`` (segment
 "preprocess"): timestamps off the grid and sensor faults, whose samples it treats as missing

@@ -18,7 +18,7 @@ from aerosid.identification.derivatives import zero_phase_low_pass
 from aerosid.estimation.findings import DEPARTURE_MIN_S, DEPARTURE_SIGMA, Finding, dilate, span_findings
 from aerosid.identification.band import (accel_at_cg, band_limited_signals, band_noise_gain, bridge_spikes,
                                          finite_runs, low_pass_runs, white_noise_sigma)
-from aerosid.identification.airdata_timing import advance, vane_delay
+from aerosid.identification.vanes import advance, angles_at_cg, vane_delay
 from aerosid.identification.crb import R_COLUMNS
 from aerosid.identification.inversion import invert_alpha_beta, total_angles
 from aerosid.vehicles.vehicle import Vehicle
@@ -57,6 +57,18 @@ def _vane_angles(clean: dict, ok: np.ndarray, vehicle: Vehicle, t: np.ndarray):
             - bias for col, bias in ((vehicle.alpha_column, vehicle.alpha_bias_rad),
                                      (vehicle.beta_column, vehicle.beta_bias_rad)))
     return (a, b, *total_angles(a, b))
+
+
+def vane_angles(t: np.ndarray, measured: pd.DataFrame, vehicle: Vehicle) -> tuple[np.ndarray, np.ndarray]:
+    """The vanes' clean columns of a preprocessed frame as the IMU would have them: advanced by
+    the vehicle file's delay_s, then moved to the CG from vane_position_m with the clean gyros
+    and airspeed (aerosid.identification.vanes); the calibration bias is left in."""
+    a, b = (advance(t, measured[f"{c}_clean"].to_numpy(dtype=float), vehicle.vane_delay_s)
+            for c in (vehicle.alpha_column, vehicle.beta_column))
+    if any(vehicle.vane_position_m):
+        p, q, r, V = (measured[f"{c}_clean"].to_numpy(dtype=float) for c in ("p_rad_s", "q_rad_s", "r_rad_s", "V_m_s"))
+        a, b = angles_at_cg(a, b, p, q, r, V, vehicle.vane_position_m)
+    return a, b
 
 
 def measured_air_data_columns(columns) -> tuple[str, ...]:
@@ -102,9 +114,8 @@ def build_flight_data(smoothed: pd.DataFrame, measured: pd.DataFrame, vehicle: V
         raise ValueError(f"segment {segment}: the preprocessed telemetry has no column(s) "
                          f"{[c + '_clean' for c in missing]} (vehicle {vehicle.name}, {vehicle.source})")
     clean = {c: measured[f"{c}_clean"].to_numpy(dtype=float) for c in cols}
-    if vanes and vehicle.vane_delay_s:  # the vanes read later than the IMU: advance them
-        for c in (vehicle.alpha_column, vehicle.beta_column):
-            clean[c] = advance(t, clean[c], vehicle.vane_delay_s)
+    if vanes:
+        clean[vehicle.alpha_column], clean[vehicle.beta_column] = vane_angles(t, measured, vehicle)
     ok = np.all(np.isfinite(np.column_stack(list(clean.values()))), axis=1) & (clean["V_m_s"] > 0)
     h_out = ok & ~((clean["h_m"] >= H_MIN_M) & (clean["h_m"] <= H_MAX_M))
     if h_out.any():
@@ -206,7 +217,7 @@ def build_flight_data(smoothed: pd.DataFrame, measured: pd.DataFrame, vehicle: V
 
 
 def _vane_timing(t, ok, clean: dict, bl, vehicle: Vehicle, segment: str) -> list[Finding]:
-    """The vanes' delay behind the IMU (aerosid.identification.airdata_timing) on the band
+    """The vanes' delay behind the IMU (aerosid.identification.vanes) on the band
     path's signals: a reported finding when it is detected, else nothing (the smoother path
     applies the vehicle file's delay_s but estimates none)."""
     def grid(x):
@@ -225,7 +236,8 @@ def _vane_timing(t, ok, clean: dict, bl, vehicle: Vehicle, segment: str) -> list
                     f"stamp, so a late vane biases C_N,delta, C_m,alpha and C_m,q. If the air-data system has this "
                     f"delay, set `delay_s = {total:.3f}` in the vehicle file's [air_data] table (both vanes are "
                     f"then advanced by it) and run again; a vane ahead of the CG whose angle was not moved to the "
-                    f"CG (it reads alpha - x q / V) looks alike, and a time shift is not its cure")]
+                    f"CG (it reads alpha - x q / V) looks alike, and a time shift is not its cure: give its "
+                    f"position as [air_data] vane_position_m instead")]
 
 
 def gyro_eiv_sigma(smoothed: pd.DataFrame, band_white_rad_s) -> dict[str, np.ndarray]:

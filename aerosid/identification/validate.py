@@ -31,7 +31,7 @@ from aerosid.identification.identified import (IdentifiedModel, load_identified_
 from aerosid.identification.output_prediction import (AXIS_CHANNELS, AXIS_OUTPUTS, BIAS_MODES, OUTPUT_UNITS,
                                                       predict_axis, prediction_inputs,
                                                       theil_inequality)
-from aerosid.identification.airdata_timing import advance
+from aerosid.identification.flight_data import vane_angles
 from aerosid.identification.identify import mach_window_mask
 from aerosid.modelling.models import vehicle_signals
 from aerosid.vehicles.vehicle import Vehicle
@@ -242,12 +242,16 @@ def measured_outputs(pre: pd.DataFrame, fd: pd.DataFrame, vehicle: Vehicle,
         cols[out] = pre[f"{col}_clean"].to_numpy(float)[idx]
         src[out] = f"telemetry {col}" + (" (at the accelerometer; the prediction is moved there)"
                                           if col.startswith("a") else "")
+    vanes = vehicle.air_data_source == "vanes" and all(f"{c}_clean" in pre for c in (vehicle.alpha_column,
+                                                                                     vehicle.beta_column))
+    at_cg = dict(zip(("alpha_rad", "beta_rad"), vane_angles(t_pre, pre, vehicle))) if vanes else {}
+    moved = ("" if not vehicle.vane_delay_s else f", advanced by the vanes' delay {vehicle.vane_delay_s:g} s") + (
+        "" if not any(vehicle.vane_position_m) else f", moved to the CG from {list(vehicle.vane_position_m)} m")
     for out, col, bias in (("alpha_rad", vehicle.alpha_column, vehicle.alpha_bias_rad),
                            ("beta_rad", vehicle.beta_column, vehicle.beta_bias_rad)):
-        if vehicle.air_data_source == "vanes" and f"{col}_clean" in pre:
-            cols[out] = advance(t_pre, pre[f"{col}_clean"].to_numpy(float), vehicle.vane_delay_s)[idx] - bias
-            src[out] = (f"telemetry {col}" + (f" less its calibration bias {bias:g} rad" if bias else "")
-                        + (f", advanced by the vanes' delay {vehicle.vane_delay_s:g} s" if vehicle.vane_delay_s else ""))
+        if vanes:
+            cols[out] = at_cg[out][idx] - bias
+            src[out] = f"telemetry {col}" + (f" less its calibration bias {bias:g} rad" if bias else "") + moved
         elif wideband and f"{out[:-4]}_wideband_rad" in fd:
             cols[out] = fd[f"{out[:-4]}_wideband_rad"].to_numpy(float)
             src[out] = "EBM flight data before the band's low-pass (from the force-database inversion; no vane)"

@@ -98,8 +98,11 @@ class Vehicle:
     #: corner of the zero-phase low-pass applied to the vane angles [Hz] (None: unfiltered)
     vane_cutoff_hz: float | None = None
     #: the vanes' delay behind the inertial sensors [s]: the vane angles are read this much
-    #: later (advanced) before anything uses them (aerosid.identification.airdata_timing)
+    #: later (advanced) before anything uses them (aerosid.identification.vanes)
     vane_delay_s: float = 0.0
+    #: the vanes' position from the CG, body axes [m]: their angles are moved to the CG with the
+    #: gyros before anything uses them ((0, 0, 0): at the CG, or already corrected)
+    vane_position_m: tuple[float, float, float] = (0.0, 0.0, 0.0)
     #: half-length of the Savitzky-Golay window of alpha_dot_hat, beta_dot_hat [s]
     derivative_half_window_s: float = 0.25
     surfaces: tuple[str, ...] = ("fin 1", "fin 2", "fin 3", "fin 4")  # what d1..d4 are
@@ -346,6 +349,7 @@ def load_vehicle(name_or_path: str | Path = "seed-rlv") -> Vehicle:
         vane_noise_rad=float(air.get("noise_rad", 0.0)),
         vane_cutoff_hz=float(air["cutoff_hz"]) if "cutoff_hz" in air else None,
         vane_delay_s=float(air.get("delay_s", 0.0)),
+        vane_position_m=tuple(float(v) for v in air.get("vane_position_m", (0.0, 0.0, 0.0))),
         derivative_half_window_s=float(air.get("derivative_half_window_s", 0.25)),
         surfaces=tuple(str(x) for x in surfaces),
         default_terms={k: list(v) for k, v in terms.items()} if terms is not None else None,

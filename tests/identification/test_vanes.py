@@ -1,4 +1,4 @@
-"""The vanes' delay behind the IMU (aerosid.identification.airdata_timing): closed-form
+"""The vanes' delay behind the IMU (aerosid.identification.vanes): closed-form
 kinematics with a known delay, the shift, the attitude from the gyros, the vehicle key, and
 the real Twin Otter flight whose vanes lag."""
 from __future__ import annotations
@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from aerosid.identification.airdata_timing import DELAY_P_MAX, advance, gyro_attitude, vane_delay
+from aerosid.identification.vanes import DELAY_P_MAX, advance, gyro_attitude, vane_delay
 from aerosid.vehicles.vehicle import VehicleError, load_vehicle
 
 G = 9.80665
@@ -158,3 +158,40 @@ def test_many_short_runs_do_not_bias_a_large_delay():
         vane[np.arange(t.size) % 125 < 5] = np.nan  # gaps of 0.1 s every 2.5 s
         vd = vane_delay(t, vane, **sig)
         assert vd.delay_s == pytest.approx(delay_s, abs=2e-4)
+
+
+def test_a_vane_ahead_of_the_cg_looks_like_a_delay_until_it_is_moved_to_the_cg():
+    """alpha_vane = alpha - x q / V for a boom x ahead of the CG: in a short period q leads alpha
+    as alpha-dot does, so the timing check sees a "delay"; angles_at_cg removes it exactly."""
+    import pandas as pd
+
+    from aerosid.identification.flight_data import vane_angles
+    from aerosid.identification.vanes import angles_at_cg
+
+    t, alpha, sig = kinematic_flight()
+    x = 6.0
+    q, V = sig["q_rad_s"], sig["V_m_s"]
+    vane = alpha - x * q / V
+    fooled = vane_delay(t, vane, **sig)
+    assert fooled.detected and fooled.delay_s > 0.01  # a boom reads as a lag
+    a, b = angles_at_cg(vane, np.zeros_like(t), sig["p_rad_s"], q, sig["r_rad_s"], V, (x, 0.0, 0.0))
+    assert np.allclose(a, alpha, atol=1e-15) and np.allclose(b, 0.0)
+    assert not vane_delay(t, a, **sig).detected
+    # lateral: beta_vane = beta + (r x - p z) / V
+    r, p = 0.1 * np.sin(t), 0.2 * np.cos(t)
+    _, b2 = angles_at_cg(np.zeros_like(t), (r * x - p * 1.5) / V, p, q, r, V, (x, 0.0, 1.5))
+    assert np.allclose(b2, 0.0, atol=1e-15)
+    # the flight data's reader: advance by delay_s, then move to the CG with the clean gyros
+    from tests.twin_otter import VEHICLE_TOML
+    import tempfile
+
+    path = Path(tempfile.mkdtemp()) / "v.toml"
+    path.write_text(VEHICLE_TOML.replace('source = "vanes"', f'source = "vanes"\ndelay_s = 0.04\nvane_position_m = [{x}, 0, 0]'))
+    veh = load_vehicle(path)
+    assert veh.vane_position_m == (x, 0.0, 0.0)
+    z = np.zeros_like(t)
+    pre = pd.DataFrame({"alpha_vane_rad_clean": late(t, vane, 0.04), "beta_vane_rad_clean": z, "p_rad_s_clean": z,
+                        "q_rad_s_clean": q, "r_rad_s_clean": z, "V_m_s_clean": V})
+    a3, _ = vane_angles(t, pre, veh)
+    inside = np.isfinite(a3)
+    assert inside.sum() >= t.size - 4 and np.allclose(a3[inside], alpha[inside], atol=1e-6)

@@ -1,22 +1,35 @@
-"""The air-data vanes' timing against the inertial sensors: a data-compatibility check.
+"""The air-data vanes against the inertial sensors: their timing and their position
+(data-compatibility corrections; Klein & Morelli, ch. 10).
 
-Why
----
+Position
+--------
+A vane at r = (x, y, z) from the CG (body axes) sees the air's velocity relative to that point,
+v + omega x r, so for small rate terms it reads
+
+    alpha_vane = alpha + (p y - q x) / V,     beta_vane = beta + (r x - p z) / V
+
+(a boom ahead of the CG, x > 0, reads a lower alpha while the nose pitches up).  The vehicle
+file's ``[air_data] vane_position_m`` moves the vane angles to the CG with the gyros
+(:func:`angles_at_cg`) before anything reads them; the default [0, 0, 0] is a vane already at
+the CG or angles already corrected (SIDPAC's, the simulators').
+
+Timing: why
+-----------
 Equation-error regression pairs every sample of the flight-derived coefficients (from the
 accelerometers and gyros) with the angle of attack read at the same time stamp.  If the
 vane's reading reaches the telemetry later than the IMU's (a slower air-data computer, a
 filter, a logging skew), the regression pairs C_N(t) with alpha(t - tau) and makes up the
 difference with whatever regressor leads alpha: the elevator (C_N,delta), the pitch rate
 (C_m,q).  Measured on the NASA Twin Otter's manoeuvre 018 (bench/results/
-airdata_timing.md): the vane angle lags the alpha integrated from the IMU by about 20 ms
-(checked on the raw data with the recorded attitude: the fit's residual halves at +20 ms on
-018 and on 017); with alpha advanced by 20 ms the C_N residual falls from 3.7e-3 to 2.0e-3,
-C_N,delta moves from 0.19 to 0.41 and C_m,alpha from -1.47 to -1.52, SIDPAC's own
+validate_twin_otter.md, section 4): the vane angle lags the alpha integrated from the IMU by
+25 +- 2 ms (on the raw files with the recorded attitude the fit's residual halves at +20 ms on
+018 and on 017); with alpha advanced by 25 ms the C_N residual falls from 3.7e-3 to 1.6e-3,
+C_N,delta moves from 0.19 to 0.47 and C_m,alpha from -1.468 to -1.539, SIDPAC's own
 output-error estimates being 0.409 and -1.543.  An output-error fit, which weights q and
 a_z as much as alpha, barely feels such a skew; equation error does.
 
-What is measured
-----------------
+Timing: what is measured
+------------------------
 Flight-path kinematics give alpha-dot from the rates, the CG specific forces and the attitude:
 
     alpha_dot = K + G,   K = q - tan b (p cos a + r sin a) + (cos a a_z - sin a a_x) / (V cos b),
@@ -43,8 +56,8 @@ themselves are that far from exact kinematics; with 25 ms added to the vanes the
 by 25.0 (pa28) and 25.3 ms (T37).  A high-pass instead of the attitude (no G, the slow parts
 filtered out) gave the same estimates with 2-4 x the sigma on the Twin Otter's 8 s.
 
-What is done with it
---------------------
+Timing: what is done with it
+----------------------------
 Reported, not applied: a run whose vanes lag (or lead) by at least one sample interval with
 p < DELAY_P_MAX is a finding ("airdata_delay") with the estimate (band path only), and the
 vehicle file's ``[air_data] delay_s`` advances both vane angles by a known or measured delay
@@ -53,7 +66,7 @@ is not estimated (a longitudinal manoeuvre hardly moves it) and is taken as alph
 air-data system.  Another cause looks alike: a vane ahead of the CG whose reading was not
 moved to the CG reads alpha - x_v q / V, and in a short period q leads alpha as alpha-dot
 does (x_v = 1 m at 50 m/s is about 20 ms); advancing the vanes is the wrong cure for that,
-which is why the engineer decides.  The correction is
+which is why the engineer decides (and why ``vane_position_m`` exists).  The correction is
 not automatic: the estimate is a few milliseconds off on simulated data whose aerodynamic
 forces are consistent with the vane's sample (JSBSim's half step), where an automatic shift
 would put that error into the regression; the engineer who knows the air-data system can
@@ -70,7 +83,8 @@ import scipy.stats
 from aerosid.identification.regression import fit_linear
 from aerosid.modelling.flight_path import gravity_alpha_dot, kinematic_alpha_dot_no_gravity
 
-__all__ = ["VaneDelay", "vane_delay", "advance", "gyro_attitude", "DELAY_P_MAX", "MIN_RUN_S", "INITIAL_S"]
+__all__ = ["VaneDelay", "vane_delay", "advance", "angles_at_cg", "gyro_attitude", "DELAY_P_MAX", "MIN_RUN_S",
+           "INITIAL_S"]
 
 #: A delay is reported when its two-sided p-value (coloured-residual sigma, normal) is below
 #: this, the significance level of the project's other findings (aerosid.diagnosis: P_MAX).
@@ -141,6 +155,17 @@ def advance(t_s: np.ndarray, x: np.ndarray, delay_s: float) -> np.ndarray:
         inside = (target >= tr[0] - 1e-9) & (target <= tr[-1] + 1e-9)
         out[r][inside] = np.interp(target[inside], tr, x[r])
     return out
+
+
+def angles_at_cg(alpha_vane_rad, beta_vane_rad, p_rad_s, q_rad_s, r_rad_s, V_m_s, position_m):
+    """(alpha, beta) [rad] at the CG from vanes at position_m = (x, y, z) [m] from the CG (body
+    axes), with the body rates [rad/s] and the airspeed [m/s] of the same samples (module doc:
+    alpha = alpha_vane - (p y - q x) / V, beta = beta_vane - (r x - p z) / V)."""
+    x, y, z = (float(v) for v in position_m)
+    V = np.asarray(V_m_s, float)
+    p, q, r = (np.asarray(w, float) for w in (p_rad_s, q_rad_s, r_rad_s))
+    return (np.asarray(alpha_vane_rad, float) - (p * y - q * x) / V,
+            np.asarray(beta_vane_rad, float) - (r * x - p * z) / V)
 
 
 def _runs(ok: np.ndarray) -> list[slice]:
