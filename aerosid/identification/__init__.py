@@ -4,6 +4,7 @@
 ``flight_coefficients`` flight force and moment coefficients from smoothed states
 ``inversion``          angle of attack and sideslip from the preflight force database
 ``derivatives``        zero-phase low-pass of vanes, smoothing derivatives (alpha-dot, beta-dot)
+``vanes``              the vanes against the IMU: their delay (estimated, reported) and position (moved to the CG)
 ``eiv``                errors in the regressors: SIMEX's numerics (the angles', rates' and controls' noise)
 ``eiv_fit``            the fits corrected by SIMEX, the regressors' noise the flight data declare, control-noise warnings
 ``prior_structure``    after the fit: the pitch-damping prior, model-structure uncertainty, wrong-sign damping
@@ -20,4 +21,6 @@
 ``output_prediction``  simulating the model driven by another manoeuvre's measured controls
 ``validate``           coefficient and output prediction of another manoeuvre, Theil's inequality coefficient
 ``validation_report``  the self-contained ``validation.html``
+``output_error``       output-error fit of a model (Gauss-Newton on simulated outputs)
+``refine``             ``aerosid refine``: output error started from a run's equation-error estimates
 """

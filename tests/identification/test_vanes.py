@@ -1,6 +1,7 @@
-"""The vanes' delay behind the IMU (aerosid.identification.vanes): closed-form
-kinematics with a known delay, the shift, the attitude from the gyros, the vehicle key, and
-the real Twin Otter flight whose vanes lag."""
+"""The vanes against the IMU (aerosid.identification.vanes): their delay on closed-form
+kinematics with a known delay, the shift, the attitude from the gyros, the vehicle keys, the
+real Twin Otter flight whose vanes lag; their position against the exact velocity of the vane's
+point."""
 from __future__ import annotations
 
 import dataclasses
@@ -160,7 +161,7 @@ def test_many_short_runs_do_not_bias_a_large_delay():
         assert vd.delay_s == pytest.approx(delay_s, abs=2e-4)
 
 
-def test_a_vane_ahead_of_the_cg_looks_like_a_delay_until_it_is_moved_to_the_cg():
+def test_a_vane_ahead_of_the_cg_looks_like_a_delay_until_it_is_moved_to_the_cg(tmp_path):
     """alpha_vane = alpha - x q / V for a boom x ahead of the CG: in a short period q leads alpha
     as alpha-dot does, so the timing check sees a "delay"; angles_at_cg removes it exactly."""
     import pandas as pd
@@ -177,15 +178,10 @@ def test_a_vane_ahead_of_the_cg_looks_like_a_delay_until_it_is_moved_to_the_cg()
     a, b = angles_at_cg(vane, np.zeros_like(t), sig["p_rad_s"], q, sig["r_rad_s"], V, (x, 0.0, 0.0))
     assert np.allclose(a, alpha, atol=1e-15) and np.allclose(b, 0.0)
     assert not vane_delay(t, a, **sig).detected
-    # lateral: beta_vane = beta + (r x - p z) / V
-    r, p = 0.1 * np.sin(t), 0.2 * np.cos(t)
-    _, b2 = angles_at_cg(np.zeros_like(t), (r * x - p * 1.5) / V, p, q, r, V, (x, 0.0, 1.5))
-    assert np.allclose(b2, 0.0, atol=1e-15)
     # the flight data's reader: advance by delay_s, then move to the CG with the clean gyros
     from tests.twin_otter import VEHICLE_TOML
-    import tempfile
 
-    path = Path(tempfile.mkdtemp()) / "v.toml"
+    path = tmp_path / "v.toml"
     path.write_text(VEHICLE_TOML.replace('source = "vanes"', f'source = "vanes"\ndelay_s = 0.04\nvane_position_m = [{x}, 0, 0]'))
     veh = load_vehicle(path)
     assert veh.vane_position_m == (x, 0.0, 0.0)
@@ -195,3 +191,26 @@ def test_a_vane_ahead_of_the_cg_looks_like_a_delay_until_it_is_moved_to_the_cg()
     a3, _ = vane_angles(t, pre, veh)
     inside = np.isfinite(a3)
     assert inside.sum() >= t.size - 4 and np.allclose(a3[inside], alpha[inside], atol=1e-6)
+
+
+def test_the_position_correction_against_the_exact_velocity_of_the_vanes_point():
+    """Independent of the formula: the air's velocity at r = (x, y, z) from the CG is v + w x r
+    (body axes, x forward, y right, z down); the vane reads atan2(w_p, u_p) and asin(v_p / V_p).
+    angles_at_cg must return the CG's alpha, beta to second order in the rate terms."""
+    from aerosid.identification.vanes import angles_at_cg
+
+    rng = np.random.default_rng(7)
+    n, V = 200, 60.0
+    alpha, beta = rng.uniform(-0.1, 0.15, n), rng.uniform(-0.05, 0.05, n)
+    w_body = rng.uniform(-0.3, 0.3, (n, 3))  # p, q, r [rad/s]
+    r_vane = np.array([4.0, 0.3, -0.5])
+    vel = V * np.column_stack([np.cos(alpha) * np.cos(beta), np.sin(beta), np.sin(alpha) * np.cos(beta)])
+    vp = vel + np.cross(w_body, r_vane)
+    Vp = np.linalg.norm(vp, axis=1)
+    a_vane, b_vane = np.arctan2(vp[:, 2], vp[:, 0]), np.arcsin(vp[:, 1] / Vp)
+    a, b = angles_at_cg(a_vane, b_vane, *w_body.T, np.full(n, V), r_vane)
+    shift = np.abs(np.cross(w_body, r_vane)).max(axis=1) / V  # the first-order correction's size
+    second_order = shift * (np.abs(alpha) + np.abs(beta) + shift)  # a sign error would leave ~2 x shift
+    assert np.all(np.abs(a - alpha) <= 0.5 * second_order) and np.all(np.abs(b - beta) <= 0.5 * second_order)
+    # and the correction matters: without it the error is first order
+    assert np.max(np.abs(a_vane - alpha)) > 10 * np.max(np.abs(a - alpha))
