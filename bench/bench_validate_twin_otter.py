@@ -135,10 +135,9 @@ def main() -> None:
 
 
 def run_bench(args, work: Path, t0: float) -> str:
-    from aerosid.ebm import process_telemetry
     from aerosid.identification.validate import validate
     from aerosid.identification.identify import format_table
-    from aerosid.io import write_json_atomic, write_parquet_atomic
+    from aerosid.io import write_parquet_atomic
     from aerosid.vehicles.vehicle import load_vehicle
 
     c18, t18 = load(args.data, "lon_020213f1_018")
@@ -148,18 +147,11 @@ def run_bench(args, work: Path, t0: float) -> str:
         c, t = load(args.data, f"lon_020213f1_{name}")
         write_parquet_atomic(telemetry(c, t), work / f"m{name}" / "telemetry.parquet")
     ref = reference(args.data, veh)
-    run = process_telemetry(pd.read_parquet(work / "m018" / "telemetry.parquet"), veh, flight="m018",
-                            preprocess_params=PREPROCESS, source="m018")
-    run_dir = work / "run018"
-    write_parquet_atomic(run.flight_data, run_dir / "flight_data.parquet")
-    write_parquet_atomic(run.identification.table(), run_dir / "coefficients.parquet")
-    write_json_atomic({"vehicle": str(work / "twin-otter.toml"),
-                       "job": {"preprocess_params": PREPROCESS, "smoothing_options": {}, "min_segment_s": 5.0,
-                               "mach_half_width": 0.5}}, run_dir / "run.json")
+    run, run_dir = identify_018(work, "twin-otter.toml", "run018")
     results = {bias: validate(run_dir, work / "m017" / "telemetry.parquet", bias=bias, axes="lon")
                for bias in ("none", "offsets", "intercepts")}
     oe_lines = output_error_section(args.data, run, run_dir, work)
-    delay_lines = delay_section(args.data, run, results["offsets"], work, veh)
+    delay_lines = delay_section(args.data, run, results["offsets"], work)
     lines = [
         "# aerosid validate on the Twin Otter: identify on 018, predict 017",
         "",
@@ -209,14 +201,29 @@ def run_bench(args, work: Path, t0: float) -> str:
     return "\n".join(lines)
 
 
-def delay_section(data: Path, run, val_none, work: Path, veh) -> list[str]:
+def identify_018(work: Path, vehicle_file: str, name: str):
+    """018 through the in-memory method with the vehicle file work/vehicle_file, written as a run
+    folder work/name that `validate` reads: (the EBMRun, the folder)."""
+    from aerosid.ebm import process_telemetry
+    from aerosid.io import write_json_atomic, write_parquet_atomic
+    from aerosid.vehicles.vehicle import load_vehicle
+
+    run = process_telemetry(pd.read_parquet(work / "m018" / "telemetry.parquet"), load_vehicle(work / vehicle_file),
+                            flight="m018", preprocess_params=PREPROCESS, source="m018")
+    run_dir = work / name
+    write_parquet_atomic(run.flight_data, run_dir / "flight_data.parquet")
+    write_parquet_atomic(run.identification.table(), run_dir / "coefficients.parquet")
+    write_json_atomic({"vehicle": str(work / vehicle_file),
+                       "job": {"preprocess_params": PREPROCESS, "smoothing_options": {}, "min_segment_s": 5.0,
+                               "mach_half_width": 0.5}}, run_dir / "run.json")
+    return run, run_dir
+
+
+def delay_section(data: Path, run, val_none, work: Path) -> list[str]:
     """The run's air-data timing finding (aerosid.identification.vanes) and the same
     identification with the vehicle file's [air_data] delay_s set to its estimate, against
     SIDPAC's equation-error and output-error estimates, and both models predicting 017."""
-    from aerosid.ebm import process_telemetry
     from aerosid.identification.validate import validate
-    from aerosid.io import write_json_atomic, write_parquet_atomic
-    from aerosid.vehicles.vehicle import load_vehicle
 
     found = [f for f in run.findings if f["kind"] == "airdata_delay"]
     if not found:
@@ -224,15 +231,7 @@ def delay_section(data: Path, run, val_none, work: Path, veh) -> list[str]:
     delay = float(found[0]["detail"].split("`delay_s = ")[1].split("`")[0])
     toml = (work / "twin-otter.toml").read_text().replace('source = "vanes"', f'source = "vanes"\ndelay_s = {delay}')
     (work / "twin-otter-delay.toml").write_text(toml)
-    vd = load_vehicle(work / "twin-otter-delay.toml")
-    fixed = process_telemetry(pd.read_parquet(work / "m018" / "telemetry.parquet"), vd, flight="m018",
-                              preprocess_params=PREPROCESS, source="m018")
-    run_dir = work / "run018-delay"
-    write_parquet_atomic(fixed.flight_data, run_dir / "flight_data.parquet")
-    write_parquet_atomic(fixed.identification.table(), run_dir / "coefficients.parquet")
-    write_json_atomic({"vehicle": str(work / "twin-otter-delay.toml"),
-                       "job": {"preprocess_params": PREPROCESS, "smoothing_options": {}, "min_segment_s": 5.0,
-                               "mach_half_width": 0.5}}, run_dir / "run.json")
+    fixed, run_dir = identify_018(work, "twin-otter-delay.toml", "run018-delay")
     val = validate(run_dir, work / "m017" / "telemetry.parquet", bias="offsets", axes="lon")
     p = sio.loadmat(data / "sidpac_results_018.mat", squeeze_me=True)
     sign = {"CN_alpha": (-1, 0), "CN_delta_p": (-1, 1), "Cm_alpha": (1, 3), "Cm_q": (1, 4), "Cm_delta_p": (1, 5)}
