@@ -46,11 +46,11 @@ def load_database(vehicle: Vehicle) -> AeroDatabase | None:
     return AeroDatabase.load(vehicle.database_path)
 
 
-def _vane_angles(clean: dict, ok: np.ndarray, vehicle: Vehicle, t: np.ndarray):
+def _vane_angles_low_passed(clean: dict, ok: np.ndarray, vehicle: Vehicle, t: np.ndarray):
     """alpha, beta [rad] from the vanes' clean columns (zero-phase low-passed) minus the
     calibration bias, and the total angle of attack alpha_r and aerodynamic roll angle
-    phi_r derived from them.  clean: build_flight_data's clean signals (the vanes advanced
-    by the vehicle file's delay)."""
+    phi_r derived from them (the smoother path).  clean: build_flight_data's clean signals (the
+    vanes as :func:`vane_angles` gives them)."""
     ts = t[ok]
     fs = 1.0 / float(np.median(np.diff(ts))) if ts.size > 1 else 1.0
     a, b = (zero_phase_low_pass(clean[col][ok], fs, vehicle.vane_cutoff_hz)
@@ -162,7 +162,7 @@ def build_flight_data(smoothed: pd.DataFrame, measured: pd.DataFrame, vehicle: V
         inv_J = np.zeros(len(alpha))
         findings += _vane_timing(t, ok, clean, bl, vehicle, segment)
     elif vanes:
-        alpha, beta, alpha_r, phi_r = _vane_angles(clean, ok, vehicle, t)
+        alpha, beta, alpha_r, phi_r = _vane_angles_low_passed(clean, ok, vehicle, t)
         inv_J = np.zeros(len(alpha))
     else:
         alpha, beta, alpha_r, phi_r, inv_J, edge = _inverted_angles(fc, s, delta_p, delta_y, vehicle, db, segment,
