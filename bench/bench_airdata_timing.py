@@ -12,7 +12,8 @@ Per (vehicle, seed), three runs of the default pipeline (``process_telemetry``):
   ``delayed`` run's estimate (what the finding tells the engineer to do).
 
 Errors in % of the at-trim truth (bench/bench_generalisation.py's definitions and coefficients).
-Writes bench/results/airdata_timing.md and airdata_timing_runs.csv.
+Writes bench/results/airdata_timing.md and airdata_timing_runs.csv (with --label L:
+airdata_timing_L.md, airdata_timing_L_runs.csv).
 """
 from __future__ import annotations
 
@@ -116,7 +117,8 @@ def report(df: pd.DataFrame, args, wall_s: float, load) -> str:
     lines = [
         "# The vanes' delay behind the IMU: estimate, report, correction (JSBSim flights with known truth)", "",
         f"{date.today().isoformat()}, `python bench/bench_airdata_timing.py --vehicles {args.vehicles} --seeds "
-        f"{args.seeds} --jobs {args.jobs}`, Python {platform.python_version()}, {cpu_model()}, load {load[0]} (start) / "
+        f"{args.seeds} --jobs {args.jobs}" + (f" --label {args.label}" if args.label else "") + "`,"
+        f" Python {platform.python_version()}, {cpu_model()}, load {load[0]} (start) / "
         f"{load[1]} (end), wall {wall_s / 60:.1f} min.", "",
         f"Definitions: bench/bench_airdata_timing.py (docstring). Added delay {DELAY_S * 1e3:.0f} ms. "
         "*reported*: the run has an `airdata_delay` finding (p < 0.001 and at least one sample interval). "
@@ -150,6 +152,7 @@ def main() -> None:
     ap.add_argument("--vehicles", default="pa28,OV10,T37,F4N,c172p")
     ap.add_argument("--seeds", default="0-3")
     ap.add_argument("--jobs", type=int, default=1)
+    ap.add_argument("--label", default=None, help="suffix of the result files")
     args = ap.parse_args()
     jobs = [(v, s) for v in args.vehicles.split(",") for s in parse_seeds(args.seeds)]
     load0, t0 = loadavg(), time.perf_counter()
@@ -161,9 +164,11 @@ def main() -> None:
                                                                    for r in part], flush=True)
     df = pd.DataFrame(rows)
     RESULTS.mkdir(exist_ok=True)
-    df.to_csv(RESULTS / "airdata_timing_runs.csv", index=False)
-    (RESULTS / "airdata_timing.md").write_text(report(df, args, time.perf_counter() - t0, (load0, loadavg())))
-    print((RESULTS / "airdata_timing.md").read_text())
+    name = "airdata_timing" + (f"_{args.label}" if args.label else "")
+    df.to_csv(RESULTS / f"{name}_runs.csv", index=False)
+    (RESULTS / f"{name}.md").write_text(report(df, args, time.perf_counter() - t0, (load0, loadavg()))
+                                        .replace("airdata_timing_runs.csv", f"{name}_runs.csv"))
+    print((RESULTS / f"{name}.md").read_text())
 
 
 if __name__ == "__main__":
