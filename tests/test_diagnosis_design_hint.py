@@ -102,6 +102,24 @@ def test_run_summary_names_the_design_command_for_an_unresolved_pair(tmp_path):
     assert "aerosid design" not in "\n".join(verdict_lines(tmp_path))
 
 
+def test_run_summary_puts_late_vanes_before_any_model_question(tmp_path):
+    """A run whose vanes lag the IMU (the airdata_delay finding in run.json): the verdict says to
+    correct the air data before adding terms; without the finding it says nothing of it."""
+    import json
+
+    from aerosid.cli.run_summary import verdict_lines
+
+    doc = {"message": "Nothing significant is missing: no candidate effect passes the rule.", "recommended": None,
+           "effects": [], "lookalikes": []}
+    (tmp_path / "diagnosis.json").write_text(json.dumps(doc))
+    (tmp_path / "run.json").write_text(json.dumps({"findings": [{"kind": "nis_mean"}]}))
+    assert "first the air data" not in "\n".join(verdict_lines(tmp_path))
+    (tmp_path / "run.json").write_text(json.dumps({"findings": [{"kind": "nis_mean"}, {"kind": "airdata_delay"}]}))
+    lines = verdict_lines(tmp_path)
+    assert lines[0].startswith("diagnosis: Nothing significant") and lines[1].startswith("first the air data")
+    assert "delay_s" in lines[1] and "vane_position_m" in lines[1]
+
+
 def test_a_pooled_diagnosis_speaks_of_the_pooled_flights(reference_flight):
     """`aerosid run A B` diagnoses the pooled data: its message must not say "this flight"."""
     import pandas as pd

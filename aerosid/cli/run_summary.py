@@ -40,6 +40,15 @@ def first_sentence(text: str) -> str:
     return re.split(r"(?<=\.)\s+(?=[A-Z])", text.strip(), maxsplit=1)[0]
 
 
+def _vanes_late(run_dir: Path) -> bool:
+    """Whether RUN_DIR/run.json records an airdata_delay finding."""
+    try:
+        findings = json.loads((run_dir / "run.json").read_text()).get("findings") or []
+    except (OSError, json.JSONDecodeError, AttributeError):
+        return False
+    return any(isinstance(f, dict) and f.get("kind") == "airdata_delay" for f in findings)
+
+
 def verdict_lines(run_dir: Path) -> list[str]:
     """The first line of diagnosis.json's message (the recommendation, or that nothing
     significant is missing) and, for a recommendation, the spec lines that add it."""
@@ -54,6 +63,11 @@ def verdict_lines(run_dir: Path) -> list[str]:
         return [f"diagnosis: {path} cannot be read ({exc})"]
     message = str(doc.get("message") or "").strip()
     lines = [f"diagnosis: {first_sentence(message.splitlines()[0]) if message else '(no message)'}"]
+    if _vanes_late(run_dir):  # a data fault before any model question (aerosid.identification.vanes)
+        lines.append("first the air data: the run found its vanes late against the IMU (finding airdata_delay); "
+                     "a late vane is what the fit makes up with terms that lead alpha (a 'lag' or 'lead' the "
+                     "localisation names in CN or Cm may be it): set the finding's delay_s (or vane_position_m) "
+                     "in the vehicle file and run again before adding terms")
     effects = doc.get("effects") or []
     name = doc.get("recommended")
     top = (next((e for e in effects if e.get("name") == name), None) if name else
