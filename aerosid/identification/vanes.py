@@ -50,9 +50,9 @@ aerosid.identification.regression.fit_linear, runs as groups); tau is refined by
 the estimate and fitting again.  Every signal is the band path's (one low-pass for all), so the
 band adds no relative delay.  Measured (seed 0, the default pipeline's flight data): Twin Otter
 018 24.9 +- 2.4 ms (gain 0.994); JSBSim flights whose vanes are the true alpha 6.0 +- 1.3 (pa28),
-6.1 +- 2.1 (c172p), 13 +- 5.5 ms (T37) -- JSBSim's accelerations are half an integration step
-off the state's alpha (the same fit on its noise-free truth: 4.3 ms), so the simulated data
-themselves are that far from exact kinematics; with 25 ms added to the vanes the estimate rises
+6.1 +- 2.1 (c172p), 13 +- 5.5 ms (T37) -- JSBSim's logged gyro rates lead alpha and the
+accelerometers by half an integration step, 5 ms (docs/estimation.md; the same fit on its
+noise-free truth: 4.3 ms), so the simulated data themselves are that far from exact kinematics; with 25 ms added to the vanes the estimate rises
 by 25.0 (pa28) and 25.3 ms (T37).  A high-pass instead of the attitude (no G, the slow parts
 filtered out) gave the same estimates with 2-4 x the sigma on the Twin Otter's 8 s.
 
@@ -68,8 +68,8 @@ moved to the CG reads alpha - x_v q / V, and in a short period q leads alpha as 
 does (x_v = 1 m at 50 m/s is about 20 ms); advancing the vanes is the wrong cure for that,
 which is why the engineer decides (and why ``vane_position_m`` exists).  The correction is
 not automatic: the estimate is a few milliseconds off on simulated data whose aerodynamic
-forces are consistent with the vane's sample (JSBSim's half step), where an automatic shift
-would put that error into the regression; the engineer who knows the air-data system can
+forces are consistent with the vane's sample (JSBSim's half step of the gyros), where an
+automatic shift would put that error into the regression; the engineer who knows the air-data system can
 say whether the lag is real.
 """
 from __future__ import annotations
