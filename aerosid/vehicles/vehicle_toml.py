@@ -115,7 +115,11 @@ class AircraftVehicle:
                f"alpha_column = {q(self.alpha_column)}\n", f"beta_column = {q(self.beta_column)}\n",
                "alpha_bias_rad = 0.0\n", "beta_bias_rad = 0.0\n",
                f"noise_rad = {num(self.vane_noise_rad)}\n",
-               f"derivative_half_window_s = {num(self.derivative_half_window_s)}\n\n",
+               f"derivative_half_window_s = {num(self.derivative_half_window_s)}\n",
+               comment(["the vanes against the IMU (docs/estimation.md, 'Air-data timing'): delay_s, their delay",
+                        "behind it [s] (a run that measures one reports it, finding airdata_delay, with the value);",
+                        "vane_position_m, their position from the CG, body axes [m] (0: angles already at the CG)"]),
+               "delay_s = 0.0\n", "vane_position_m = [0.0, 0.0, 0.0]\n\n",
                "[controls]\n", comment(self.controls_note),
                f"surfaces = [{', '.join(q(s) for s in self.surfaces)}]   # d1..d4\n",
                comment(["rows: delta_r (roll control), delta_p (pitch control = elevator), "
