@@ -84,7 +84,7 @@ from aerosid.identification.regression import fit_linear
 from aerosid.modelling.flight_path import gravity_alpha_dot, kinematic_alpha_dot_no_gravity
 
 __all__ = ["VaneDelay", "vane_delay", "advance", "angles_at_cg", "gyro_attitude", "DELAY_P_MAX", "MIN_RUN_S",
-           "INITIAL_S"]
+           "INITIAL_S", "MAX_DELAY_S"]
 
 #: A delay is reported when its two-sided p-value (coloured-residual sigma, normal) is below
 #: this, the significance level of the project's other findings (aerosid.diagnosis: P_MAX).
@@ -96,6 +96,9 @@ MIN_RUN_S = 2.0
 INITIAL_S = 0.2
 #: Refinement passes (each shifts the integrated kinematic alpha by the current estimate).
 PASSES = 3
+#: An estimate beyond this [s] is no delay the kinematics can tell (the vane does not follow
+#: the kinematic alpha at all): no result (the range of the vehicle file's delay_s).
+MAX_DELAY_S = 0.5
 G_M_S2 = 9.80665
 
 
@@ -253,6 +256,8 @@ def vane_delay(t_s, alpha_vane_rad, beta_rad, p_rad_s, q_rad_s, r_rad_s, ax_cg_m
         if not (math.isfinite(g) and abs(g) > 1e-6):
             return None
         tau += -m / g
+        if not abs(tau) <= MAX_DELAY_S:
+            return None
     g, m = (float(v) for v in fit.estimate[-2:])
     C = np.asarray(fit.cov, float)[-2:, -2:]
     J = np.array([m / g ** 2, -1.0 / g])  # d(-m/g)/d(g, m)

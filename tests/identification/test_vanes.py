@@ -214,3 +214,13 @@ def test_the_position_correction_against_the_exact_velocity_of_the_vanes_point()
     assert np.all(np.abs(a - alpha) <= 0.5 * second_order) and np.all(np.abs(b - beta) <= 0.5 * second_order)
     # and the correction matters: without it the error is first order
     assert np.max(np.abs(a_vane - alpha)) > 10 * np.max(np.abs(a - alpha))
+
+
+def test_a_vane_that_does_not_follow_the_kinematics_gives_no_delay():
+    """A vane column unrelated to the flight (noise, a wrong channel): no estimate, or none
+    reported; never an exception or a wild delay."""
+    t, alpha, sig = kinematic_flight()
+    rng = np.random.default_rng(11)
+    for vane in (0.05 + 1e-3 * rng.standard_normal(t.size), 0.05 + 0.02 * np.sin(5.0 * t) ** 3):
+        vd = vane_delay(t, vane, **sig)
+        assert vd is None or (not vd.detected and abs(vd.delay_s) <= 0.5)
