@@ -120,22 +120,27 @@ def flight_data_task(pre_path: str, smoothed_paths: list[str], run_dir: str, ctx
         smoothed = [read_validated(path, SmoothedSegment) for path in smoothed_paths]
         frame = build_flight_data_segments(pre, smoothed, veh, db, ctx.flight)
         findings_seen.extend(frame.attrs.get("findings", []))
+        timing_seen.extend(frame.attrs.get("vane_timing", []))
         return Produced(frame, {"aerosid.air_data": {ctx.flight: flight_air_data_sources(pre.columns)},
-                                "aerosid.findings": json.dumps(list(findings_seen))},
+                                "aerosid.findings": json.dumps(list(findings_seen)),
+                                "aerosid.vane_timing": json.dumps(list(timing_seen))},
                         rows_in=sum(len(sm) for sm in smoothed))
 
     findings_seen: list = []
+    timing_seen: list = []
     result = execute("flight_data", ctx, [pre_path, *smoothed_paths, *vehicle_files(vehicle)], out,
                      {"vehicle": vehicle, "flight": ctx.flight}, FlightData, produce)
-    return {**result, "findings": findings_seen or stored_findings(result["path"])}
+    return {**result, "findings": findings_seen or stored_findings(result["path"]),
+            "vane_timing": timing_seen or stored_findings(result["path"], "aerosid.vane_timing")}
 
 
-def stored_findings(path: str) -> list:
-    """The findings a stage recorded in its Parquet file's metadata (a reused output)."""
+def stored_findings(path: str, key: str = "aerosid.findings") -> list:
+    """The findings (or another list under key, e.g. the vanes' timing) a stage recorded in its
+    Parquet file's metadata (a reused output)."""
     import pyarrow.parquet as pq
 
     meta = pq.read_schema(path).metadata or {}
-    return json.loads(meta.get(b"aerosid.findings", b"[]"))
+    return json.loads(meta.get(key.encode(), b"[]"))
 
 
 @task(name="pooled-flight-data", **IO_RETRIES)
@@ -154,13 +159,17 @@ def pooled_flight_data_task(flights: list[dict], run_dir: str, ctx: StageContext
             sources[f["flight"]] = flight_air_data_sources(pre.columns)
         frame = build_pooled_flight_data(pooled, veh, load_database(veh))
         findings_seen.extend(frame.attrs.get("findings", []))
-        return Produced(frame, {"aerosid.air_data": sources, "aerosid.findings": json.dumps(list(findings_seen))},
+        timing_seen.extend(frame.attrs.get("vane_timing", []))
+        return Produced(frame, {"aerosid.air_data": sources, "aerosid.findings": json.dumps(list(findings_seen)),
+                                "aerosid.vane_timing": json.dumps(list(timing_seen))},
                         rows_in=sum(len(sm) for _, _, s in pooled for sm in s))
 
     findings_seen: list = []
+    timing_seen: list = []
     result = execute("flight_data", ctx, [*inputs, *vehicle_files(vehicle)], out,
                      {"vehicle": vehicle, "flights": [f["flight"] for f in flights]}, FlightData, produce)
-    return {**result, "findings": findings_seen or stored_findings(result["path"])}
+    return {**result, "findings": findings_seen or stored_findings(result["path"]),
+            "vane_timing": timing_seen or stored_findings(result["path"], "aerosid.vane_timing")}
 
 
 @task(name="regression", **IO_RETRIES)

@@ -123,6 +123,7 @@ def build_flight_data(smoothed: pd.DataFrame, measured: pd.DataFrame, vehicle: V
                          f"{H_MAX_M:g} m at {int(h_out.sum())} rows, t = {_span(t[h_out])}")
     band_hz = np.nan
     findings: list = []
+    timing = None
     if signals == "band":
         # measured air data and altitude are scale factors of the coefficients (through the
         # density and qbar), not regressors: left as measured, and a gap in them does not
@@ -160,7 +161,8 @@ def build_flight_data(smoothed: pd.DataFrame, measured: pd.DataFrame, vehicle: V
         beta = clean[vehicle.beta_column][ok] - vehicle.beta_bias_rad
         alpha_r, phi_r = total_angles(alpha, beta)
         inv_J = np.zeros(len(alpha))
-        findings += _vane_timing(t, ok, clean, bl, vehicle, segment)
+        found, timing = _vane_timing(t, ok, clean, bl, vehicle, segment)
+        findings += found
     elif vanes:
         alpha, beta, alpha_r, phi_r = _vane_angles_low_passed(clean, ok, vehicle, t)
         inv_J = np.zeros(len(alpha))
@@ -213,13 +215,15 @@ def build_flight_data(smoothed: pd.DataFrame, measured: pd.DataFrame, vehicle: V
             raise ValueError(f"segment {segment}: alpha/beta at the force database's edge on every sample "
                              f"({findings[-1].summary()})")
     frame.attrs["findings"] = [f.as_dict() for f in findings]
+    frame.attrs["vane_timing"] = [timing] if timing else []
     return frame
 
 
-def _vane_timing(t, ok, clean: dict, bl, vehicle: Vehicle, segment: str) -> list[Finding]:
-    """The vanes' delay behind the IMU (aerosid.identification.vanes) on the band
-    path's signals: a reported finding when it is detected, else nothing (the smoother path
-    applies the vehicle file's delay_s but estimates none)."""
+def _vane_timing(t, ok, clean: dict, bl, vehicle: Vehicle, segment: str) -> tuple[list[Finding], dict | None]:
+    """The vanes' delay behind the IMU (aerosid.identification.vanes) on the band path's
+    signals: (a reported finding when it is detected, else none; the estimate as a record for
+    the run's audit trail, None when there is none).  The smoother path applies the vehicle
+    file's delay_s but estimates none."""
     def grid(x):
         return np.where(ok, x, np.nan)
 
@@ -227,8 +231,12 @@ def _vane_timing(t, ok, clean: dict, bl, vehicle: Vehicle, segment: str) -> list
                     grid(clean[vehicle.beta_column] - vehicle.beta_bias_rad),
                     *(grid(bl.rates_rad_s[:, j]) for j in range(3)), *(grid(bl.accel_cg_m_s2[:, j]) for j in range(3)),
                     grid(clean["V_m_s"]), applied_s=vehicle.vane_delay_s)
-    if vd is None or not vd.detected:
-        return []
+    if vd is None:
+        return [], None
+    record = {"segment": segment, **{k: (v if not isinstance(v, float) or math.isfinite(v) else None)
+                                     for k, v in vd.as_dict().items()}}
+    if not vd.detected:
+        return [], record
     total = vd.delay_s + vd.applied_s
     ts = t[ok]
     return [Finding("airdata_delay", segment, vehicle.alpha_column, float(ts[0]), float(ts[-1]), vd.n, False,
@@ -237,7 +245,7 @@ def _vane_timing(t, ok, clean: dict, bl, vehicle: Vehicle, segment: str) -> list
                     f"delay, set `delay_s = {total:.3f}` in the vehicle file's [air_data] table (both vanes are "
                     f"then advanced by it) and run again; a vane ahead of the CG whose angle was not moved to the "
                     f"CG (it reads alpha - x q / V) looks alike, and a time shift is not its cure: give its "
-                    f"position as [air_data] vane_position_m instead")]
+                    f"position as [air_data] vane_position_m instead")], record
 
 
 def gyro_eiv_sigma(smoothed: pd.DataFrame, band_white_rad_s) -> dict[str, np.ndarray]:
@@ -433,6 +441,7 @@ def build_flight_data_segments(preprocessed: pd.DataFrame, smoothed: list[pd.Dat
         raise ValueError("no segment left for the regression: " + "; ".join(f["detail"] for f in lost))
     frame = pd.concat(parts, ignore_index=True)
     frame.attrs["findings"] = [f for part in parts for f in part.attrs.get("findings", [])] + lost
+    frame.attrs["vane_timing"] = [r for part in parts for r in part.attrs.get("vane_timing", [])]
     return frame
 
 
@@ -450,4 +459,6 @@ def build_pooled_flight_data(flights: list[tuple[str, pd.DataFrame, list[pd.Data
     # every manoeuvre has a seg00: a finding names its manoeuvre with its segment ("m1 seg00")
     frame.attrs["findings"] = [{**f, "segment": f"{fid} {f['segment']}"}
                                for fid, part in zip(ids, parts) for f in part.attrs.get("findings", [])]
+    frame.attrs["vane_timing"] = [{**r, "segment": f"{fid} {r['segment']}"}
+                                  for fid, part in zip(ids, parts) for r in part.attrs.get("vane_timing", [])]
     return frame

@@ -140,6 +140,10 @@ def test_the_twin_otters_vanes_lag_and_the_correction_moves_the_fit_toward_outpu
     assert 0.015 <= delay <= 0.035
     fixed = process_telemetry(flight.telemetry, dataclasses.replace(vehicle, vane_delay_s=delay))
     assert not [f for f in fixed.findings if f["kind"] == "airdata_delay"]
+    # the estimate is recorded either way (run.json's flight_data.vane_timing, the audit trail)
+    (before_t,), (after_t,) = run.flight_data.attrs["vane_timing"], fixed.flight_data.attrs["vane_timing"]
+    assert before_t["detected"] and before_t["delay_s"] == pytest.approx(delay, abs=0.0005)
+    assert not after_t["detected"] and after_t["applied_s"] == delay and abs(after_t["delay_s"]) < 3 * after_t["sigma_s"]
 
     def cn(r, name):
         tab = r.identification.table().set_index("coefficient")
