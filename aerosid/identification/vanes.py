@@ -52,8 +52,8 @@ band adds no relative delay.  Measured (seed 0, the default pipeline's flight da
 018 24.9 +- 2.4 ms (gain 0.994); JSBSim flights whose vanes are the true alpha 6.0 +- 1.3 (pa28),
 6.1 +- 2.1 (c172p), 13 +- 5.5 ms (T37) -- JSBSim's logged gyro rates lead alpha and the
 accelerometers by half an integration step, 5 ms (docs/estimation.md; the same fit on its
-noise-free truth: 4.3 ms), so the simulated data themselves are that far from exact kinematics; with 25 ms added to the vanes the estimate rises
-by 25.0 (pa28) and 25.3 ms (T37).  A high-pass instead of the attitude (no G, the slow parts
+noise-free truth: 4.3 ms), so the simulated data themselves are that far from exact
+kinematics; with 25 ms added to the vanes the estimate rises by 25.0 (pa28) and 25.3 ms (T37).  A high-pass instead of the attitude (no G, the slow parts
 filtered out) gave the same estimates with 2-4 x the sigma on the Twin Otter's 8 s.
 
 Timing: what is done with it
@@ -69,8 +69,8 @@ does (x_v = 1 m at 50 m/s is about 20 ms); advancing the vanes is the wrong cure
 which is why the engineer decides (and why ``vane_position_m`` exists).  The correction is
 not automatic: the estimate is a few milliseconds off on simulated data whose aerodynamic
 forces are consistent with the vane's sample (JSBSim's half step of the gyros), where an
-automatic shift would put that error into the regression; the engineer who knows the air-data system can
-say whether the lag is real.
+automatic shift would put that error into the regression; the engineer who knows the air-data
+system can say whether the lag is real.
 """
 from __future__ import annotations
 
@@ -80,6 +80,7 @@ from dataclasses import asdict, dataclass
 import numpy as np
 import scipy.stats
 
+from aerosid.identification.band import finite_runs
 from aerosid.identification.regression import fit_linear
 from aerosid.modelling.flight_path import gravity_alpha_dot, kinematic_alpha_dot_no_gravity
 
@@ -150,7 +151,7 @@ def advance(t_s: np.ndarray, x: np.ndarray, delay_s: float) -> np.ndarray:
         return x.copy()
     t = np.asarray(t_s, float)
     out = np.full_like(x, np.nan)
-    for r in _runs(np.isfinite(x)):
+    for r in finite_runs(np.isfinite(x)):
         if r.stop - r.start < 2:
             continue
         tr = t[r]
@@ -169,14 +170,6 @@ def angles_at_cg(alpha_vane_rad, beta_vane_rad, p_rad_s, q_rad_s, r_rad_s, V_m_s
     p, q, r = (np.asarray(w, float) for w in (p_rad_s, q_rad_s, r_rad_s))
     return (np.asarray(alpha_vane_rad, float) - (p * y - q * x) / V,
             np.asarray(beta_vane_rad, float) - (r * x - p * z) / V)
-
-
-def _runs(ok: np.ndarray) -> list[slice]:
-    idx = np.flatnonzero(ok)
-    if idx.size == 0:
-        return []
-    breaks = np.flatnonzero(np.diff(idx) > 1) + 1
-    return [slice(int(r[0]), int(r[-1]) + 1) for r in np.split(idx, breaks)]
 
 
 def gyro_attitude(t_s, p_rad_s, q_rad_s, r_rad_s, f0_m_s2) -> tuple[np.ndarray, np.ndarray]:
@@ -232,7 +225,7 @@ def vane_delay(t_s, alpha_vane_rad, beta_rad, p_rad_s, q_rad_s, r_rad_s, ax_cg_m
     theta[i0:], phi[i0:] = gyro_attitude(t[i0:], p[i0:], q[i0:], r[i0:],
                                          (fx[head].mean(), fy[head].mean(), fz[head].mean()))
     rate = kinematic_alpha_dot_no_gravity(a, b, p, q, r, fx, fz, V) + gravity_alpha_dot(a, b, theta, phi, V)
-    runs = [s for s in _runs(usable) if t[s.stop - 1] - t[s.start] >= MIN_RUN_S]
+    runs = [s for s in finite_runs(usable) if t[s.stop - 1] - t[s.start] >= MIN_RUN_S]
     if not runs:
         return None
     tau, fit, n = 0.0, None, 0
