@@ -137,10 +137,9 @@ def flight_data_task(pre_path: str, smoothed_paths: list[str], run_dir: str, ctx
 def stored_findings(path: str, key: str = "aerosid.findings") -> list:
     """The findings (or another list under key, e.g. the vanes' timing) a stage recorded in its
     Parquet file's metadata (a reused output)."""
-    import pyarrow.parquet as pq
+    from aerosid.io import read_parquet_metadata
 
-    meta = pq.read_schema(path).metadata or {}
-    return json.loads(meta.get(key.encode(), b"[]"))
+    return json.loads(read_parquet_metadata(path).get(key, "[]"))
 
 
 @task(name="pooled-flight-data", **IO_RETRIES)
