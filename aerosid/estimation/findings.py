@@ -133,9 +133,14 @@ def span_findings(kind: str, segment: str, channel: str, t_s: np.ndarray, mask: 
 
 def smoother_findings(t_s: np.ndarray, gated: dict[str, np.ndarray], excursion: np.ndarray,
                       mean_nis: float, nis_band: tuple[float, float], segment: str,
-                      ) -> tuple[list[Finding], np.ndarray]:
+                      channel_nis: dict[str, float] | None = None, whiteness: dict[str, float] | None = None,
+                      f_cut_hz: float | None = None) -> tuple[list[Finding], np.ndarray]:
     """Findings of a smoothed segment: gated runs per channel, windowed-NIS excursions,
-    the mean NIS against its band.  Returns them and the mask of samples to cut."""
+    the mean NIS against its band.  Returns them and the mask of samples to cut.
+    channel_nis: mean standardised innovation square per channel (1 expected);
+    whiteness: dispersion sigma / white floor per channel
+    (aerosid.estimation.init.NoiseDispersion.whiteness), f_cut_hz the dispersion's edge
+    [Hz]: with them a mean-NIS finding names the channels and, below its band, the cause."""
     t = np.asarray(t_s, float)
     dt = sample_interval(t)
     found, cut = [], np.zeros(t.size, bool)
@@ -164,5 +169,34 @@ def smoother_findings(t_s: np.ndarray, gated: dict[str, np.ndarray], excursion: 
         side = "above" if mean_nis > hi else "below"
         found.append(Finding("nis_mean", segment, "", float(t[0]), float(t[-1]), int(t.size), False,
                              f"mean NIS {mean_nis:.2f} {side} its band {lo:.2f}..{hi:.2f}: the noise model does "
-                             "not fit this flight, the smoother's sigma are not to be trusted"))
+                             "not fit this flight, the smoother's sigma are not to be trusted"
+                             + nis_mean_cause(side, channel_nis or {}, whiteness or {}, f_cut_hz)))
     return found, cut
+
+
+#: A channel's mean NIS this far from 1 (a factor) is named in a mean-NIS finding.
+CHANNEL_NIS_OFF = 2.0
+#: Dispersion sigma over the white floor near Nyquist from which a channel's noise is not
+#: white (simulated white noise 0.9-1.05; the Twin Otter's low-passed IMU 14-31).
+NOT_WHITE = 2.0
+
+
+def nis_mean_cause(side: str, channel_nis: dict[str, float], whiteness: dict[str, float],
+                   f_cut_hz: float | None) -> str:
+    """The part of a mean-NIS finding that names the channels off their own NIS (1 each)
+    and, below the band, those whose noise above the dispersion's edge is not white: a
+    signal low-passed before it was recorded, whose R from the dispersion is too large."""
+    off = {c: v for c, v in channel_nis.items()
+           if np.isfinite(v) and (v * CHANNEL_NIS_OFF < 1.0 if side == "below" else v > CHANNEL_NIS_OFF)}
+    if not off:
+        return ""
+    text = "; channels off their NIS of 1: " + ", ".join(f"{c} {v:.2f}" for c, v in off.items())
+    coloured = {c: whiteness[c] for c in off if np.isfinite(whiteness.get(c, np.nan)) and whiteness[c] >= NOT_WHITE}
+    if side == "below" and coloured:
+        edge = f"{f_cut_hz:g} Hz" if f_cut_hz else "the band edge"
+        text += (f". The noise of {', '.join(coloured)} above {edge} is not white (its sigma "
+                 + ", ".join(f"{w:.0f}x" for w in coloured.values())
+                 + " what the top of the band holds): the recorded signals look low-pass filtered (anti-aliasing "
+                 "or smoothing before recording), so R from their dispersion counts signal or coloured noise "
+                 "as white noise and is too large")
+    return text

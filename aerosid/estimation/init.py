@@ -189,7 +189,13 @@ class NoiseDispersion:
     sigma: robust estimate (MAD of the high-passed noise, corrected for the removed
     band) [y units]; sigma_std: the same with the standard deviation instead of
     the MAD; sigma_seed: the seed's rule Delta y / 3; delta_y: largest deviation of
-    the noise about its mean; n: number of samples used; f_cut_hz: high-pass edge.
+    the noise about its mean; n: number of samples used; f_cut_hz: high-pass edge;
+    sigma_floor: the white-noise sigma the top quarter of the band implies (its mean
+    power spectral density times the Nyquist frequency) [y units], NaN when fewer than
+    64 consecutive valid samples.  For white noise sigma_floor = sigma; a recorded
+    signal that was low-pass filtered before recording (anti-aliasing, smoothing) has
+    little noise left near Nyquist, and the high-passed part counted as noise is
+    signal or coloured noise (``whiteness``).
     """
 
     sigma: float
@@ -198,6 +204,13 @@ class NoiseDispersion:
     delta_y: float
     n: int
     f_cut_hz: float
+    sigma_floor: float = float("nan")
+
+    @property
+    def whiteness(self) -> float:
+        """sigma / sigma_floor: about 1 for white noise (simulated flights 0.9-1.05); the
+        NASA Twin Otter's low-passed IMU 14-31.  NaN when the floor is unknown."""
+        return self.sigma / self.sigma_floor if self.sigma_floor > 0 else float("nan")
 
     @property
     def variance(self) -> float:
@@ -207,7 +220,8 @@ class NoiseDispersion:
     def summary(self) -> str:
         return (f"noise dispersion over {self.n} samples (high-pass above {self.f_cut_hz:g} Hz): "
                 f"sigma robust {self.sigma:.4g}, std {self.sigma_std:.4g}, "
-                f"seed rule (dy/3) {self.sigma_seed:.4g} (dy = {self.delta_y:.4g})")
+                f"seed rule (dy/3) {self.sigma_seed:.4g} (dy = {self.delta_y:.4g}), "
+                f"white floor near Nyquist {self.sigma_floor:.4g}")
 
 
 def measurement_noise_from_dispersion(y, dt_s: float, f_cut_hz: float = 4.0, valid=None) -> NoiseDispersion:
@@ -275,7 +289,31 @@ def measurement_noise_from_dispersion(y, dt_s: float, f_cut_hz: float = 4.0, val
     nz = noise[use]
     sigma = mad_sigma(nz)
     sigma_std = float(np.std(nz)) / math.sqrt(keep)
-    return NoiseDispersion(sigma, sigma_std, dy / 3.0, dy, int(nz.size), float(f_cut_hz))
+    floor = white_floor_sigma(noise, dt_s, inner & ok, f_cut_hz)
+    return NoiseDispersion(sigma, sigma_std, dy / 3.0, dy, int(nz.size), float(f_cut_hz), floor)
+
+
+def white_floor_sigma(noise, dt_s: float, valid, f_cut_hz: float, min_samples: int = 64) -> float:
+    """The sigma of the white noise whose density equals the mean power spectral density
+    of `noise` over the top quarter of the band (above f_cut_hz too) [noise units].
+
+    Welch (Hann, 50 % overlap) on the longest run of `valid` samples, so that an
+    interpolated stretch (no noise) does not lower it; NaN when that run is shorter
+    than min_samples.  One-sided density S: white noise of variance s^2 has S = s^2 / f_N.
+    """
+    from scipy.signal import welch
+    runs = np.flatnonzero(np.diff(np.concatenate(([0], np.asarray(valid, np.int8), [0]))))
+    if runs.size == 0:
+        return float("nan")
+    starts, stops = runs[0::2], runs[1::2]
+    k = int(np.argmax(stops - starts))
+    seg = np.asarray(noise, float)[starts[k]:stops[k]]
+    if seg.size < min_samples:
+        return float("nan")
+    f_nyq = 0.5 / dt_s
+    f, P = welch(seg, fs=1.0 / dt_s, nperseg=min(256, seg.size // 4))
+    top = f >= max(0.75 * f_nyq, f_cut_hz)
+    return math.sqrt(float(np.mean(P[top])) * f_nyq) if top.any() else float("nan")
 
 
 

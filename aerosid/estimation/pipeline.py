@@ -152,7 +152,9 @@ class EBMResult:
     (the seed-style smoother statistic, below dof by construction).
     R_sigma (6,): noise sigma used in the final pass [m/s^2, rad/s];
     R_sigma_dispersion, R_sigma_seed_rule (6,): robust dispersion estimate and the
-    seed's (Delta y / 3) rule.  q_chain (6,): chain white-noise intensities used
+    seed's (Delta y / 3) rule; R_sigma_white_floor (6,): the white-noise sigma near
+    Nyquist (aerosid.estimation.init.NoiseDispersion.sigma_floor: far below the
+    dispersion when the recorded signal was low-pass filtered).  q_chain (6,): chain white-noise intensities used
     (X, Y, Z [m^2/s^9], L, M, N [rad^2/s^9]); Q_diag (21,): diagonal of the
     discrete Q; f_band_hz (6,): signal band edges found per chain; x0, P0_diag.
     gate_flags, used (N,6) bool; chan_nis_filter, chan_nis_smoother (6,) per
@@ -194,6 +196,14 @@ class EBMResult:
     innovation_sq: np.ndarray | None = None  # (N,6) filter v^2/s per channel tested (gated too), NaN if not
     q_local: np.ndarray | None = None  # (N,6) the chains' local process-noise multipliers (None: stationary)
     meas_names: tuple = field(default=MEAS_NAMES)
+    R_sigma_white_floor: np.ndarray | None = None
+
+    def whiteness(self) -> np.ndarray:
+        """(6,) dispersion sigma / white floor per channel: about 1 for white noise, NaN if unknown."""
+        if self.R_sigma_white_floor is None:
+            return np.full(len(self.meas_names), np.nan)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            return np.asarray(self.R_sigma_dispersion, float) / np.asarray(self.R_sigma_white_floor, float)
 
     def angular_acceleration(self) -> tuple[np.ndarray, np.ndarray]:
         """(p', q', r') [rad/s^2] (N,3) at the smoothed state through the Euler
@@ -207,11 +217,15 @@ class EBMResult:
                  f"gated channel-samples {int(self.gate_flags.sum())}, diverged {self.diverged}",
                  "",
                  f"{'channel':<8}{'unit':<7}{'sigma used':>11}{'dispersion':>11}{'seed dy/3':>11}"
-                 f"{'NIS EKF':>9}{'NIS smoother':>13}"]
+                 f"{'white floor':>12}{'NIS EKF':>9}{'NIS smoother':>13}"]
+        floor = (np.full(len(MEAS_NAMES), np.nan) if self.R_sigma_white_floor is None
+                 else self.R_sigma_white_floor)
         for j, name in enumerate(MEAS_NAMES):
             lines.append(f"{name:<8}{MEAS_UNITS[j]:<7}{self.R_sigma[j]:11.4g}{self.R_sigma_dispersion[j]:11.4g}"
-                         f"{self.R_sigma_seed_rule[j]:11.4g}{self.chan_nis_filter[j]:9.3f}{self.chan_nis_smoother[j]:13.3f}")
-        lines += [f"{'total':<8}{'':<7}{'':>11}{'':>11}{'':>11}{self.mean_nis_filter:9.3f}{self.mean_nis_smoother:13.3f}",
+                         f"{self.R_sigma_seed_rule[j]:11.4g}{floor[j]:12.4g}{self.chan_nis_filter[j]:9.3f}"
+                         f"{self.chan_nis_smoother[j]:13.3f}")
+        lines += [f"{'total':<8}{'':<7}{'':>11}{'':>11}{'':>11}{'':>12}{self.mean_nis_filter:9.3f}"
+                  f"{self.mean_nis_smoother:13.3f}",
                   f"chi-square band for the mean NIS: [{lo:.3f}, {hi:.3f}]; smoother e'R^-1e mean "
                   f"{self.mean_residual_r:.3f}",
                   "",
@@ -276,6 +290,7 @@ def smooth_flight(t_s, z, valid, inertia_kg_m2, sensor_offset_m, z_filled=None,
     disp = [measurement_noise_from_dispersion(zf[:, j], dt, opt.f_max_hz, valid=cand[:, j]) for j in range(N_MEAS)]
     sig_disp = np.array([dd.sigma for dd in disp])
     sig_seed = np.array([dd.sigma_seed for dd in disp])
+    sig_floor = np.array([dd.sigma_floor for dd in disp])
     R0 = sig_disp**2
 
     # Q from the spectrum (§3)
@@ -383,4 +398,4 @@ def smooth_flight(t_s, z, valid, inertia_kg_m2, sensor_offset_m, z_filled=None,
         chan_nis_smoother=cs, tuning_history=tuple(history),
         diverged=_diverged(dflag, run, dt, opt), divergence_samples=div_idx,
         angacc=run.angacc, angacc_sigma=run.angacc_sigma, innovation_sq=run.innovation_sq,
-        q_local=None if q_local is None else np.asarray(q_local, float))
+        q_local=None if q_local is None else np.asarray(q_local, float), R_sigma_white_floor=sig_floor)

@@ -59,7 +59,11 @@ class SmoothedSegmentResult:
     def nis_record(self) -> str:
         r = self.result
         return json.dumps({"process_noise": self.process_noise_note, "mean_nis_filter": r.mean_nis_filter, "mean_nis_smoother": r.mean_nis_smoother,
-                           "band": list(r.nis_band), "R_sigma": list(map(float, r.R_sigma))})
+                           "band": list(r.nis_band), "R_sigma": list(map(float, r.R_sigma)),
+                           "R_sigma_dispersion": list(map(float, r.R_sigma_dispersion)),
+                           "R_sigma_white_floor": [float(v) for v in (r.R_sigma_white_floor if r.R_sigma_white_floor
+                                                                      is not None else [])],
+                           "channel_nis_filter": list(map(float, r.chan_nis_filter))})
 
 
 def smoothing_options(vehicle: Vehicle, overrides: dict | None = None) -> EBMOptions:
@@ -108,7 +112,10 @@ def smooth_segment_frame(rows: pd.DataFrame, vehicle: Vehicle, options: dict | N
     excursion = np.zeros(len(t), bool)
     excursion[np.asarray(res.divergence_samples, dtype=int)] = True
     findings, suspect = smoother_findings(t, {m: res.gate_flags[:, j] for j, m in enumerate(res.meas_names)},
-                                          excursion, res.mean_nis_filter, tuple(res.nis_band), segment_id)
+                                          excursion, res.mean_nis_filter, tuple(res.nis_band), segment_id,
+                                          dict(zip(res.meas_names, map(float, res.chan_nis_filter))),
+                                          dict(zip(res.meas_names, map(float, res.whiteness()))),
+                                          smoothing_options(vehicle, options).f_max_hz)
     data["suspect"] = suspect
     frame = pd.DataFrame(data)
     frame["segment"] = frame["segment"].astype(str)

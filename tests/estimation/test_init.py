@@ -144,3 +144,39 @@ def test_initial_state_from_truth_parabolas():
     np.testing.assert_allclose(x0[[12, 15, 18]], x_true[[12, 15, 18]], atol=2e-3)
     np.testing.assert_allclose(x0[[3, 6, 9]], x_true[[3, 6, 9]], atol=2e-3)
     assert np.all(np.diag(P0) > 0) and np.count_nonzero(P0 - np.diag(np.diag(P0))) == 0
+
+
+def test_white_floor_equals_the_dispersion_for_white_noise_and_ignores_a_gap():
+    """White noise over a low-frequency signal: the density near Nyquist implies the same sigma
+    as the high-passed dispersion (whiteness 1); an interpolated stretch (no noise) is left out."""
+    rng = np.random.default_rng(11)
+    dt = 0.01
+    t = np.arange(8000) * dt
+    y = _sines(t, [(5.0, 0.4, 0.0), (2.0, 1.7, 1.0)]) + rng.normal(0, 0.3, t.size)
+    valid = np.ones(t.size, bool)
+    gap = slice(2000, 5000)
+    y[gap] = np.interp(t[gap], [t[1999], t[5000]], [y[1999], y[5000]])
+    valid[gap] = False
+    nd = measurement_noise_from_dispersion(y, dt, 4.0, valid=valid)
+    assert nd.sigma_floor == pytest.approx(0.3, rel=0.08)
+    assert nd.whiteness == pytest.approx(1.0, abs=0.1)
+
+
+def test_a_low_passed_recording_is_not_white_and_its_floor_is_the_noise_left_near_nyquist():
+    """Noise low-passed before recording (4th-order Butterworth at 8 Hz, 100 Hz sampling) plus a
+    small white quantisation-like noise: the dispersion above 4 Hz holds the filtered noise, the
+    floor only the white part, so whiteness is far above 1."""
+    from scipy.signal import butter, lfilter
+
+    from aerosid.estimation.findings import NOT_WHITE
+    rng = np.random.default_rng(12)
+    dt = 0.01
+    t = np.arange(8000) * dt
+    b, a = butter(4, 8.0, fs=1.0 / dt)
+    coloured = lfilter(b, a, rng.normal(0, 1.0, t.size))
+    y = _sines(t, [(5.0, 0.4, 0.0)]) + coloured + rng.normal(0, 0.02, t.size)
+    nd = measurement_noise_from_dispersion(y, dt, 4.0)
+    assert nd.sigma_floor == pytest.approx(0.02, rel=0.25)
+    assert nd.whiteness > 5 * NOT_WHITE
+    short = measurement_noise_from_dispersion(y[:40], dt, 4.0)
+    assert math.isnan(short.sigma_floor) and math.isnan(short.whiteness)
