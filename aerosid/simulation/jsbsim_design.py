@@ -19,6 +19,7 @@ import numpy as np
 from aerosid.simulation.jsbsim_linear import Controls, linear_truth, snapshot
 from aerosid.simulation.jsbsim_tables import DEG, AeroTables
 from aerosid.simulation.jsbsim_trim import TrimError, TrimPoint, initialise, open_fdm, start_engines, trim
+from aerosid.vehicles.vehicle import INERTIA_TRIANGLE_TOLERANCE, inertia_triangle_excess
 
 FT = 0.3048
 INCH = 0.0254
@@ -463,10 +464,15 @@ def _design(jsbsim, aircraft: str) -> FlightDesign:
                 notes.append(f"FCS feedback: the {surface} surface moves with {state} ({k:.3g} {unit}; "
                              f"e.g. {kind}): its deflection is partly collinear with {state}")
     Ixx, Iyy, Izz = (base[f"inertia/i{k}-slugs_ft2"] for k in ("xx", "yy", "zz"))
-    if Iyy > Ixx + Izz or Ixx > Iyy + Izz or Izz > Ixx + Iyy:
-        raise UnsupportedAircraft(f"{aircraft}: JSBSim's inertias Ixx {Ixx * SLUG_FT2:.6g}, Iyy {Iyy * SLUG_FT2:.6g}, "
-                                  f"Izz {Izz * SLUG_FT2:.6g} kg m^2 violate the triangle inequality (no rigid body "
-                                  "has them; aerosid's vehicle file refuses them)")
+    axis, excess = inertia_triangle_excess(Ixx, Iyy, Izz)
+    inertias = (f"JSBSim's inertias Ixx {Ixx * SLUG_FT2:.6g}, Iyy {Iyy * SLUG_FT2:.6g}, Izz {Izz * SLUG_FT2:.6g} kg m^2 "
+                f"violate the triangle inequality ({axis} exceeds the sum of the other two by {100 * excess:.2g} %")
+    if excess > INERTIA_TRIANGLE_TOLERANCE:
+        raise UnsupportedAircraft(f"{aircraft}: {inertias}; no rigid body has them, and aerosid's vehicle file "
+                                  f"refuses more than {100 * INERTIA_TRIANGLE_TOLERANCE:g} %)")
+    if excess > 0:
+        notes.append(f"mass: {inertias}, within the {100 * INERTIA_TRIANGLE_TOLERANCE:g} % an estimate's error may "
+                     "cross it by; JSBSim flies them as they are, and so does the vehicle file)")
     cg_y = base["inertia/cg-y-in"] / (base["metrics/bw-ft"] * 12.0)
     cross = max(abs(base["inertia/ixy-slugs_ft2"]), abs(base["inertia/iyz-slugs_ft2"])) / base["inertia/ixx-slugs_ft2"]
     text = (f"CG {base['inertia/cg-y-in']:.2f} in off the symmetry plane ({100 * cg_y:.2f} % of the span), "
