@@ -204,12 +204,11 @@ def _trimmed_fdm(jsbsim, sim_cfg: dict, throttle: float | None = None):
     the speed on the configured glide path), or, with `throttle` [0..1, 0 = idle], a steady
     glide at that fixed throttle: the flight-path angle is then solved for
     (aerosid.simulation.jsbsim_trim.trim, mode "glide"), the speed and height stay."""
-    fdm = jsbsim.FGFDMExec(jsbsim.get_default_root_dir())
-    fdm.set_debug_level(0)
+    from aerosid.simulation.jsbsim_trim import new_fdm
+    fdm = new_fdm(jsbsim)
     if not fdm.load_model(sim_cfg["jsbsim"]["model"]):
         raise RuntimeError(f"JSBSim could not load {sim_cfg['jsbsim']['model']!r}")
-    if throttle is not None:
-        fdm.disable_output()  # the trim initialises JSBSim many times (c172x's output file, one error each)
+    fdm.disable_output()  # the output files c172x's XML asks for are not the flight's record
     for i, w in enumerate(sim_cfg["loading"]["pointmass_weights_lbs"]):
         fdm[f"inertia/pointmass-weight-lbs[{i}]"] = float(w)
     fdm.set_dt(float(sim_cfg["jsbsim"]["dt_s"]))

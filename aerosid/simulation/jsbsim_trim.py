@@ -15,7 +15,11 @@ the throttle (``mode="level"``: γ fixed).
 """
 from __future__ import annotations
 
+import atexit
+import functools
 import math
+import shutil
+import tempfile
 import xml.etree.ElementTree as ET
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -57,13 +61,31 @@ class TrimPoint:
         return asdict(self)
 
 
+@functools.cache
+def _scratch_dir() -> str:
+    """A folder for this process's JSBSim output files, removed at exit."""
+    folder = tempfile.mkdtemp(prefix="aerosid-jsbsim-")
+    atexit.register(shutil.rmtree, folder, ignore_errors=True)
+    return folder
+
+
+def new_fdm(jsbsim):
+    """A quiet JSBSim executive whose output files go to a throwaway folder.  An aircraft's
+    XML may ask for output files (c172x: 0.8 MB of CSV per flight; B17, global5000, pogo),
+    which JSBSim opens even after disable_output(), in its own package folder by default:
+    an installation folder (on a read-only one, an error line per initialisation)."""
+    fdm = jsbsim.FGFDMExec(jsbsim.get_default_root_dir())
+    fdm.set_debug_level(0)
+    fdm.set_output_path(_scratch_dir())
+    return fdm
+
+
 def open_fdm(jsbsim, model: str, dt: float):
     """A JSBSim instance of `model` in the clean configuration (a retractable gear, flaps
     and speed brakes retracted), no output files, fuel consumption frozen (the mass and
     CG stay those of the trim; some models' engines feed from small collector tanks
     that only FlightGear's transfer scripts refill: Concorde's flame out after ~10 s)."""
-    fdm = jsbsim.FGFDMExec(jsbsim.get_default_root_dir())
-    fdm.set_debug_level(0)
+    fdm = new_fdm(jsbsim)
     if not fdm.load_model(model):
         raise TrimError(f"JSBSim could not load the aircraft {model!r}")
     fdm.disable_output()

@@ -334,3 +334,19 @@ def test_powered_level_flight_gets_a_speed_term_in_cm(written, tmp_path):
         sol = dict(zip(cols, np.linalg.lstsq(X[cols].to_numpy(), y, rcond=None)[0]))
         errors[with_speed] = abs(sol["Cm_alpha"] / truth - 1.0)
     assert errors[True] < 0.5 * errors[False]
+
+
+def test_jsbsim_output_files_an_aircraft_asks_for_stay_out_of_the_installation():
+    """c172x's XML asks for a CSV output file, which JSBSim opens even with its output disabled;
+    it must land in the process's scratch folder, never in the jsbsim package (an install folder)."""
+    from pathlib import Path
+
+    jsbsim = _import_jsbsim()
+    package = Path(jsbsim.get_default_root_dir())
+    before = set(package.glob("*.csv"))
+    fdm = open_fdm(jsbsim, "c172x", 0.01)
+    fdm.run_ic()
+    for _ in range(10):
+        fdm.run()
+    assert Path(str(fdm.get_output_path())).resolve() != package.resolve()
+    assert set(package.glob("*.csv")) == before
