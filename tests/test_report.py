@@ -329,3 +329,18 @@ def test_a_wrong_sign_damping_term_is_marked_in_the_coefficients_table(run_copy)
     assert doc.count(html.escape(WRONG_SIGN_NOTE)) == 1
     row = next(r for r in doc.split("<tr") if f">{name}<" in r and html.escape(WRONG_SIGN_NOTE) in r)
     assert html.escape(UNDETERMINED_NOTE) not in row
+
+
+def test_the_smoother_note_is_read_with_and_without_the_white_floor_column():
+    """The report reads the smoother's per-channel table from its summary text: runs written before
+    the white floor column (7 tokens) and after it (8; NaN when the floor is unknown)."""
+    from aerosid.report.sections_run import _nis_from_note
+    old = "ax      m/s^2     0.003298   0.006596    0.01282    0.068        0.088"
+    new = "q       rad/s     0.000225  0.0004501  0.0004628   1.337e-05    0.265        0.144"
+    unknown = "r       rad/s     0.0002016  0.0002381  0.0002012       nan    1.163        0.998"
+    rows = _nis_from_note("\n".join([old, new, unknown, "total   1 2 3"]))
+    assert rows["ax"] == {"used": 0.003298, "dispersion": 0.006596, "seed": 0.01282, "nis_filter": 0.068,
+                          "nis_smoother": 0.088}
+    assert rows["q"]["floor"] == 1.337e-05 and rows["q"]["nis_filter"] == 0.265 and rows["q"]["nis_smoother"] == 0.144
+    assert math.isnan(rows["r"]["floor"]) and rows["r"]["nis_smoother"] == 0.998
+    assert set(rows) == {"ax", "q", "r"}

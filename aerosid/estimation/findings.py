@@ -177,7 +177,7 @@ def smoother_findings(t_s: np.ndarray, gated: dict[str, np.ndarray], excursion: 
 #: A channel's mean NIS this far from 1 (a factor) is named in a mean-NIS finding.
 CHANNEL_NIS_OFF = 2.0
 #: Dispersion sigma over the white floor near Nyquist from which a channel's noise is not
-#: white (simulated white noise 0.9-1.05; the Twin Otter's low-passed IMU 14-31).
+#: white (simulated white noise 0.9-1.06; the Twin Otter's low-passed IMU 13-34).
 NOT_WHITE = 2.0
 
 
@@ -194,9 +194,10 @@ def nis_mean_cause(side: str, channel_nis: dict[str, float], whiteness: dict[str
     coloured = {c: whiteness[c] for c in off if np.isfinite(whiteness.get(c, np.nan)) and whiteness[c] >= NOT_WHITE}
     if side == "below" and coloured:
         edge = f"{f_cut_hz:g} Hz" if f_cut_hz else "the band edge"
-        text += (f". The noise of {', '.join(coloured)} above {edge} is not white (its sigma "
+        text += (f". The noise of {', '.join(coloured)} above {edge} is not white (its sigma is "
                  + ", ".join(f"{w:.0f}x" for w in coloured.values())
-                 + " what the top of the band holds): the recorded signals look low-pass filtered (anti-aliasing "
+                 + " the white-noise sigma the density near Nyquist implies): the recorded signals look low-pass "
+                 "filtered (anti-aliasing "
                  "or smoothing before recording), so R from their dispersion counts signal or coloured noise "
                  "as white noise and is too large")
     return text

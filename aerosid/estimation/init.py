@@ -208,8 +208,8 @@ class NoiseDispersion:
 
     @property
     def whiteness(self) -> float:
-        """sigma / sigma_floor: about 1 for white noise (simulated flights 0.9-1.05); the
-        NASA Twin Otter's low-passed IMU 14-31.  NaN when the floor is unknown."""
+        """sigma / sigma_floor: about 1 for white noise (simulated flights 0.9-1.06); the
+        NASA Twin Otter's low-passed IMU 13-34.  NaN when the floor is unknown or zero."""
         return self.sigma / self.sigma_floor if self.sigma_floor > 0 else float("nan")
 
     @property
@@ -289,7 +289,7 @@ def measurement_noise_from_dispersion(y, dt_s: float, f_cut_hz: float = 4.0, val
     nz = noise[use]
     sigma = mad_sigma(nz)
     sigma_std = float(np.std(nz)) / math.sqrt(keep)
-    floor = white_floor_sigma(noise, dt_s, inner & ok, f_cut_hz)
+    floor = white_floor_sigma(noise, dt_s, inner, f_cut_hz)
     return NoiseDispersion(sigma, sigma_std, dy / 3.0, dy, int(nz.size), float(f_cut_hz), floor)
 
 
@@ -299,20 +299,21 @@ def white_floor_sigma(noise, dt_s: float, valid, f_cut_hz: float, min_samples: i
 
     Welch (Hann, 50 % overlap) on the longest run of `valid` samples, so that an
     interpolated stretch (no noise) does not lower it; NaN when that run is shorter
-    than min_samples.  One-sided density S: white noise of variance s^2 has S = s^2 / f_N.
+    than min_samples.  One-sided density S: white noise of variance s^2 has S = s^2 / f_N
+    in every bin but DC and Nyquist (scipy does not double those: the Nyquist bin is left out).
     """
     from scipy.signal import welch
-    runs = np.flatnonzero(np.diff(np.concatenate(([0], np.asarray(valid, np.int8), [0]))))
-    if runs.size == 0:
+
+    from .findings import true_runs
+    runs = true_runs(valid)
+    if not runs:
         return float("nan")
-    starts, stops = runs[0::2], runs[1::2]
-    k = int(np.argmax(stops - starts))
-    seg = np.asarray(noise, float)[starts[k]:stops[k]]
-    if seg.size < min_samples:
+    a, b = max(runs, key=lambda r: r[1] - r[0])
+    if b - a < min_samples:
         return float("nan")
     f_nyq = 0.5 / dt_s
-    f, P = welch(seg, fs=1.0 / dt_s, nperseg=min(256, seg.size // 4))
-    top = f >= max(0.75 * f_nyq, f_cut_hz)
+    f, P = welch(np.asarray(noise, float)[a:b], fs=1.0 / dt_s, nperseg=min(256, (b - a) // 4))
+    top = (f >= max(0.75 * f_nyq, f_cut_hz)) & (f < f_nyq)
     return math.sqrt(float(np.mean(P[top])) * f_nyq) if top.any() else float("nan")
 
 

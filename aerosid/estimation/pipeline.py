@@ -202,8 +202,9 @@ class EBMResult:
         """(6,) dispersion sigma / white floor per channel: about 1 for white noise, NaN if unknown."""
         if self.R_sigma_white_floor is None:
             return np.full(len(self.meas_names), np.nan)
+        floor = np.asarray(self.R_sigma_white_floor, float)
         with np.errstate(invalid="ignore", divide="ignore"):
-            return np.asarray(self.R_sigma_dispersion, float) / np.asarray(self.R_sigma_white_floor, float)
+            return np.where(floor > 0, np.asarray(self.R_sigma_dispersion, float) / floor, np.nan)
 
     def angular_acceleration(self) -> tuple[np.ndarray, np.ndarray]:
         """(p', q', r') [rad/s^2] (N,3) at the smoothed state through the Euler

@@ -57,13 +57,18 @@ class SmoothedSegmentResult:
                 f"band {r.nis_band[0]:.2f}..{r.nis_band[1]:.2f}")
 
     def nis_record(self) -> str:
+        """The smoother's noise check as strict JSON (a NaN is written as null)."""
         r = self.result
-        return json.dumps({"process_noise": self.process_noise_note, "mean_nis_filter": r.mean_nis_filter, "mean_nis_smoother": r.mean_nis_smoother,
-                           "band": list(r.nis_band), "R_sigma": list(map(float, r.R_sigma)),
-                           "R_sigma_dispersion": list(map(float, r.R_sigma_dispersion)),
-                           "R_sigma_white_floor": [float(v) for v in (r.R_sigma_white_floor if r.R_sigma_white_floor
-                                                                      is not None else [])],
-                           "channel_nis_filter": list(map(float, r.chan_nis_filter))})
+
+        def num(v):
+            return float(v) if np.isfinite(v) else None
+
+        floor = r.R_sigma_white_floor if r.R_sigma_white_floor is not None else []
+        return json.dumps({"process_noise": self.process_noise_note, "mean_nis_filter": num(r.mean_nis_filter),
+                           "mean_nis_smoother": num(r.mean_nis_smoother), "band": list(map(num, r.nis_band)),
+                           "R_sigma": list(map(num, r.R_sigma)), "R_sigma_dispersion": list(map(num, r.R_sigma_dispersion)),
+                           "R_sigma_white_floor": list(map(num, floor)),
+                           "channel_nis_filter": list(map(num, r.chan_nis_filter))}, allow_nan=False)
 
 
 def smoothing_options(vehicle: Vehicle, overrides: dict | None = None) -> EBMOptions:

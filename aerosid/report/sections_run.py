@@ -158,17 +158,23 @@ def _s_preprocessing(run: _Run) -> str:
     return "\n".join(out)
 
 
-_NOTE_ROW = re.compile(r"^(ax|ay|az|p|q|r)\s+(\S+)\s+(\S+)\s+(\S+)\s+(\S+)\s+(\S+)\s+(\S+)\s*$")
+_NOTE_ROW = re.compile(r"^(ax|ay|az|p|q|r)\s+(\S+)((?:\s+\S+){5,6})\s*$")
+#: The columns of a channel's row in the smoother's summary after its unit: before the white
+#: floor was added (2026-11-28), and since.
+_NOTE_COLUMNS = {5: ("used", "dispersion", "seed", "nis_filter", "nis_smoother"),
+                 6: ("used", "dispersion", "seed", "floor", "nis_filter", "nis_smoother")}
 
 
 def _nis_from_note(note: str | None) -> dict:
-    """Per-channel rows of the smoother's own summary (its Table-2 text), when recorded."""
+    """Per-channel rows of the smoother's own summary (its Table-2 text), when recorded:
+    {channel: {column: value}} (columns of _NOTE_COLUMNS; a NaN floor reads as NaN)."""
     rows = {}
     for line in (note or "").splitlines():
         m = _NOTE_ROW.match(line.strip())
         if m:
+            tokens = m.group(3).split()
             try:
-                rows[m.group(1)] = [float(m.group(i)) for i in range(3, 8)]
+                rows[m.group(1)] = dict(zip(_NOTE_COLUMNS[len(tokens)], map(float, tokens)))
             except ValueError:
                 continue
     return rows
@@ -249,20 +255,25 @@ def _segment_detail(run: _Run, seg: str, sm: pd.DataFrame, meta: dict, pre: pd.D
         f"{_num(nis.get('mean_nis_filter'), '.3f')}, smoother {_num(nis.get('mean_nis_smoother'), '.3f')} "
         f"({'inside' if inside else 'outside'} the band)."))
     headers = ["channel", "unit", "σ used (R)"]
+    floor = parsed and any("floor" in v for v in parsed.values())
     if parsed:
-        headers += ["dispersion", "seed rule Δy/3", "NIS EKF", "NIS smoother"]
+        headers += ["dispersion", "seed rule Δy/3"] + (["white floor (σ near Nyquist)"] if floor else [])
+        headers += ["NIS EKF", "NIS smoother"]
     headers += ["gated samples"]
     rows = []
     for j, ch in enumerate(MEAS_UNITS):
         row = [ch, MEAS_UNITS[ch], R[j] if j < len(R) else None]
         if parsed:
-            vals = parsed.get(ch, [None] * 5)
-            row += [_num(vals[1], ".4g"), _num(vals[2], ".4g"), _num(vals[3], ".3f"), _num(vals[4], ".3f")]
+            vals = parsed.get(ch, {})
+            row += [_num(vals.get("dispersion"), ".4g"), _num(vals.get("seed"), ".4g")]
+            row += [_num(vals.get("floor"), ".4g")] if floor else []
+            row += [_num(vals.get("nis_filter"), ".3f"), _num(vals.get("nis_smoother"), ".3f")]
         row.append(int(sm[f"gated_{ch}"].sum()) if f"gated_{ch}" in sm else "—")
         rows.append(row)
     total = ["total (mean NIS)", "", ""]
     if parsed:
-        total += ["", "", _num(nis.get("mean_nis_filter"), ".3f"), _num(nis.get("mean_nis_smoother"), ".3f")]
+        total += ["", ""] + ([""] if floor else [])
+        total += [_num(nis.get("mean_nis_filter"), ".3f"), _num(nis.get("mean_nis_smoother"), ".3f")]
     total += [""]
     rows.append(_H('<tr class="total">' + "".join(f"<td{_align(c) if c else ''}>{_cell(c)}</td>" for c in total)
                    + "</tr>"))

@@ -37,6 +37,21 @@ def test_above_the_band_names_the_channels_above_two():
     assert "az 4.50" in f.detail and "low-pass" not in f.detail and "q 1.20" not in f.detail
 
 
+def test_only_the_low_channels_whose_noise_is_not_white_are_given_the_cause_and_nan_is_skipped():
+    (f,) = _mean_nis_finding(3.0, (0.07, 0.9, 0.2, float("nan"), 0.26, 1.2), (15, 17, 1.0, 19, 34, float("nan")))
+    named, cause = f.detail.split("not white")
+    assert "ax 0.07, az 0.20, q 0.26" in named and " p " not in named
+    assert "The noise of ax, q above" in named and "15x, 34x" in cause
+
+
+def test_without_the_channel_facts_the_message_is_the_plain_one():
+    t = np.arange(400) * 0.02
+    none = {m: np.zeros(t.size, bool) for m in NAMES}
+    (f,) = smoother_findings(t, none, np.zeros(t.size, bool), 3.4, (5.66, 6.34), "seg00")[0]
+    assert f.detail == ("mean NIS 3.40 below its band 5.66..6.34: the noise model does not fit this flight, "
+                        "the smoother's sigma are not to be trusted")
+
+
 def test_inside_the_band_there_is_no_finding_and_no_channel_no_cause():
     assert _mean_nis_finding(6.0, (0.07,) * 6, (30,) * 6) == []
     assert nis_mean_cause("below", {"q": 0.9}, {"q": 30.0}, 4.0) == ""
@@ -68,5 +83,5 @@ def test_the_twin_otters_low_passed_imu_is_named_as_the_cause_of_its_low_nis():
         assert f" {ch} 0." in f.detail.split("not white")[0]
     white = out.result.whiteness()
     assert np.all(white > 5)  # every IMU channel low-passed; simulated white noise gives 0.9-1.05
-    # the floor sits near the recorded resolution (1 mg accelerometers, 0.001 deg/s gyros)
+    # the floor: the noise left near Nyquist, far below the dispersion (gyros at their 0.001 deg/s steps)
     assert np.all(out.result.R_sigma_white_floor[:3] < 1e-3) and np.all(out.result.R_sigma_white_floor[3:] < 3e-5)

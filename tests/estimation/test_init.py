@@ -180,3 +180,18 @@ def test_a_low_passed_recording_is_not_white_and_its_floor_is_the_noise_left_nea
     assert nd.whiteness > 5 * NOT_WHITE
     short = measurement_noise_from_dispersion(y[:40], dt, 4.0)
     assert math.isnan(short.sigma_floor) and math.isnan(short.whiteness)
+
+
+def test_the_white_floor_needs_one_long_enough_run_and_is_unbiased_on_a_short_one():
+    """Many valid samples in runs shorter than 64: no floor (NaN) while sigma is still estimated;
+    on a 64-sample run of white noise (nperseg 16, the Nyquist bin left out) the floor is unbiased."""
+    from aerosid.estimation.init import white_floor_sigma
+    rng = np.random.default_rng(13)
+    dt = 0.01
+    y = rng.normal(0, 1.0, 4000)
+    valid = (np.arange(4000) % 60) < 50  # runs of 50 valid samples
+    nd = measurement_noise_from_dispersion(y, dt, 4.0, valid=valid)
+    assert math.isnan(nd.sigma_floor) and nd.sigma == pytest.approx(1.0, rel=0.1)
+    assert math.isnan(white_floor_sigma(y, dt, np.zeros(4000, bool), 4.0))
+    floors = [white_floor_sigma(rng.normal(0, 1.0, 64), dt, np.ones(64, bool), 4.0) for _ in range(400)]
+    assert np.mean(np.square(floors)) == pytest.approx(1.0, rel=0.06)
