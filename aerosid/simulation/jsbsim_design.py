@@ -373,8 +373,13 @@ def manoeuvre_design(d: dict, modes: dict, gains: dict, limits: dict, controls: 
         return _r(sign * math.copysign(1.0, gain) * surface_rad / abs(gain) * 100.0) / 100.0 or 0.01
 
     # elevator: a step that would change alpha by ALPHA_STEP_DEG in steady state; the first
-    # 3-2-1-1 starts nose-up (the surface moves the way that raises C_m)
-    de = ALPHA_STEP_DEG * DEG * abs(closed["Cm_alpha"] / d["Cm_delta_p"])
+    # 3-2-1-1 starts nose-up (the surface moves the way that raises C_m).  The steady short
+    # period turns at q = -Z_alpha alpha (alpha' = 0), so the pitch damping holds alpha back too:
+    # 0 = C_m,alpha alpha + C_m,q c/(2V) q + C_m,delta delta.  With C_m,alpha alone a heavily
+    # damped aircraft got 42 % of the step (c310: C_m,q c/(2V) Z_alpha 1.4 x C_m,alpha; pa28 0.14 x)
+    c = base["metrics/cbarw-ft"] * FT
+    stiffness = closed["Cm_alpha"] - d["Cm_q"] * c / (2.0 * V) * modes["Z_alpha_s"]
+    de = ALPHA_STEP_DEG * DEG * abs(stiffness / d["Cm_delta_p"])
     a_e = command("pitch", controls.pitch, de, math.copysign(1.0, d["Cm_delta_p"]))
     # aileron: a bank change of BANK_STEP_DEG over the first half at the steady roll rate
     p_per_rad = abs(d["Cl_delta_r"] / closed["Cl_p"]) * 2.0 * V / b
