@@ -6,6 +6,7 @@ control mixing, and alpha/beta, either inverted from the force database (the fin
 class) or read from air-data vanes (a vehicle file with ``[air_data] source = "vanes"``)."""
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -289,10 +290,17 @@ def _band_signals(t, measured: pd.DataFrame, smoothed: pd.DataFrame, vehicle: Ve
     inertia = (vehicle.Ixx_kg_m2, vehicle.Iyy_kg_m2, vehicle.Izz_kg_m2, vehicle.Ixz_kg_m2)
     fs = 1.0 / float(np.median(np.diff(t)))
 
-    def signals(keep):
-        return band_limited_signals(t, imu[:, 3:], imu[:, :3], inertia, vehicle.accel_offset_m, vehicle.band_hz, keep)
+    first = band_limited_signals(t, imu[:, 3:], imu[:, :3], inertia, vehicle.accel_offset_m, vehicle.band_hz, ok)
 
-    bl = signals(ok)
+    def signals(keep):
+        # the band edge stays the one of the segment before any cut: it comes from the longest
+        # run, and a cut span split that run (J3Cub seed 1: a 0.16 s gated q run in the first
+        # 3-2-1-1 left a longest run with only the lateral doublets, 3.0 -> 1.6 Hz, and C_m's
+        # estimates +32..+51 %): a cut costs the samples it touches, not the segment's band
+        cut = band_limited_signals(t, imu[:, 3:], imu[:, :3], inertia, vehicle.accel_offset_m, first.band_hz, keep)
+        return dataclasses.replace(cut, band_source=first.band_source)
+
+    bl = first
     margin = int(np.ceil(min(1.0 / bl.band_hz, MAX_MARGIN_S) * fs))
     suspect = smoothed["suspect"].to_numpy(bool) if "suspect" in smoothed else np.zeros(len(t), bool)
     keep = ok & ~dilate(suspect, margin)

@@ -119,3 +119,40 @@ def test_bridge_spikes_replaces_isolated_spikes_only():
     assert abs(y[500] - truth[500]) < 0.03 and abs(y[1500] - truth[1500]) < 0.03
     assert np.array_equal(y[3000:3050], x[3000:3050])
     assert np.count_nonzero(y != x) == 3
+
+
+def test_a_cut_span_costs_its_samples_not_the_segments_band():
+    """The band edge comes from the longest run; a condemned span (the smoother's `suspect`) in
+    the fast manoeuvre used to split that run so that the longest one held only a slow doublet,
+    and the whole segment was low-passed at the slow edge.  The edge is the uncut segment's."""
+    import pandas as pd
+
+    from aerosid.identification.flight_data import BAND_IMU, _band_signals
+    from aerosid.vehicles.vehicle import load_vehicle
+
+    rng = np.random.default_rng(21)
+    dt = 0.01
+    t = np.arange(4000) * dt
+    fast = np.where((t > 8) & (t < 12), np.sin(2 * np.pi * 2.5 * t), 0.0) * 0.1       # a 2.5 Hz pitch manoeuvre
+    slow = np.where((t > 15) & (t < 35), np.sin(2 * np.pi * 0.4 * t), 0.0) * 0.1      # a 0.4 Hz doublet
+    q = fast + slow
+    true = {"ax_m_s2": np.zeros_like(t), "ay_m_s2": np.zeros_like(t), "az_m_s2": -9.81 + 0 * t,
+            "p_rad_s": slow, "q_rad_s": q, "r_rad_s": 0.5 * slow}
+    measured = pd.DataFrame({f"{c}_clean": true[c] + rng.normal(0, 0.002, t.size) for c in BAND_IMU})
+    smoothed = pd.DataFrame({c: true[c] for c in ("p_rad_s", "q_rad_s", "r_rad_s")})
+    for c, k in (("X1_m_s2", "ax_m_s2"), ("Y1_m_s2", "ay_m_s2"), ("Z1_m_s2", "az_m_s2")):
+        smoothed[c] = true[k]
+    ok = np.ones(t.size, bool)
+    vehicle = load_vehicle("c172x")
+    smoothed["suspect"] = False
+    whole, _, _ = _band_signals(t, measured, smoothed, vehicle, ok, "seg00")
+    # two condemned spans at the manoeuvre's ends: the longest run left holds the doublet only
+    smoothed["suspect"] = ((t > 8.5) & (t < 8.7)) | ((t > 11.5) & (t < 11.7))
+    cut, keep, _ = _band_signals(t, measured, smoothed, vehicle, ok, "seg00")
+    assert whole.band_hz > 2.0 and whole.band_source == "flight"
+    assert cut.band_hz == whole.band_hz and cut.band_source == "flight"
+    assert not keep[(t > 8.5) & (t < 8.7)].any() and keep[(t > 15) & (t < 30)].all()
+    from aerosid.identification.band import signal_band_edge_hz
+    longest = (t > 12.2) & (t < 39.9)  # what the edge used to be computed on
+    assert signal_band_edge_hz(measured.loc[longest, ["p_rad_s_clean", "q_rad_s_clean", "r_rad_s_clean"]]
+                               .to_numpy(), dt) < 1.0
