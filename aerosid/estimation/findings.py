@@ -197,7 +197,6 @@ def nis_mean_cause(side: str, channel_nis: dict[str, float], whiteness: dict[str
         text += (f". The noise of {', '.join(coloured)} above {edge} is not white (its sigma is "
                  + ", ".join(f"{w:.0f}x" for w in coloured.values())
                  + " the white-noise sigma the density near Nyquist implies): the recorded signals look low-pass "
-                 "filtered (anti-aliasing "
-                 "or smoothing before recording), so R from their dispersion counts signal or coloured noise "
-                 "as white noise and is too large")
+                 "filtered (anti-aliasing or smoothing before recording), so R from their dispersion counts "
+                 "signal or coloured noise as white noise and is too large")
     return text

@@ -92,10 +92,11 @@ def smooth_segment_frame(rows: pd.DataFrame, vehicle: Vehicle, options: dict | N
                          f"at least {MIN_USABLE_SAMPLES} per channel are needed to initialise the filter")
     filled = pd.DataFrame(z).interpolate(limit_direction="both").to_numpy()
     ctl = [f"{c}_clean" for c in CONTROL_CHANNELS if f"{c}_clean" in rows]
+    opts = smoothing_options(vehicle, options)
     adaptive = smooth_flight_adaptive(t, np.where(valid, z, np.nan), valid,
                                       (vehicle.Ixx_kg_m2, vehicle.Iyy_kg_m2, vehicle.Izz_kg_m2, vehicle.Ixz_kg_m2),
                                       vehicle.accel_offset_m, z_filled=filled,
-                                      options=smoothing_options(vehicle, options),
+                                      options=opts,
                                       controls=rows[ctl].to_numpy(dtype=float) if ctl else None)
     res = adaptive.result
     data = {"t_s": t, "segment": np.full(len(t), segment_id, dtype=object)}
@@ -120,7 +121,7 @@ def smooth_segment_frame(rows: pd.DataFrame, vehicle: Vehicle, options: dict | N
                                           excursion, res.mean_nis_filter, tuple(res.nis_band), segment_id,
                                           dict(zip(res.meas_names, map(float, res.chan_nis_filter))),
                                           dict(zip(res.meas_names, map(float, res.whiteness()))),
-                                          smoothing_options(vehicle, options).f_max_hz)
+                                          opts.f_max_hz)
     data["suspect"] = suspect
     frame = pd.DataFrame(data)
     frame["segment"] = frame["segment"].astype(str)
