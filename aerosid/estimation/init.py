@@ -16,6 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.linalg import solve
 
+from .findings import true_runs
 from .model import CHAIN_START, IX_ACC, IX_ANG, N_STATE, PlantModel, rate_rhs
 
 _MAD_TO_SIGMA = 1.4826022185056018  # 1 / Phi^-1(3/4)
@@ -302,9 +303,8 @@ def white_floor_sigma(noise, dt_s: float, valid, f_cut_hz: float, min_samples: i
     than min_samples.  One-sided density S: white noise of variance s^2 has S = s^2 / f_N
     in every bin but DC and Nyquist (scipy does not double those: the Nyquist bin is left out).
     """
-    from scipy.signal import welch
+    from scipy.signal import welch  # here, not at import: the rest of the module does not need it
 
-    from .findings import true_runs
     runs = true_runs(valid)
     if not runs:
         return float("nan")
