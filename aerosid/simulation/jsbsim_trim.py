@@ -18,6 +18,8 @@ from __future__ import annotations
 import atexit
 import functools
 import math
+import multiprocessing.util
+import os
 import shutil
 import tempfile
 import xml.etree.ElementTree as ET
@@ -62,10 +64,14 @@ class TrimPoint:
 
 
 @functools.cache
-def _scratch_dir() -> str:
-    """A folder for this process's JSBSim output files, removed at exit."""
+def _scratch_dir(pid: int) -> str:
+    """A folder for process `pid`'s JSBSim output files, removed when it exits: at interpreter
+    exit, or, for a forked pool worker (which ends with os._exit and skips atexit), by
+    multiprocessing's finaliser; cached per pid so a forked child does not share its parent's."""
     folder = tempfile.mkdtemp(prefix="aerosid-jsbsim-")
     atexit.register(shutil.rmtree, folder, ignore_errors=True)
+    multiprocessing.util.Finalize(None, shutil.rmtree, args=(folder,), kwargs={"ignore_errors": True},
+                                  exitpriority=0)
     return folder
 
 
@@ -76,7 +82,7 @@ def new_fdm(jsbsim):
     an installation folder (on a read-only one, an error line per initialisation)."""
     fdm = jsbsim.FGFDMExec(jsbsim.get_default_root_dir())
     fdm.set_debug_level(0)
-    fdm.set_output_path(_scratch_dir())
+    fdm.set_output_path(_scratch_dir(os.getpid()))
     return fdm
 
 
