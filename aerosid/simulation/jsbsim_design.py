@@ -313,20 +313,24 @@ def mode_frequencies(d: dict, base: dict) -> dict[str, float]:
     m = base["inertia/mass-slugs"] * SLUG
     Ixx, Iyy, Izz = (base[f"inertia/i{k}-slugs_ft2"] * SLUG_FT2 for k in ("xx", "yy", "zz"))
     M_a = q_S * c * d["Cm_alpha"] / Iyy
-    M_q = q_S * c * (d["Cm_q"] + d["Cm_alpha_dot"]) * c / (2 * V) / Iyy
+    M_q = q_S * c * d["Cm_q"] * c / (2 * V) / Iyy
+    M_ad = q_S * c * d["Cm_alpha_dot"] * c / (2 * V) / Iyy
     Z_a = -q_S * d["CN_alpha"] / (m * V)
+    # alpha' = Z_a alpha + q, q' = M_a alpha + M_q q + M_ad alpha': the determinant is
+    # Z_a M_q - M_a (M_ad cancels out of it) and the trace Z_a + M_q + M_ad
     w_sp2 = Z_a * M_q - M_a
     w_sp = math.sqrt(max(w_sp2, 1e-6))
-    # s^2 - (Z_a + M_q) s + w_sp^2 = 0: when overdamped, the pitch response is as slow as
+    # s^2 - trace s + w_sp^2 = 0: when overdamped, the pitch response is as slow as
     # the slower real root, and that sets the manoeuvre's time unit
-    two_zeta_w = -(Z_a + M_q)
+    two_zeta_w = -(Z_a + M_q + M_ad)
     disc = two_zeta_w**2 - 4 * w_sp2
     w_design = (two_zeta_w - math.sqrt(disc)) / 2 if disc > 0 and w_sp2 > 0 else w_sp
     N_b = q_S * b * d["Cn_beta"] / Izz
     L_p = q_S * b * d["Cl_p"] * b / (2 * V) / Ixx
     return {"omega_sp_rad_s": w_sp, "zeta_sp": two_zeta_w / (2 * w_sp), "omega_pitch_design_rad_s": w_design,
             "omega_dr_rad_s": math.sqrt(max(N_b, 1e-6)),
-            "tau_roll_s": -1.0 / L_p if L_p < 0 else float("inf"), "M_alpha_s2": M_a, "M_q_s": M_q, "Z_alpha_s": Z_a}
+            "tau_roll_s": -1.0 / L_p if L_p < 0 else float("inf"), "M_alpha_s2": M_a, "M_q_s": M_q,
+            "M_alpha_dot_s": M_ad, "Z_alpha_s": Z_a}
 
 
 # --------------------------------------------------------------------------------------
@@ -361,7 +365,8 @@ def manoeuvre_design(d: dict, modes: dict, gains: dict, limits: dict, controls: 
     unit = _r(np.clip(UNIT_OMEGA / w_sp, 0.1, 1.0))
     half = _r(np.clip(DOUBLET_OMEGA / w_dr, 0.3, 2.0))
 
-    def command(axis: str, prop: str, surface_rad: float, sign: float) -> float:
+    def command(axis: str, prop: str, surface_rad: float, sign: float) -> tuple[float, float]:
+        """The normalised command and the surface step [rad] it flies (capped by the travel)."""
         room = TRAVEL_FRACTION * _travel(limits, prop, base[prop])
         if surface_rad > room:
             notes.append(f"{axis}: step {surface_rad / DEG:.2f} deg limited to {room / DEG:.2f} deg "
@@ -370,24 +375,27 @@ def manoeuvre_design(d: dict, modes: dict, gains: dict, limits: dict, controls: 
         gain = gains[axis]
         if abs(gain) < 1e-6:
             raise UnsupportedAircraft(f"the {axis} command does not move {prop} (static gain {gain:g})")
-        return _r(sign * math.copysign(1.0, gain) * surface_rad / abs(gain) * 100.0) / 100.0 or 0.01
+        return _r(sign * math.copysign(1.0, gain) * surface_rad / abs(gain) * 100.0) / 100.0 or 0.01, surface_rad
 
     # elevator: a step that would change alpha by ALPHA_STEP_DEG in steady state; the first
     # 3-2-1-1 starts nose-up (the surface moves the way that raises C_m).  The steady short
-    # period turns at q = -Z_alpha alpha (alpha' = 0), so the pitch damping holds alpha back too:
-    # 0 = C_m,alpha alpha + C_m,q c/(2V) q + C_m,delta delta.  With C_m,alpha alone a heavily
-    # damped aircraft got 42 % of the step (c310: C_m,q c/(2V) Z_alpha 1.4 x C_m,alpha; pa28 0.14 x)
+    # period turns at q = -Z_alpha alpha - Z_delta delta (alpha' = 0), so the pitch damping holds
+    # alpha back too: 0 = C_m,alpha alpha + C_m,q c/(2V) q + C_m,delta delta.  With C_m,alpha alone
+    # a heavily damped aircraft got 42 % of the step (c310: C_m,q c/(2V) Z_alpha 1.4 x C_m,alpha;
+    # pa28 0.14 x); the elevator's own lift (Z_delta) moves the step by -6 % (pa28) to +11 % (c310)
     c = base["metrics/cbarw-ft"] * FT
-    stiffness = closed["Cm_alpha"] - d["Cm_q"] * c / (2.0 * V) * modes["Z_alpha_s"]
-    de = ALPHA_STEP_DEG * DEG * abs(stiffness / d["Cm_delta_p"])
-    a_e = command("pitch", controls.pitch, de, math.copysign(1.0, d["Cm_delta_p"]))
+    k_q = d["Cm_q"] * c / (2.0 * V)
+    z_delta = modes["Z_alpha_s"] * d["CN_delta_p"] / d["CN_alpha"]
+    stiffness = closed["Cm_alpha"] - k_q * modes["Z_alpha_s"]
+    de = ALPHA_STEP_DEG * DEG * abs(stiffness / (d["Cm_delta_p"] - k_q * z_delta))
+    a_e, de = command("pitch", controls.pitch, de, math.copysign(1.0, d["Cm_delta_p"]))
     # aileron: a bank change of BANK_STEP_DEG over the first half at the steady roll rate
     p_per_rad = abs(d["Cl_delta_r"] / closed["Cl_p"]) * 2.0 * V / b
     da = BANK_STEP_DEG * DEG / (half * p_per_rad)
-    a_a = command("roll", controls.roll, da, math.copysign(1.0, d["Cl_delta_r"]))
+    a_a, da = command("roll", controls.roll, da, math.copysign(1.0, d["Cl_delta_r"]))
     # rudder: a steady sideslip of BETA_STEP_DEG, nose left first
     dr = BETA_STEP_DEG * DEG * abs(closed["Cn_beta"] / d["Cn_delta_y"])
-    a_r = command("yaw", controls.yaw, dr, math.copysign(1.0, -d["Cn_delta_y"]) * -1.0)
+    a_r, dr = command("yaw", controls.yaw, dr, math.copysign(1.0, -d["Cn_delta_y"]) * -1.0)
     rise_e = _r(unit / 2)
     rise_lat = _r(min(0.2, half / 4))
     takeup = 0.2
@@ -405,6 +413,7 @@ def manoeuvre_design(d: dict, modes: dict, gains: dict, limits: dict, controls: 
         "aileron_start_s": t_a, "aileron_half_s": half, "aileron_amplitude_norm": a_a, "aileron_rise_s": rise_lat,
         "rudder_start_s": t_r, "rudder_half_s": half, "rudder_amplitude_norm": a_r, "rudder_rise_s": rise_lat,
         "hysteresis_takeup_s": takeup,
+        # the steps flown (after the travel caps): the generated model's 1 % rules compare to these
         "surface_steps_rad": {"elevator": de, "aileron": da, "rudder": dr},
     }
     return m, end, notes

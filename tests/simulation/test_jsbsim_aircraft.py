@@ -220,6 +220,28 @@ def test_fcs_feedback_probe_and_closed_loop_sizing():
         math.radians(BETA_STEP_DEG) * abs(pa28.derivatives["Cn_beta"] / pa28.derivatives["Cn_delta_y"]), rel=1e-9)
 
 
+def test_short_period_of_mode_frequencies_is_the_two_state_models_eigenvalues():
+    """alpha' = Z_a alpha + q, q' = M_a alpha + M_q q + M_ad alpha': omega_sp^2 is the determinant
+    (M_ad drops out of it) and 2 zeta omega minus the trace; an earlier version put M_ad into both."""
+    base = {"aero/qbar-psf": 60.0, "metrics/Sw-sqft": 170.0, "metrics/cbarw-ft": 5.0, "metrics/bw-ft": 36.0,
+            "velocities/vt-fps": 150.0, "inertia/mass-slugs": 70.0, "inertia/ixx-slugs_ft2": 1000.0,
+            "inertia/iyy-slugs_ft2": 1300.0, "inertia/izz-slugs_ft2": 2000.0}
+    d = {"Cm_alpha": -1.0, "Cm_q": -12.0, "Cm_alpha_dot": -7.0, "CN_alpha": 5.0, "Cn_beta": 0.1, "Cl_p": -0.5}
+    m = mode_frequencies(d, base)
+    Za, Ma, Mq, Mad = m["Z_alpha_s"], m["M_alpha_s2"], m["M_q_s"], m["M_alpha_dot_s"]
+    assert Mad / Mq == pytest.approx(7.0 / 12.0)
+    A = np.array([[Za, 1.0], [Ma + Mad * Za, Mq + Mad]])  # alpha' substituted into q'
+    eig = np.linalg.eigvals(A)
+    assert m["omega_sp_rad_s"] ** 2 == pytest.approx(float(np.prod(eig).real), rel=1e-12)
+    assert 2 * m["zeta_sp"] * m["omega_sp_rad_s"] == pytest.approx(-float(np.sum(eig).real), rel=1e-12)
+    # the design frequency of an overdamped short period is its slower real root
+    stiff = mode_frequencies({**d, "Cm_q": -200.0}, base)
+    Mq2 = stiff["M_q_s"]
+    eig2 = np.linalg.eigvals(np.array([[Za, 1.0], [Ma + Mad * Za, Mq2 + Mad]]))
+    assert np.all(np.isreal(eig2))
+    assert stiff["omega_pitch_design_rad_s"] == pytest.approx(float(np.min(np.abs(eig2.real))), rel=1e-9)
+
+
 def test_closed_loop_derivatives_closed_form():
     d = {"Cm_alpha": -1.0, "Cm_delta_p": -2.0, "Cl_p": -0.5, "Cl_delta_r": 0.2, "Cn_beta": 0.1, "Cn_delta_y": -0.4}
     fb = {"alpha": {"pitch": 0.25}, "p": {"roll": -0.1}, "beta": {"yaw": -1.5}}
@@ -360,7 +382,8 @@ def test_the_elevator_step_moves_alpha_by_the_designed_amount_in_jsbsim(aircraft
     later (the short period settled, the phugoid barely started) is half the step's alpha.  Half,
     because the design is linear and c310 is not beyond that: the full command gives 2.8 deg where
     the linear truth says 1.4 (0.64 at half).  c310 is heavily damped (C_m,q c/(2V) Z_alpha
-    1.4 x C_m,alpha): sized on C_m,alpha alone, its step gave 0.3 deg at half command."""
+    1.4 x C_m,alpha): sized on C_m,alpha alone, its step gave 0.3 deg at half command.  Its step is
+    capped by the elevator's travel, and the design records the step flown, not the one wanted."""
     import xml.etree.ElementTree as ET
 
     from aerosid.simulation.jsbsim_design import ALPHA_STEP_DEG, symmetric_loading
@@ -372,6 +395,9 @@ def test_the_elevator_step_moves_alpha_by_the_designed_amount_in_jsbsim(aircraft
     if capped:  # "pitch: step X deg limited to Y deg (...)": alpha scales with the surface
         x, y = (float(v) for v in capped[0].split("step ")[1].split(" deg (")[0].split(" deg limited to "))
         want *= y / x
+    flown = design.manoeuvre["surface_steps_rad"]["elevator"]
+    assert abs(design.manoeuvre["elevator_amplitudes_norm"][0] * design.gains["pitch"]) == pytest.approx(flown, rel=0.01)
+    assert bool(capped) == (aircraft == "c310")
     fdm = open_fdm(jsbsim, aircraft, 0.01)
     symmetric_loading(fdm, ET.parse(design.xml_path).getroot())
     start_engines(fdm, design.trim.h_m, design.trim.V_m_s)
