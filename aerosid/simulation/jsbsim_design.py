@@ -11,12 +11,14 @@ from __future__ import annotations
 
 import math
 import xml.etree.ElementTree as ET
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from aerosid.simulation.jsbsim_linear import Controls, linear_truth, snapshot
+from aerosid.simulation.jsbsim_modes import doublet_sideslip_peak, flown_doublet_sideslip_peak, mode_frequencies
 from aerosid.simulation.jsbsim_tables import DEG, AeroTables
 from aerosid.simulation.jsbsim_trim import TrimError, TrimPoint, initialise, open_fdm, start_engines, trim
 from aerosid.vehicles.vehicle import INERTIA_TRIANGLE_TOLERANCE, inertia_triangle_excess
@@ -65,6 +67,8 @@ BETA_STEP_DEG = 1.5      # steady sideslip of the rudder step
 TRAVEL_FRACTION = 0.4    # no step beyond this fraction of the surface's travel
 UNIT_OMEGA = 2.0         # 3-2-1-1 time unit = UNIT_OMEGA / omega_sp (c172x: 0.4 s at omega_sp ~ 5 rad/s);
                          # an overdamped short period: the slower real root instead of omega_sp
+DAMPER_ITERATIONS = 8      # flown rudder doublets to size the step of a yaw-damped aircraft
+DAMPER_TOLERANCE = 0.05    # ... until its peak sideslip is within this of the undamped doublet's
 DOUBLET_OMEGA = 2.3      # doublet half-width = DOUBLET_OMEGA / omega_dr (Koehler's optimum)
 
 
@@ -303,36 +307,6 @@ def closed_loop_derivatives(d: dict, feedback: dict, V_m_s: float, span_m: float
             "Cn_beta": d["Cn_beta"] + d["Cn_delta_y"] * feedback.get("beta", {}).get("yaw", 0.0)}
 
 
-def mode_frequencies(d: dict, base: dict) -> dict[str, float]:
-    """Short-period and Dutch-roll natural frequencies [rad/s] and the roll-mode time
-    constant [s] from the linear truth (the classical two-degree-of-freedom
-    approximations)."""
-    q_S = base["aero/qbar-psf"] * PSF * base["metrics/Sw-sqft"] * FT**2
-    c, b = base["metrics/cbarw-ft"] * FT, base["metrics/bw-ft"] * FT
-    V = base["velocities/vt-fps"] * FT
-    m = base["inertia/mass-slugs"] * SLUG
-    Ixx, Iyy, Izz = (base[f"inertia/i{k}-slugs_ft2"] * SLUG_FT2 for k in ("xx", "yy", "zz"))
-    M_a = q_S * c * d["Cm_alpha"] / Iyy
-    M_q = q_S * c * d["Cm_q"] * c / (2 * V) / Iyy
-    M_ad = q_S * c * d["Cm_alpha_dot"] * c / (2 * V) / Iyy
-    Z_a = -q_S * d["CN_alpha"] / (m * V)
-    # alpha' = Z_a alpha + q, q' = M_a alpha + M_q q + M_ad alpha': the determinant is
-    # Z_a M_q - M_a (M_ad cancels out of it) and the trace Z_a + M_q + M_ad
-    w_sp2 = Z_a * M_q - M_a
-    w_sp = math.sqrt(max(w_sp2, 1e-6))
-    # s^2 - trace s + w_sp^2 = 0: when overdamped, the pitch response is as slow as
-    # the slower real root, and that sets the manoeuvre's time unit
-    two_zeta_w = -(Z_a + M_q + M_ad)
-    disc = two_zeta_w**2 - 4 * w_sp2
-    w_design = (two_zeta_w - math.sqrt(disc)) / 2 if disc > 0 and w_sp2 > 0 else w_sp
-    N_b = q_S * b * d["Cn_beta"] / Izz
-    L_p = q_S * b * d["Cl_p"] * b / (2 * V) / Ixx
-    return {"omega_sp_rad_s": w_sp, "zeta_sp": two_zeta_w / (2 * w_sp), "omega_pitch_design_rad_s": w_design,
-            "omega_dr_rad_s": math.sqrt(max(N_b, 1e-6)),
-            "tau_roll_s": -1.0 / L_p if L_p < 0 else float("inf"), "M_alpha_s2": M_a, "M_q_s": M_q,
-            "M_alpha_dot_s": M_ad, "Z_alpha_s": Z_a}
-
-
 # --------------------------------------------------------------------------------------
 # the manoeuvre
 # --------------------------------------------------------------------------------------
@@ -347,12 +321,15 @@ def _travel(limits: dict, prop: str, value: float) -> float:
 
 
 def manoeuvre_design(d: dict, modes: dict, gains: dict, limits: dict, controls: Controls,
-                     base: dict, closed: dict | None = None) -> tuple[dict, float, list[str]]:
+                     base: dict, closed: dict | None = None, feedback: dict | None = None,
+                     rudder_peak: Callable[[float, float, float], float] | None = None) -> tuple[dict, float, list[str]]:
     """Input timing and amplitudes (the keys of jsbsim_flight._schedule), the flight's
     duration and notes on what limited them.  closed: :func:`closed_loop_derivatives`
     (default: the open loop's); the amplitudes are sized on the closed loop's steady
     response (a sideslip feedback that holds beta to a sixth of its open-loop value asks
-    six times the rudder); the timing comes from `modes` as given."""
+    six times the rudder); feedback: :func:`state_feedback` and rudder_peak(step [rad], half [s],
+    rise [s]) -> the peak |beta| [rad] of the rudder doublet flown with that surface step: with both, a yaw
+    damper scales the rudder step (below); the timing comes from `modes` as given."""
     notes = []
     V = base["velocities/vt-fps"] * FT
     b = base["metrics/bw-ft"] * FT
@@ -394,10 +371,38 @@ def manoeuvre_design(d: dict, modes: dict, gains: dict, limits: dict, controls: 
     da = BANK_STEP_DEG * DEG / (half * p_per_rad)
     a_a, da = command("roll", controls.roll, da, math.copysign(1.0, d["Cl_delta_r"]))
     # rudder: a steady sideslip of BETA_STEP_DEG, nose left first
+    rise_lat = _r(min(0.2, half / 4))
     dr = BETA_STEP_DEG * DEG * abs(closed["Cn_beta"] / d["Cn_delta_y"])
+    # a yaw damper (r on the rudder) leaves the steady sideslip as it is but takes most of the
+    # doublet's (A4, F4N, global5000, A320: 56-73 %): the rudder then follows r, and C_n,r is seen
+    # only through the input's share.  The step is scaled until the doublet flown in JSBSim
+    # reaches the peak sideslip the Dutch-roll approximation gives it without the damper (what
+    # an undamped aircraft's doublet flies); flown, because a damper's authority limit (F4N:
+    # 0.1 of the rudder) makes the response of a larger step more than proportional
+    k_r = (feedback or {}).get("r", {}).get("yaw", 0.0)
+    if abs(k_r) > 1e-3 and rudder_peak is not None:
+        k_beta = feedback.get("beta", {}).get("yaw", 0.0)
+        target = dr * doublet_sideslip_peak(d, base, half, rise_lat, 0.0, k_beta)
+        room = TRAVEL_FRACTION * _travel(limits, controls.yaw, base[controls.yaw])
+        # the peak grows with the step, faster than in proportion once the damper saturates:
+        # proportional steps kept inside a bracket, bisection when they leave it
+        lo, hi = 0.0, room
+        step = min(target / doublet_sideslip_peak(d, base, half, rise_lat, k_r, k_beta), room)
+        flown = []
+        for _ in range(DAMPER_ITERATIONS):
+            peak = rudder_peak(step, half, rise_lat)
+            flown.append((abs(peak / target - 1.0), step, peak))
+            if flown[-1][0] < DAMPER_TOLERANCE or (step >= room and peak < target):
+                break
+            lo, hi = (step, hi) if peak < target else (lo, step)
+            step = step * target / peak if lo < step * target / peak < hi else 0.5 * (lo + hi)
+        _, step, peak = min(flown)
+        cap = f", {TRAVEL_FRACTION:.0%} of the travel left at trim" if step >= room else ""
+        notes.append(f"yaw damper ({k_r:.3g} rad per rad/s): rudder step {dr / DEG:.2f} -> {step / DEG:.2f} deg{cap}, "
+                     f"so the doublet's peak sideslip is {peak / DEG:.2f} deg in JSBSim (undamped: {target / DEG:.2f})")
+        dr = step
     a_r, dr = command("yaw", controls.yaw, dr, math.copysign(1.0, -d["Cn_delta_y"]) * -1.0)
     rise_e = _r(unit / 2)
-    rise_lat = _r(min(0.2, half / 4))
     takeup = 0.2
     gap_lon = _r(max(3.0, 3 * 2 * math.pi / w_sp))
     gap_lat = _r(max(6.0, 3 * 2 * math.pi / w_dr))
@@ -514,7 +519,16 @@ def _design(jsbsim, aircraft: str) -> FlightDesign:
     # the inputs' timing stays the open loop's: on A320 (seeds 0-4) timing the doublets on its
     # closed-loop Dutch roll (2.5 x faster) shortened them and cost C_n,beta's sigma 1.7 -> 4.6 %
     modes = mode_frequencies(d_cg, base)
-    m, duration, more = manoeuvre_design(d_cg, modes, gains, limits, controls, base, closed)
+    fresh = []  # a fresh FDM, opened on the first call: the probes above left the FCS in trim mode
+
+    def rudder_peak(step_rad: float, half_s: float, rise_s: float) -> float:
+        if not fresh:
+            fresh.append(open_fdm(jsbsim, aircraft, DT_S))
+            symmetric_loading(fresh[0], xml_root)
+            start_engines(fresh[0], point.h_m, point.V_m_s)
+        return flown_doublet_sideslip_peak(fresh[0], point, step_rad / abs(gains["yaw"]), half_s, rise_s, DT_S)
+
+    m, duration, more = manoeuvre_design(d_cg, modes, gains, limits, controls, base, closed, feedback, rudder_peak)
     if duration > MAX_DURATION_S:
         raise UnsupportedAircraft(f"{aircraft}: the manoeuvre would last {duration:.0f} s (> {MAX_DURATION_S:g} s; "
                                   f"short period {modes['omega_sp_rad_s']:.3g} rad/s, Dutch roll "
