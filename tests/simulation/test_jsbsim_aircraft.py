@@ -14,13 +14,9 @@ pytest.importorskip("jsbsim")
 from aerosid.io import read_parquet_metadata, telemetry_vehicle  # noqa: E402
 from aerosid.vehicles.rigid_body import body_rate_derivatives, inertia_constants  # noqa: E402
 from aerosid.simulation.jsbsim_aircraft import XML_TOLERANCE, simulate_aircraft  # noqa: E402
-from aerosid.simulation.jsbsim_design import (  # noqa: E402
-    BETA_STEP_DEG,
-    UnsupportedAircraft,
-    closed_loop_derivatives,
-    flight_design,
-    mode_frequencies,
-)
+from aerosid.simulation.jsbsim_design import BETA_STEP_DEG, UnsupportedAircraft, flight_design  # noqa: E402
+from aerosid.simulation.jsbsim_fcs import closed_loop_derivatives  # noqa: E402
+from aerosid.simulation.jsbsim_modes import mode_frequencies  # noqa: E402
 from aerosid.simulation.jsbsim_flight import (  # noqa: E402
     TELEMETRY_COLUMNS,
     _import_jsbsim,
