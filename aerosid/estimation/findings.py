@@ -113,10 +113,13 @@ def dilate(mask: np.ndarray, margin: int) -> np.ndarray:
 
 def condemned_samples(result) -> int:
     """How much of a segment an EBMResult loses to its filter: the samples gated on any
-    channel or in a windowed-NIS excursion, counted once (the escalation's yardstick; the
-    findings below cut less: they merge, and skip short runs and excursions)."""
+    channel, in a windowed-NIS excursion, or whose smoothed state is not finite (a filter that
+    ran off numerically: its NIS is NaN there, so neither test above sees it), counted once
+    (the escalation's yardstick; the findings below cut less: they merge, and skip short runs
+    and excursions)."""
     flags = np.asarray(result.gate_flags).any(axis=1)
     flags[np.asarray(result.divergence_samples, dtype=int)] = True
+    flags |= ~np.isfinite(np.asarray(result.x_smooth)).all(axis=1)
     return int(flags.sum())
 
 

@@ -34,16 +34,30 @@ class SmoothedSegmentResult:
     findings: tuple = ()  # aerosid.estimation.findings.Finding: gated runs, NIS excursions, mean NIS
     process_noise_note: str = ""  # aerosid.estimation.adaptive: escalations of the chains' process noise
 
+    def nonfinite(self) -> np.ndarray:
+        """Samples whose smoothed state or sigma is not finite (a filter that ran off numerically)."""
+        r = self.result
+        return ~(np.isfinite(r.x_smooth).all(axis=1) & np.isfinite(r.sigma_smooth).all(axis=1))
+
     def lost_reason(self) -> str:
-        """Why the segment is failed: the divergence (with its samples) and the findings."""
+        """Why the segment is failed: states that are not finite, the divergence (with its
+        samples) and the findings."""
+        bad = self.nonfinite()
+        if bad.any():
+            t = self.result.t_s[bad]
+            return (f"the filter ran off numerically: smoothed states not finite at {int(bad.sum())} of {bad.size} "
+                    f"samples, t = {t[0]:.2f}..{t[-1]:.2f} s ({self.process_noise_note})")
         why = "; ".join(f.summary() for f in self.findings if f.cut)
         head = f"filter diverged: {self.divergence_note()}; " if self.result.diverged else ""
         return f"{head}more than half the samples condemned ({why})"
 
     @property
     def lost(self) -> bool:
-        """More than half the segment is condemned (the ``suspect`` column): not worth keeping."""
-        return bool(self.frame["suspect"].mean() > MAX_SUSPECT_FRACTION) if len(self.frame) else True
+        """More than half the segment is condemned (the ``suspect`` column), or any smoothed
+        state is not finite (no Parquet of smoothed states may hold one): not worth keeping."""
+        if not len(self.frame) or self.nonfinite().any():
+            return True
+        return bool(self.frame["suspect"].mean() > MAX_SUSPECT_FRACTION)
 
     def divergence_note(self) -> str:
         """Where the filter's windowed NIS left its band (sample times) [s]."""

@@ -23,7 +23,7 @@ def _fake_result(scale):
         div = np.arange(1000, 1000 + (300 if m < 900 else 250))  # > 5 %: systematic
     else:
         gated[900:, Q] = True
-    return SimpleNamespace(gate_flags=gated, divergence_samples=div, t_s=np.arange(N) * DT,
+    return SimpleNamespace(gate_flags=gated, divergence_samples=div, t_s=np.arange(N) * DT, x_smooth=np.zeros((N, 2)),
                            chan_nis_filter=np.array([1.0, 1.0, 1.0, 1.0, 1.6, 1.0]),
                            meas_names=("ax", "ay", "az", "p", "q", "r"), scale=tuple(scale))
 
@@ -47,6 +47,32 @@ def test_condemned_samples_counts_gated_or_excursion_once():
     assert adaptive.condemned_samples(r) == 400
     r.divergence_samples = np.arange(600, 800)  # overlaps one gated run by 100 samples
     assert adaptive.condemned_samples(r) == 500
+
+
+def test_a_run_whose_states_are_not_finite_condemns_those_samples(monkeypatch):
+    """The unseen minisgs seed 0 pattern: the second raise of M (x900) ran the filter off
+    numerically -- NaN states everywhere, hence NaN NIS: no gated sample, no excursion.  Counted
+    as condemning nothing, it was kept and the segment failed at the schema; it condemns all."""
+    r = _fake_result((1,) * 6)
+    r.x_smooth = np.zeros((N, 2))
+    r.x_smooth[3000:, 1] = np.nan
+    assert adaptive.condemned_samples(r) == 400 + 1000
+
+    def fake(t_s, z, valid, inertia, offset, z_filled, opt, **kw):
+        r = _fake_result(opt.q_chain_scale)
+        if opt.q_chain_scale[4] >= 900:
+            r.gate_flags[:] = False
+            r.divergence_samples = np.zeros(0, int)
+            r.x_smooth = np.full((N, 2), np.nan)
+        return r
+
+    monkeypatch.setattr(adaptive, "smooth_flight", fake)
+    monkeypatch.setattr(adaptive, "MAX_ESCALATIONS", 2)
+    out = adaptive.smooth_flight_adaptive(np.arange(N) * DT, np.zeros((N, 6)), np.ones((N, 6), bool), (1, 1, 1, 0),
+                                          (0, 0, 0), local_q=False)
+    assert np.isfinite(out.result.x_smooth).all()
+    assert out.q_chain_scale[4] == 30.0
+    assert "run 2 undone" in out.summary()
 
 
 def test_the_run_of_the_path_that_condemns_fewest_is_kept_and_the_later_runs_undone(monkeypatch):

@@ -85,3 +85,25 @@ def test_the_twin_otters_low_passed_imu_is_named_as_the_cause_of_its_low_nis():
     assert np.all(white > 5)  # every IMU channel low-passed; simulated white noise gives 0.9-1.05
     # the floor: the noise left near Nyquist, far below the dispersion (gyros at their 0.001 deg/s steps)
     assert np.all(out.result.R_sigma_white_floor[:3] < 1e-3) and np.all(out.result.R_sigma_white_floor[3:] < 3e-5)
+
+
+def test_a_segment_with_states_that_are_not_finite_is_lost_with_the_reason_and_span():
+    """No Parquet of smoothed states may hold a NaN (schemas.smoothed): a segment whose filter ran
+    off numerically is failed in the core with that reason, not at the schema check."""
+    from types import SimpleNamespace
+
+    import pandas as pd
+
+    from aerosid.estimation.smoothing import SmoothedSegmentResult
+
+    n = 200
+    t = np.arange(n) * 0.01
+    x = np.zeros((n, 3))
+    res = SimpleNamespace(t_s=t, x_smooth=x, sigma_smooth=np.ones((n, 3)), diverged=False)
+    frame = pd.DataFrame({"t_s": t, "suspect": np.zeros(n, bool)})
+    ok = SmoothedSegmentResult("seg00", frame, res, (), "process noise: spectral")
+    assert not ok.lost
+    x[150:, 1] = np.nan
+    bad = SmoothedSegmentResult("seg00", frame, res, (), "process noise: spectral")
+    assert bad.lost
+    assert "not finite at 50 of 200 samples, t = 1.50..1.99 s" in bad.lost_reason()
