@@ -66,11 +66,12 @@ def _step_q(Qd, Qc, qm, k, Qk):
 
 
 @njit(cache=True)
-def forward(z, cand, x0, P0, prm, Qd, Qc, qm, rdiag, gate_thr, do_gate, seg,
+def forward(z, cand, x0, P0, prm, Qd, Qc, qm, rdiag, gate_thr, do_gate, gate_on, seg,
             xf, sf, nis, dof, used, gated, ckpt, stats, innov):
     """Forward EKF over all samples.  x0 (24,), P0, Qd (24,24) padded; Qc (6,24,24) the
     chains' shares of Qd and qm (N,6) their multipliers on the transition into sample k
-    (time-varying process noise, :func:`_step_q`; all ones or no rows: Qd itself).  Writes xf, sf
+    (time-varying process noise, :func:`_step_q`; all ones or no rows: Qd itself); gate_on (N,)
+    bool, the samples where the gate applies when do_gate (no rows: everywhere).  Writes xf, sf
     (N,21) (filtered state and sigma), nis (NaN if no update), dof, used, gated,
     innov (N,6) the standardised conditional innovation squared v^2/s of every channel
     tested, used or gated (NaN if not a candidate), stats[4] (per-channel sum of v^2/s)
@@ -110,7 +111,8 @@ def forward(z, cand, x0, P0, prm, Qd, Qc, qm, rdiag, gate_thr, do_gate, seg,
             P = Pn
             Pn = tmpP
         _measure(x, prm, hx, H)
-        nk, dk = _update(x, P, z[k], cand[k], rdiag, gate_thr, do_gate, hx, H, K, v, s, us, gs, u, dx)
+        gate_k = do_gate and (gate_on.shape[0] == 0 or gate_on[k])
+        nk, dk = _update(x, P, z[k], cand[k], rdiag, gate_thr, gate_k, hx, H, K, v, s, us, gs, u, dx)
         nis[k] = nk if dk > 0 else np.nan
         dof[k] = dk
         for j in range(NM):
@@ -350,11 +352,11 @@ def backward(z, used, x0, P0, prm, Qd, Qc, qm, rdiag, seg, xf, ckpt,
 
 
 @njit(cache=True)
-def run(z, cand, x0, P0, prm, Qd, Qc, qm, rdiag, gate_thr, do_gate, seg,
+def run(z, cand, x0, P0, prm, Qd, Qc, qm, rdiag, gate_thr, do_gate, gate_on, seg,
         xf, sf, nis, dof, used, gated, ckpt,
         xs, ss, nis_s, aa, aa_sig, stats, Pb, Kb, Hb, vb, sb, Fb, innov):
     """forward() then backward(); returns forward()'s count of bad variances."""
-    bad = forward(z, cand, x0, P0, prm, Qd, Qc, qm, rdiag, gate_thr, do_gate, seg,
+    bad = forward(z, cand, x0, P0, prm, Qd, Qc, qm, rdiag, gate_thr, do_gate, gate_on, seg,
                   xf, sf, nis, dof, used, gated, ckpt, stats, innov)
     backward(z, used, x0, P0, prm, Qd, Qc, qm, rdiag, seg, xf, ckpt,
              xs, ss, nis_s, aa, aa_sig, stats, Pb, Kb, Hb, vb, sb, Fb)

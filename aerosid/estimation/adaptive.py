@@ -37,7 +37,7 @@ import numpy as np
 
 from aerosid.estimation.findings import (GATED_RUN_MIN_S, MERGE_GAP_S, condemned_samples, dilate, sample_interval,
                                          true_runs)
-from aerosid.estimation.local_q import CHAIN_NAMES, follow_locally
+from aerosid.estimation.local_q import CHAIN_NAMES, follow_locally, gate_lifted
 from aerosid.estimation.local_q import CHAINS_OF_CHANNEL as MEASURED_CHAIN
 from aerosid.estimation.pipeline import EBMOptions, EBMResult, smooth_flight
 
@@ -163,14 +163,29 @@ def smooth_flight_adaptive(t_s, z, valid, inertia_kg_m2, sensor_offset_m, z_fill
         escalations.append((0, (f"{runs} undone: {path[-1][0]} samples condemned at the end, {n_best} before",)))
     rounds = ()
     if local_q:
-        # the local rounds keep the stationary pass's Q scale: re-tuning it once the burst is absorbed
-        # moves Q for the whole segment (F4N seed 1: q_scale to its lower bound, a pitch manoeuvre at
-        # 6 s then gated); R is re-estimated (EM) from the stationary pass's values
-        tuned = [h for h in result.tuning_history if np.isfinite(h.mean_nis_filter)][-1:]
-        fix = dict(q_scale=tuned[0].q_scale, q_scale_bounds=(tuned[0].q_scale,) * 2,
-                   r_scale=tuple(tuned[0].r_scale)) if tuned else {}
-        final = dataclasses.replace(opt, q_chain_scale=tuple(float(v) for v in scale), **fix)
-        result, _, rounds = follow_locally(
-            lambda ql: smooth_flight(t_s, z, valid, inertia_kg_m2, sensor_offset_m, z_filled, final, q_local=ql),
-            result, controls)
+        def local(res, sc):
+            # the local rounds keep the stationary pass's Q scale: re-tuning it once the burst is absorbed
+            # moves Q for the whole segment (F4N seed 1: q_scale to its lower bound, a pitch manoeuvre at
+            # 6 s then gated); R is re-estimated (EM) from the stationary pass's values
+            tuned = [h for h in res.tuning_history if np.isfinite(h.mean_nis_filter)][-1:]
+            fix = dict(q_scale=tuned[0].q_scale, q_scale_bounds=(tuned[0].q_scale,) * 2,
+                       r_scale=tuple(tuned[0].r_scale)) if tuned else {}
+            final = dataclasses.replace(opt, q_chain_scale=tuple(float(v) for v in sc), **fix)
+            return follow_locally(
+                lambda ql: smooth_flight(t_s, z, valid, inertia_kg_m2, sensor_offset_m, z_filled, final, q_local=ql,
+                                         gate_off=gate_lifted(ql)),
+                res, controls)
+
+        escalated, _, rounds = local(result, scale)
+        if any(a > 0 for a, _ in escalations):
+            # the whole-segment escalation and the local raise are alternatives: a lock-out in one
+            # manoeuvre reads as systematic gating, and raising the whole segment can leave it locked
+            # (unseen global5000 seed 0: L, N x27000, p then gated to the end; the local raise from the
+            # unescalated run frees it): the local rounds from the first run too, fewer condemned kept
+            first, first_rounds = local(path[0][2], path[0][1])[0::2]
+            if first_rounds and condemned_samples(first) < condemned_samples(escalated):
+                escalations.append((0, (f"escalation undone: the local raise on the first run condemns "
+                                        f"{condemned_samples(first)} samples, {condemned_samples(escalated)} with it",)))
+                escalated, rounds, scale = first, first_rounds, path[0][1]
+        result = escalated
     return AdaptiveSmoothing(result, tuple(float(v) for v in scale), tuple(escalations), rounds)

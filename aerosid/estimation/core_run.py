@@ -56,11 +56,12 @@ class CoreRun:
 
 def run_filter_smoother(z, cand, x0, P0, model: PlantModel, Qd, R_diag, gate_threshold=np.inf,
                         use_numba: bool = True, segment_length: int = 64, q_local=None,
-                        q_shares=None) -> CoreRun:
+                        q_shares=None, gate_off=None) -> CoreRun:
     """One EKF + MBF pass.  z (N,6), cand (N,6) bool (channels allowed), x0/P0 prior at
     sample 0, Qd (21,21), R_diag (6,), gate_threshold (chi2(1) per channel, inf = off);
     q_local (N,6) chain multipliers per transition with q_shares (6,21,21) the chains'
-    shares of Qd (:func:`chain_shares`), or None: stationary (module doc)."""
+    shares of Qd (:func:`chain_shares`), or None: stationary (module doc); gate_off (N,)
+    bool: samples where the gate is lifted (None: nowhere)."""
     z = np.ascontiguousarray(z, dtype=np.float64)
     cand = np.ascontiguousarray(cand, dtype=np.bool_) & np.isfinite(z)
     zz = np.where(cand, z, 0.0)
@@ -73,9 +74,13 @@ def run_filter_smoother(z, cand, x0, P0, model: PlantModel, Qd, R_diag, gate_thr
     if local and q_shares is None:
         raise ValueError("q_local other than ones needs q_shares (chain_shares of the chain intensities)")
     Qc = np.zeros((6, N_STATE, N_STATE)) if q_shares is None else np.asarray(q_shares, dtype=np.float64)
+    lifted = None if gate_off is None else np.ascontiguousarray(gate_off, dtype=np.bool_)
+    if lifted is not None and lifted.shape != (N,):
+        raise ValueError(f"gate_off must be ({N},) bool; got shape {lifted.shape}")
     if not use_numba:
         Qk = Qd + np.einsum("kc,cij->kij", qm - 1.0, Qc) if local else Qd
-        return _core_from_reference(run_reference(zz, cand, x0, P0, model, Qk, R_diag, gate_threshold),
+        thr = gate_threshold if lifted is None else np.where(lifted, np.inf, gate_threshold)
+        return _core_from_reference(run_reference(zz, cand, x0, P0, model, Qk, R_diag, thr),
                                     zz, model, R_diag)
     seg = int(segment_length)
     nseg = (N + seg - 1) // seg
@@ -112,7 +117,8 @@ def run_filter_smoother(z, cand, x0, P0, model: PlantModel, Qd, R_diag, gate_thr
     thr = float(gate_threshold)
     do_gate = bool(np.isfinite(thr))
     bad = _fast.run(zz, cand, x0p, P0p, model.params, Qdp, Qcp, qk, R_diag,
-                    thr if do_gate else 0.0, do_gate, seg, xf, sf, nis, dof, used, gated, ckpt,
+                    thr if do_gate else 0.0, do_gate,
+                    np.ones(0, np.bool_) if lifted is None else ~lifted, seg, xf, sf, nis, dof, used, gated, ckpt,
                     xs, ss, nis_s, aa, aas, stats, Pb, Kb, Hb, vb, sb, Fb, innov)
     with np.errstate(invalid="ignore", divide="ignore"):
         em_R = (stats[0] + stats[1]) / stats[2]

@@ -236,7 +236,8 @@ def run_reference(z, valid, x0, P0, model: PlantModel, Qd, R_diag, gate_threshol
     """Filter + MBF smoother over all samples with the numpy functions above.
 
     x0, P0 are the prior at sample 0 (x(0|-1), P(0|-1)); Qd (21,21), or (N,21,21) for a
-    time-varying process noise (Qd[k]: the transition into sample k).  Smoother NIS at k is
+    time-varying process noise (Qd[k]: the transition into sample k); gate_threshold a number
+    or (N,) per sample (inf: no gate there).  Smoother NIS at k is
     sum_j e_j^2 / Var(e_j) with e = z - h(x(k|N)) and Var(e) = diag(R D R)
     (see :class:`aerosid.estimation.pipeline.EBMResult`).
     """
@@ -255,7 +256,8 @@ def run_reference(z, valid, x0, P0, model: PlantModel, Qd, R_diag, gate_threshol
     for k in range(N):
         if k > 0:
             x, P, Phi[k] = ekf_predict(x, P, model, Qd[k] if np.ndim(Qd) == 3 else Qd)
-        up = ekf_update(x, P, z[k], valid[k], model, R_diag, gate_threshold)
+        up = ekf_update(x, P, z[k], valid[k], model, R_diag,
+                        gate_threshold[k] if np.ndim(gate_threshold) else gate_threshold)
         ups.append(up)
         x, P = up.x, up.P
         xf[k], Pf[k] = x, P

@@ -254,7 +254,7 @@ def _fill(t, y, ok):
 
 
 def smooth_flight(t_s, z, valid, inertia_kg_m2, sensor_offset_m, z_filled=None,
-                  options: EBMOptions | None = None, q_local=None) -> EBMResult:
+                  options: EBMOptions | None = None, q_local=None, gate_off=None) -> EBMResult:
     """Estimation Before Modeling state estimation of one flight segment.
 
     t_s (N,) uniform time grid [s]; z (N,6) measurements ax, ay, az [m/s^2],
@@ -265,7 +265,9 @@ def smooth_flight(t_s, z, valid, inertia_kg_m2, sensor_offset_m, z_filled=None,
     z_filled: optional gap-filled copy for the spectra (default: linear
     interpolation over the valid samples); options: EBMOptions; q_local: None or (N,6)
     multipliers of the chains' intensities per sample (time-varying process noise,
-    aerosid.estimation.local_q; all ones is the stationary filter bit for bit).
+    aerosid.estimation.local_q; all ones is the stationary filter bit for bit); gate_off:
+    None or (N,) bool, samples where the innovation gate is lifted (local_q: the spans of
+    manoeuvres the model could not follow).
     """
     opt = options or EBMOptions()
     t_s = np.asarray(t_s, dtype=float)
@@ -323,7 +325,7 @@ def smooth_flight(t_s, z, valid, inertia_kg_m2, sensor_offset_m, z_filled=None,
         Qd = discrete_process_noise(q_chain0 * qs, model)
         shares = None if q_local is None else chain_shares(q_chain0 * qs, model)
         return run_filter_smoother(z, cand, x0, P0, model, Qd, R0 * rf, gate, opt.use_numba,
-                                   opt.segment_length, q_local, shares), Qd
+                                   opt.segment_length, q_local, shares, gate_off), Qd
 
     n_iter = max(1, int(opt.max_tuning_iterations)) if opt.auto_tune else 1
     good = None  # the last iteration whose smoother output is finite
