@@ -182,7 +182,7 @@ def smooth_flight_adaptive(t_s, z, valid, inertia_kg_m2, sensor_offset_m, z_fill
             # manoeuvre reads as systematic gating, and raising the whole segment can leave it locked
             # (unseen global5000 seed 0: L, N x27000, p then gated to the end; the local raise from the
             # unescalated run frees it): the local rounds from the first run too, fewer condemned kept
-            first, first_rounds = local(path[0][2], path[0][1])[0::2]
+            first, _, first_rounds = local(path[0][2], path[0][1])
             if first_rounds and condemned_samples(first) < condemned_samples(escalated):
                 escalations.append((0, (f"escalation undone: the local raise on the first run condemns "
                                         f"{condemned_samples(first)} samples, {condemned_samples(escalated)} with it",)))
