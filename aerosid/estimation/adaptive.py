@@ -183,9 +183,10 @@ def smooth_flight_adaptive(t_s, z, valid, inertia_kg_m2, sensor_offset_m, z_fill
             # (unseen global5000 seed 0: L, N x27000, p then gated to the end; the local raise from the
             # unescalated run frees it): the local rounds from the first run too, fewer condemned kept
             first, _, first_rounds = local(path[0][2], path[0][1])
-            if first_rounds and condemned_samples(first) < condemned_samples(escalated):
+            n_first, n_escalated = condemned_samples(first), condemned_samples(escalated)
+            if first_rounds and n_first < n_escalated:
                 escalations.append((0, (f"escalation undone: the local raise on the first run condemns "
-                                        f"{condemned_samples(first)} samples, {condemned_samples(escalated)} with it",)))
+                                        f"{n_first} samples, {n_escalated} with it",)))
                 escalated, rounds, scale = first, first_rounds, path[0][1]
         result = escalated
     return AdaptiveSmoothing(result, tuple(float(v) for v in scale), tuple(escalations), rounds)

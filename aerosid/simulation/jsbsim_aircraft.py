@@ -29,14 +29,14 @@ import pandas as pd
 
 from aerosid.simulation import SimulatedFlight
 from aerosid.simulation.jsbsim_design import (DT_S, FT, INCH, LBF, PSF, SLUG, SLUG_FT2, FlightDesign, in_catalogue,
-                                              UnsupportedAircraft, flight_design, symmetric_loading)
+                                              UnsupportedAircraft, flight_design, loaded_fdm)
 from aerosid.simulation.jsbsim_linear import abs_beta_slope, mach_slopes, model_coefficients
 from aerosid.simulation.jsbsim_flight import COMMON_PROPERTIES, _fly, _import_jsbsim, _schedule, _takeup_steps
 from aerosid.simulation.jsbsim_turbulence import checked_turbulence, start_turbulence
 from aerosid.simulation.jsbsim_columns import coefficient_columns, make_telemetry, state_columns
 from aerosid.simulation.jsbsim_truth import flight_statistics, _truth_check
 from aerosid.simulation.jsbsim_tables import DEG, AeroTables
-from aerosid.simulation.jsbsim_trim import initialise, open_fdm, start_engines
+from aerosid.simulation.jsbsim_trim import initialise
 from aerosid.simulation.jsbsim_truth_avg import generated_flight_average
 from aerosid.simulation.jsbsim_vehicle import powered_level, vehicle_toml
 from aerosid.vehicles.vehicle import DATA_DIR
@@ -129,9 +129,7 @@ def simulate_aircraft(aircraft: str, seed: int = 0, *, faults: bool = True, prog
     xml_root = ET.parse(design.xml_path).getroot()
     ctl = design.controls
 
-    fdm = open_fdm(jsbsim, aircraft, DT_S)
-    symmetric_loading(fdm, xml_root)
-    start_engines(fdm, design.trim.h_m, design.trim.V_m_s)
+    fdm = loaded_fdm(jsbsim, aircraft, xml_root, design.trim)
     residual = initialise(fdm, design.trim)
     catalogue = {p.split(" ")[0] for p in fdm.get_property_catalog()}
     n_eng = int(fdm.get_propulsion().get_num_engines())

@@ -160,6 +160,15 @@ def symmetric_loading(fdm, xml_root: ET.Element) -> list[float]:
     return weights
 
 
+def loaded_fdm(jsbsim, aircraft: str, xml_root: ET.Element, point: TrimPoint):
+    """A fresh FDM of `aircraft` (JSBSim step DT_S) with the symmetric loading and its engines
+    started at the trim point's height and speed (`initialise` then puts it at `point`)."""
+    fdm = open_fdm(jsbsim, aircraft, DT_S)
+    symmetric_loading(fdm, xml_root)
+    start_engines(fdm, point.h_m, point.V_m_s)
+    return fdm
+
+
 def find_controls(tables: AeroTables, catalogue: set[str]) -> Controls:
     """The elevator, aileron and rudder variables of the aerodynamic model."""
     leaves = [p for p in tables.leaf_properties() if p.startswith("fcs/") and "mag-" not in p]
@@ -263,9 +272,13 @@ def manoeuvre_design(d: dict, modes: dict, gains: dict, limits: dict, controls: 
     unit = _r(np.clip(UNIT_OMEGA / w_sp, 0.1, 1.0))
     half = _r(np.clip(DOUBLET_OMEGA / w_dr, 0.3, 2.0))
 
+    def room_of(prop: str) -> float:
+        """The largest step [rad] of surface `prop`: TRAVEL_FRACTION of the travel left at trim."""
+        return TRAVEL_FRACTION * _travel(limits, prop, base[prop])
+
     def command(axis: str, prop: str, surface_rad: float, sign: float) -> tuple[float, float]:
         """The normalised command and the surface step [rad] it flies (capped by the travel)."""
-        room = TRAVEL_FRACTION * _travel(limits, prop, base[prop])
+        room = room_of(prop)
         if surface_rad > room:
             notes.append(f"{axis}: step {surface_rad / DEG:.2f} deg limited to {room / DEG:.2f} deg "
                          f"({TRAVEL_FRACTION:.0%} of the travel left at trim)")
@@ -304,7 +317,7 @@ def manoeuvre_design(d: dict, modes: dict, gains: dict, limits: dict, controls: 
     if abs(k_r) > 1e-3 and rudder_peak is not None:
         k_beta = feedback.get("beta", {}).get("yaw", 0.0)
         target = dr * doublet_sideslip_peak(d, base, half, rise_lat, 0.0, k_beta)
-        room = TRAVEL_FRACTION * _travel(limits, controls.yaw, base[controls.yaw])
+        room = room_of(controls.yaw)
         # the peak grows with the step, faster than in proportion once the damper saturates:
         # proportional steps kept inside a bracket, bisection when they leave it
         lo, hi = 0.0, room
@@ -444,9 +457,7 @@ def _design(jsbsim, aircraft: str) -> FlightDesign:
 
     def rudder_peak(step_rad: float, half_s: float, rise_s: float) -> float:
         if not fresh:
-            fresh.append(open_fdm(jsbsim, aircraft, DT_S))
-            symmetric_loading(fresh[0], xml_root)
-            start_engines(fresh[0], point.h_m, point.V_m_s)
+            fresh.append(loaded_fdm(jsbsim, aircraft, xml_root, point))
         return flown_doublet_sideslip_peak(fresh[0], point, step_rad / abs(gains["yaw"]), half_s, rise_s, DT_S)
 
     m, duration, more = manoeuvre_design(d_cg, modes, gains, limits, controls, base, closed, feedback, rudder_peak)

@@ -11,6 +11,7 @@ import numpy as np
 from scipy.linalg import expm
 
 from aerosid.simulation.jsbsim_columns import FT, PSF, SLUG, SLUG_FT2
+from aerosid.simulation.jsbsim_trim import initialise
 
 
 def mode_frequencies(d: dict, base: dict) -> dict[str, float]:
@@ -58,8 +59,6 @@ def flown_doublet_sideslip_peak(fdm, point, command_norm: float, half_s: float, 
     """Peak |beta| [rad] of a rudder doublet of `command_norm` (normalised rudder command)
     flown in JSBSim from `point` (a TrimPoint; `fdm` loaded, engines started, stepping dt_s),
     with everything the FCS does: a yaw damper's authority limit, washout, actuator."""
-    from aerosid.simulation.jsbsim_trim import initialise
-
     initialise(fdm, point)
     beta0 = fdm["aero/beta-rad"]
     _, u = doublet_shape(half_s, rise_s, dt_s)

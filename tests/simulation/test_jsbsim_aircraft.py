@@ -226,17 +226,13 @@ def test_dutch_roll_approximation_gives_jsbsims_doublet_sideslip(aircraft):
     command: within 10 % on an undamped aircraft (pa28) and a damped one (global5000, 4 % when
     measured).  On a yaw-damped aircraft the design's step is the one whose flown doublet reaches
     the undamped approximation's peak (within 5 %) or the travel cap."""
-    import xml.etree.ElementTree as ET
-
-    from aerosid.simulation.jsbsim_design import DAMPER_TOLERANCE, symmetric_loading
+    from aerosid.simulation.jsbsim_design import DAMPER_TOLERANCE, loaded_fdm
     from aerosid.simulation.jsbsim_modes import doublet_sideslip_peak, flown_doublet_sideslip_peak
     jsbsim = _import_jsbsim()
     design = flight_design(jsbsim, aircraft)
     m, fb = design.manoeuvre, design.feedback
     half, rise = m["rudder_half_s"], m["rudder_rise_s"]
-    fdm = open_fdm(jsbsim, aircraft, 0.01)
-    symmetric_loading(fdm, ET.parse(design.xml_path).getroot())
-    start_engines(fdm, design.trim.h_m, design.trim.V_m_s)
+    fdm = loaded_fdm(jsbsim, aircraft, ET.parse(design.xml_path).getroot(), design.trim)
     step = m["surface_steps_rad"]["rudder"]
     flown = flown_doublet_sideslip_peak(fdm, design.trim, 0.5 * m["rudder_amplitude_norm"], half, rise, 0.01)
     model = 0.5 * step * doublet_sideslip_peak(design.derivatives, design.state, half, rise,
@@ -416,9 +412,7 @@ def test_the_elevator_step_moves_alpha_by_the_designed_amount_in_jsbsim(aircraft
     the linear truth says 1.4 (0.64 at half).  c310 is heavily damped (C_m,q c/(2V) Z_alpha
     1.4 x C_m,alpha): sized on C_m,alpha alone, its step gave 0.3 deg at half command.  Its step is
     capped by the elevator's travel, and the design records the step flown, not the one wanted."""
-    import xml.etree.ElementTree as ET
-
-    from aerosid.simulation.jsbsim_design import ALPHA_STEP_DEG, symmetric_loading
+    from aerosid.simulation.jsbsim_design import ALPHA_STEP_DEG, loaded_fdm
     from aerosid.simulation.jsbsim_trim import initialise
     jsbsim = _import_jsbsim()
     design = flight_design(jsbsim, aircraft)
@@ -430,9 +424,7 @@ def test_the_elevator_step_moves_alpha_by_the_designed_amount_in_jsbsim(aircraft
     flown = design.manoeuvre["surface_steps_rad"]["elevator"]
     assert abs(design.manoeuvre["elevator_amplitudes_norm"][0] * design.gains["pitch"]) == pytest.approx(flown, rel=0.01)
     assert bool(capped) == (aircraft == "c310")
-    fdm = open_fdm(jsbsim, aircraft, 0.01)
-    symmetric_loading(fdm, ET.parse(design.xml_path).getroot())
-    start_engines(fdm, design.trim.h_m, design.trim.V_m_s)
+    fdm = loaded_fdm(jsbsim, aircraft, ET.parse(design.xml_path).getroot(), design.trim)
     initialise(fdm, design.trim)
     alpha0 = fdm["aero/alpha-deg"]
     fdm["fcs/elevator-cmd-norm"] = design.trim.elevator_cmd + 0.5 * design.manoeuvre["elevator_amplitudes_norm"][0]
