@@ -120,6 +120,20 @@ def test_two_distinct_effects_are_not_called_lookalikes():
     assert c.verdict == "distinct" and c.recommended == "a_term"
 
 
+def test_three_distinct_effects_name_every_one_the_model_lacks():
+    rng = np.random.default_rng(4)
+    n = 4000
+    base = np.ones((n, 1))
+    xs = [np.sin(np.linspace(0, 47, n)), np.cos(np.linspace(0, 13, n)), np.sin(np.linspace(0, 29, n) + 1.0)]
+    y = 0.5 * xs[0] + 0.4 * xs[1] + 0.3 * xs[2] + 0.05 * rng.standard_normal(n)
+    cands = (*_cands(), Candidate("c_term", "Cm", "Cm_c", "delta_p**2", "c"))
+    c = compare("Cm", y, base, ["c0"], cands, xs, in_model="a_term", p_distinct=1e-3)
+    assert c.verdict == "distinct" and c.recommended == "b_term"
+    assert "are all needed" in c.message and "add b_term and c_term as well (b_term first)" in c.message
+    c2 = compare("Cm", y, base, ["c0"], cands[:2], xs[:2], p_distinct=1e-3)
+    assert "are both needed" in c2.message and "add a_term and b_term (a_term first)" in c2.message
+
+
 def test_separating_manoeuvre_names_what_one_term_has_and_the_other_lacks():
     text = separating_manoeuvre("alpha*delta_p/2", "alpha*abs(alpha)")
     assert "pitch-fin deflection" in text and "alpha" in text and "two" in text

@@ -320,10 +320,13 @@ def compare(channel: str, y: np.ndarray, base_X: np.ndarray, base_names: Sequenc
     pair_txt = " and ".join(names)
     if distinct:
         verdict = "distinct"
-        recommended = next((n for n in names if n != in_model), names[0])
-        msg = (f"{pair_txt} are both needed in {channel}: each keeps p < {p_distinct:g} with the other(s) in "
-               f"the model (|t| {', '.join(f'{abs(a.t_joint):.1f}' for a in alts)} >= {t_distinct:.1f}); add "
-               f"{recommended}" + (" as well." if in_model else " first."))
+        missing = [n for n in names if n != in_model]
+        recommended = missing[0] if missing else names[0]
+        add = " and ".join(missing)
+        msg = (f"{pair_txt} are {'both' if k == 2 else 'all'} needed in {channel}: each keeps p < {p_distinct:g} "
+               f"with the other{'' if k == 2 else 's'} in the model (|t| "
+               f"{', '.join(f'{abs(a.t_joint):.1f}' for a in alts)} >= {t_distinct:.1f}); add {add}"
+               + (" as well" if in_model else "") + (f" ({recommended} first)." if len(missing) > 1 else "."))
     elif winner is not None:
         verdict = "separated"
         w = next(a for a in alts if a.name == winner)
