@@ -31,7 +31,8 @@ by a sample or more (aerosid.identification.vanes).
 
 The preprocessing adds ``time_jitter``, ``frozen``, ``sentinel`` and ``out_of_range`` (segment
 "preprocess"): timestamps off the grid and sensor faults, whose samples it treats as missing
-(aerosid.preprocess.result.PreprocessResult.findings).
+(aerosid.preprocess.result.PreprocessResult.findings); and ``phase_shift`` (reported): rows whose
+sample phase moved at a dropout, re-timed onto the grid and kept.
 """
 from __future__ import annotations
 

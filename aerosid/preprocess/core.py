@@ -8,9 +8,11 @@ Pipeline (method.md §1), all vectorised:
    carried over; their names are recorded (``ignored_columns``).
 2. **Grid.**  dt = 1 / ``nominal_rate_hz``, or the median interval when that is
    ``None``.  The grid origin is the circular mean phase of the timestamps, so
-   jitter does not shift it.  Each raw row goes to its nearest grid point; rows
-   further than ``snap_tolerance`` steps away are flagged ``TIME_JITTER``; two rows
-   on one grid point raise ``TelemetryError``.  Grid points without a raw row are
+   jitter does not shift it.  A run of rows that left the grid together at a dropout
+   (the sample phase moved: ``_phase_runs``) is re-timed onto it and reported
+   (``PreprocessResult.retimed``, a ``phase_shift`` finding).  Each raw row goes to its
+   nearest grid point; rows further than ``snap_tolerance`` steps away are flagged
+   ``TIME_JITTER``; two rows on one grid point raise ``TelemetryError``.  Grid points without a raw row are
    inserted (``MISSING_ROW``; raw columns and ``t_raw_s`` NaN).
 3. **Per channel detection** on the grid: ``NAN``, ``SENTINEL``, ``OUT_OF_RANGE``;
    then the sensor's profile (``sensors.profile``: resolution, update interval,
@@ -58,6 +60,10 @@ from .result import PreprocessResult
 
 #: Hard cap on the grid size (a clock jump would otherwise allocate without bound).
 MAX_GRID_ROWS = 50_000_000
+#: Rows a run must have to be re-timed as a phase shift (_phase_runs); shorter runs off the grid are jitter.
+PHASE_RUN_MIN_ROWS = 10
+#: A dropout interval further than this [steps] from a whole number moved the sample phase (_infer_rate).
+PHASE_STEP_RESOLUTION = 1e-3
 
 
 # ---------------------------------------------------------------------------
@@ -99,13 +105,18 @@ def _infer_rate(t: np.ndarray) -> float:
     """Sample rate [Hz] from the timestamps: a first step dt0 = median interval, the
     sample count between consecutive rows = round(interval / dt0) (>= 1), then the
     least-squares slope of t against the cumulative sample index (the median alone
-    drifts by samples over a long jittered record)."""
+    drifts by samples over a long jittered record).  A dropout across which the sample
+    phase moved (an interval of >= 1.5 steps that is not a whole number of them) counts its
+    fractional steps: rounded, each such jump would tilt the slope (0.13 % on 20 s of 50 Hz
+    with two half-step jumps, a step and a half of drift)."""
     d = np.diff(t)
     dt0 = float(np.median(d))
     if not (dt0 > 0):
         return float("inf")
     for _ in range(2):
-        steps = np.maximum(1, np.round(d / dt0))
+        x = d / dt0
+        steps = np.where((x >= 1.5) & (np.abs(x - np.round(x)) > PHASE_STEP_RESOLUTION), x,
+                         np.maximum(1, np.round(x)))
         k = np.concatenate(([0.0], np.cumsum(steps)))
         kc = k - k.mean()
         denom = float(np.dot(kc, kc))
@@ -140,14 +151,16 @@ def _grid(t: np.ndarray, params: PreprocessParams, source: str):
         raise TelemetryError(f"span {t[-1] - t[0]:.6g} s at {rate:.6g} Hz needs more than {MAX_GRID_ROWS} grid "
                              "rows", file=source, column="t_s")
     u = (t - t[0]) / dt
-    frac = u - np.round(u)
-    phase = math.atan2(float(np.mean(np.sin(2 * np.pi * frac))), float(np.mean(np.cos(2 * np.pi * frac))))
-    phase /= 2 * np.pi  # in (-0.5, 0.5]
-    pos = u - phase
+    pos = u - _circular_phase(u)
+    k_global = np.round(pos)
+    t0 = t[0] - (pos[0] - k_global[0]) * dt  # the global grid point of the first row
+    retimed = _phase_runs(pos, params.snap_tolerance)
+    for a, b, phi in retimed:
+        pos[a:b] -= phi
     k = np.round(pos).astype(np.int64)
+    t0 += (k[0] - k_global[0]) * dt  # a re-timed first run may start one grid step off
     k -= k[0]
     resid = pos - np.round(pos)
-    t0 = t[0] - resid[0] * dt  # the grid point of the first row
     coll = np.flatnonzero(np.diff(k) == 0)
     if coll.size:
         rows = sorted(set(coll.tolist()) | set((coll + 1).tolist()))
@@ -155,7 +168,42 @@ def _grid(t: np.ndarray, params: PreprocessParams, source: str):
                              f"(first t_s={float(t[coll[0]])!r} and {float(t[coll[0] + 1])!r}); "
                              "is the nominal rate right?",
                              file=source, column="t_s", rows=rows)
-    return rate, dt, inferred, t0, k, resid
+    return rate, dt, inferred, t0, k, resid, tuple((a, b, -phi * dt) for a, b, phi in retimed)
+
+
+def _circular_phase(u: np.ndarray) -> float:
+    """The circular mean of the fractional parts of u [steps], in (-0.5, 0.5]: the grid's phase,
+    which symmetric jitter does not shift."""
+    frac = u - np.round(u)
+    phase = math.atan2(float(np.mean(np.sin(2 * np.pi * frac))), float(np.mean(np.cos(2 * np.pi * frac))))
+    return phase / (2 * np.pi)
+
+
+def _phase_runs(pos: np.ndarray, tol: float) -> list[tuple[int, int, float]]:
+    """Runs of rows that lie off the grid together because the record's sample phase moved at a
+    dropout (a recorder that resumes on another phase; telemetry thinned after dropouts): (first
+    row, end row, the run's phase [steps]) for every run of at least PHASE_RUN_MIN_ROWS rows,
+    delimited by dropouts (intervals of >= 1.5 steps: a phase can move there by any amount, and
+    quarter steps add up) or by intervals more than tol off a whole step, at least one of them
+    a dropout, whose own phase is more than tol off the grid.
+    Such a run is re-timed onto the grid by its phase (at most half a step; the rows keep their
+    spacing, every channel moves alike) instead of being lost as jitter.  A run off the grid
+    between two unbroken intervals is a clock glitch and stays jitter."""
+    if pos.size < PHASE_RUN_MIN_ROWS:
+        return []
+    d = np.diff(pos)
+    breaks = np.flatnonzero((d >= 1.5) | (np.abs(d - np.round(d)) > tol)) + 1
+    edges = np.concatenate(([0], breaks, [pos.size]))
+    out = []
+    for a, b in zip(edges[:-1], edges[1:]):
+        if b - a < PHASE_RUN_MIN_ROWS:
+            continue
+        after_dropout = a > 0 and d[a - 1] >= 1.5
+        before_dropout = b < pos.size and d[b - 1] >= 1.5
+        phi = _circular_phase(pos[a:b])
+        if (after_dropout or before_dropout) and abs(phi) > tol:
+            out.append((int(a), int(b), phi))
+    return out
 
 
 def _run_bits(bad: np.ndarray, fault: np.ndarray, limit: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -276,7 +324,7 @@ def preprocess(raw: pd.DataFrame, params: PreprocessParams = PreprocessParams(),
     _check_structure(raw, source)
     validate(raw, RawTelemetry, source)
     t = raw["t_s"].to_numpy()
-    rate, dt, inferred, t0, k, resid = _grid(t, params, source)
+    rate, dt, inferred, t0, k, resid, retimed = _grid(t, params, source)
     n = int(k[-1]) + 1
     t_grid = t0 + np.arange(n, dtype=np.float64) * dt
     present = np.zeros(n, dtype=bool)
@@ -350,6 +398,8 @@ def preprocess(raw: pd.DataFrame, params: PreprocessParams = PreprocessParams(),
         n_used_rows=int(all_used.sum()),
         n_used_by_channel=used_by,
         sensors=profiles,
+        retimed=tuple((float(t_grid[k[a]]), float(t_grid[k[b - 1]]), int(b - a), float(shift))
+                      for a, b, shift in retimed),
     )
     validate(frame, PreprocessedTelemetry, source)
     return result

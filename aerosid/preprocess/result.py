@@ -70,6 +70,10 @@ class PreprocessResult:
         the outlier test (a diagnostic, not the R estimate of method.md §4).
     ignored_columns:
         Input columns outside the contract, not carried over.
+    retimed:
+        ``(t_start_s, t_end_s, n_rows, shift_s)`` of every run of rows re-timed onto the grid
+        because the record's sample phase moved at a dropout (grid times of its first and last
+        row; shift_s = grid time - raw time, at most half a step; ``t_raw_s`` keeps the raw time).
     """
 
     frame: pd.DataFrame
@@ -93,6 +97,7 @@ class PreprocessResult:
     n_used_rows: int = 0
     n_used_by_channel: dict = field(default_factory=dict)
     sensors: dict = field(default_factory=dict)
+    retimed: tuple = ()
 
     @property
     def usable_share(self) -> dict:
@@ -109,6 +114,8 @@ class PreprocessResult:
         * ``time_jitter`` (channel t_s): rows whose timestamp lies off the grid (``TIME_JITTER``),
           reported from JITTER_MIN_ROWS rows on -- the clock or the sample phase of the record is
           the engineer's to check;
+        * ``phase_shift`` (channel t_s): a run of rows whose sample phase moved at a dropout,
+          re-timed onto the grid and kept (``retimed``; nothing cut);
         * ``frozen``, ``sentinel``, ``out_of_range`` (per channel): a stuck sensor, sentinel values,
           values outside the physical bounds, reported from SENSOR_FAULT_MIN_S on.
 
@@ -138,6 +145,12 @@ class PreprocessResult:
               lambda n: f"{n} timestamp(s) lie more than snap_tolerance = {self.params.snap_tolerance:g} of a step "
                         f"from the {rate:.6g} Hz grid (clock jitter, or the sample phase moved after a dropout); "
                         "those rows are treated as missing: check the record's clock or nominal_rate_hz")
+        for t0, t1, n, shift in self.retimed:
+            out.append(Finding("phase_shift", "preprocess", "t_s", t0, t1, n, False,
+                               f"the sample phase moved at a dropout: {n} row(s) lie {-shift / self.dt_s:+.2f} of a "
+                               f"step off the {rate:.6g} Hz grid together; re-timed onto it by {1e3 * shift:+.3g} ms "
+                               "and kept (every channel alike; t_raw_s keeps the recorded time): a recorder that "
+                               "resumed on another phase, or telemetry thinned after dropouts"))
         min_n = max(2, int(round(SENSOR_FAULT_MIN_S * rate)))
         for col in [c for c in self.frame.columns if c.startswith("flags_")]:
             ch = col[len("flags_"):]
@@ -186,6 +199,7 @@ class PreprocessResult:
             p + "physical_bounds": json.dumps(PHYSICAL_BOUNDS, sort_keys=True),
             p + "usable_share": json.dumps(self.usable_share, sort_keys=True),
             p + "sensors": json.dumps(self.sensors, sort_keys=True),
+            p + "retimed": json.dumps([list(r) for r in self.retimed]),
             "aerosid.findings": json.dumps([f.as_dict() for f in self.findings]),
         }
 

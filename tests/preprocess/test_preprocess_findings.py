@@ -2,8 +2,10 @@
 import json
 
 import numpy as np
+import pytest
 
 from aerosid.preprocess import preprocess
+from aerosid.preprocess.flags import QualityFlag
 from aerosid.preprocess.result import JITTER_MIN_ROWS
 from tests.preprocess.test_preprocess import make_flight
 
@@ -70,3 +72,39 @@ def test_the_preprocess_stage_hands_the_finding_on_computed_and_reused(tmp_path)
     again = preprocess_task.fn(str(raw_path), str(run_dir), ctx, {})  # the output reused
     assert [f["kind"] for f in first["findings"]] == ["time_jitter"] and first["findings"][0]["n_samples"] == 40
     assert again["status"] == "reused" and again["findings"] == first["findings"]
+
+
+def _thinned_after_dropouts(seed: int = 9):
+    """A clean 100 Hz flight with two dropouts of an odd number of rows (7 and 5), then every
+    other row kept: the 50 Hz record's sample phase moves by half a step at the first dropout
+    and back at the second (telemetry thinned after dropouts)."""
+    fl = make_flight(seed=seed, duration_s=20.0, faults=False, jitter=0.0)
+    keep = np.ones(len(fl.raw), bool)
+    keep[600:607] = False
+    keep[1400:1405] = False
+    return fl, fl.raw[keep].iloc[::2].reset_index(drop=True)
+
+
+def test_a_sample_phase_that_moves_at_a_dropout_is_re_timed_and_kept():
+    fl, raw = _thinned_after_dropouts()
+    res = preprocess(raw)
+    assert res.nominal_rate_hz == pytest.approx(50.0, rel=1e-3)
+    fr = res.frame
+    assert int(((fr["flags"].to_numpy() & int(QualityFlag.TIME_JITTER)) != 0).sum()) == 0  # nothing lost as jitter
+    (f,) = [f for f in res.findings if f.kind == "phase_shift"]
+    assert not f.cut and f.channel == "t_s" and "re-timed" in f.detail
+    (r,) = res.retimed
+    t_raw = fr["t_raw_s"].to_numpy()
+    moved = np.isfinite(t_raw) & (np.abs(fr["t_s"].to_numpy() - t_raw) > 0.004)
+    # the rows between the two dropouts, moved by half a step (10 ms) and no more
+    assert r[2] == int(moved.sum()) == f.n_samples > 300
+    assert abs(abs(r[3]) - 0.01) < 1e-9 and np.max(np.abs(fr["t_s"] - fr["t_raw_s"])) <= 0.01 + 1e-9
+    assert fl.t_nominal[607] - 0.011 <= f.t0_s <= fl.t_nominal[607] + 0.011
+    assert res.n_used_rows == res.n_raw_rows  # every row recorded is used
+
+
+def test_the_re_timed_rows_keep_their_values_in_order():
+    _, raw = _thinned_after_dropouts()
+    fr = preprocess(raw).frame
+    got = fr.loc[np.isfinite(fr["t_raw_s"]), ["t_raw_s", "q_rad_s"]].to_numpy()
+    assert np.array_equal(got[:, 0], raw["t_s"].to_numpy()) and np.array_equal(got[:, 1], raw["q_rad_s"].to_numpy())
