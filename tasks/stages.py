@@ -65,7 +65,8 @@ def preprocess_task(raw_path: str, run_dir: str, ctx: StageContext, params: dict
 
     meta = read_parquet_metadata(out)  # also when the output is reused
     share = meta.get("aerosid.preprocess.usable_share")
-    done = {**done, "findings": json.loads(meta.get("aerosid.findings", "[]"))}
+    done = {**done, "findings": json.loads(meta.get("aerosid.findings", "[]")),
+            "time_origin_s": float(meta.get("aerosid.preprocess.time_origin_s", "0.0"))}
     return {**done, "usable_share": json.loads(share)} if share else done
 
 

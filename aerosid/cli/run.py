@@ -134,7 +134,7 @@ def run(telemetry, vehicle, out_dir, flight, windows, model_spec, mach_half_widt
         raise click.ClickException(f"cannot write the run folder {out_dir}: {exc.strerror or exc}{where}; "
                                    "earlier outputs are left as they were") from exc
     for fs in summary.get("flights", [summary]):
-        _echo_usable_share(fs.get("usable_share"))
+        _echo_usable_share(fs.get("usable_share"), (fs.get("preprocess") or {}).get("time_origin_s"))
         if fs.get("error", {}).get("stage") == "plan-segments":
             raise click.ClickException(f"{fs.get('telemetry', telemetry[0])}: {fs['error']['message']}")
         if fs.get("segments_note"):
@@ -188,8 +188,9 @@ def _preprocess_options(items, min_segment_s):
     return params, min_segment_s if min_segment_s is not None else from_items
 
 
-def _echo_usable_share(share: dict | None) -> None:
-    """One line: rows used of rows recorded, and the channels below 100 %."""
+def _echo_usable_share(share: dict | None, time_origin_s: float | None = None) -> None:
+    """One line: rows used of rows recorded, and the channels below 100 %; and the origin the
+    run's times count from when the record is stamped in absolute time."""
     if not share:
         return
     low = {c: v["share"] for c, v in share["by_channel"].items() if v["used"] < share["recorded"]}
@@ -197,6 +198,9 @@ def _echo_usable_share(share: dict | None) -> None:
                f"({100.0 * share['share']:.1f} %)"
                + (("; channels below 100 %: " + ", ".join(f"{c} {100.0 * v:.1f} %" for c, v in low.items()))
                   if low else ""))
+    if time_origin_s:
+        click.echo(f"times (findings, windows, plots) are in s since t_s = {time_origin_s:.0f}, the record's first "
+                   "whole second (absolute timestamps: aerosid.preprocess.time_origin_s)")
 
 
 #: The inertial channels: a constant one is a dead sensor.
@@ -236,6 +240,7 @@ def _preflight(telemetry: Path, vehicle: str | None, model_spec: str | None, pre
     from aerosid.modelling.models import default_models, load_models
     from aerosid.plausibility.units import check_units
     from aerosid.preprocess import TelemetryError
+    from aerosid.preprocess.core import time_origin_s
     from aerosid.vehicles.vehicle import load_vehicle
     from schemas.telemetry import CHANNELS, MEASURED_AIR_DATA_CHANNELS, RAW_COLUMNS, RawTelemetry, sentinel_mask
     from tasks.runner import read_validated
@@ -299,7 +304,8 @@ def _preflight(telemetry: Path, vehicle: str | None, model_spec: str | None, pre
         from aerosid.preprocess.segments import plan_segments
 
         min_seg = next(v for v in (min_segment_s, veh.min_segment_s, DEFAULT_MIN_SEGMENT_S) if v is not None)
-        plan = plan_segments(frame["t_s"].to_numpy(), [], [tuple(w) for w in windows], float(min_seg))
+        t_s = frame["t_s"].to_numpy(float)  # in the pipeline's time (preprocess.time_origin_s)
+        plan = plan_segments(t_s - time_origin_s(float(t_s[0])), [], [tuple(w) for w in windows], float(min_seg))
         if not plan.segments:
             raise ValueError(f"{telemetry}: {plan.refusal()}")
     return vehicle

@@ -12,7 +12,9 @@ Pipeline (method.md §1), all vectorised:
    (the sample phase moved: ``_phase_runs``) is re-timed onto it and reported
    (``PreprocessResult.retimed``, a ``phase_shift`` finding).  Each raw row goes to its
    nearest grid point; rows further than ``snap_tolerance`` steps away are flagged
-   ``TIME_JITTER``; two rows on one grid point raise ``TelemetryError``.  Grid points without a raw row are
+   ``TIME_JITTER``; two rows on one grid point raise ``TelemetryError``.  A record stamped
+   in absolute times (Unix time) is processed in seconds since its first whole second
+   (``time_origin_s``; ``t_s`` and ``t_raw_s`` count from it).  Grid points without a raw row are
    inserted (``MISSING_ROW``; raw columns and ``t_raw_s`` NaN).
 3. **Per channel detection** on the grid: ``NAN``, ``SENTINEL``, ``OUT_OF_RANGE``;
    then the sensor's profile (``sensors.profile``: resolution, update interval,
@@ -60,6 +62,11 @@ from .result import PreprocessResult
 
 #: Hard cap on the grid size (a clock jump would otherwise allocate without bound).
 MAX_GRID_ROWS = 50_000_000
+#: A record whose first timestamp is at least this large [s] in magnitude (Unix time, 1.7e9 s) is
+#: processed in seconds since time_origin_s(t0): at 1.7e9 s a float64 timestamp resolves only
+#: 2.4e-7 s, so a 100 Hz grid's steps scatter by 2e-5 of a step and no stage downstream could
+#: tell it from a broken clock (the smoother refused it); GPS time of week (< 6.1e5 s) stays as it is.
+TIME_ORIGIN_ABOVE_S = 1e6
 #: Rows a run must have to be re-timed as a phase shift (_phase_runs); shorter runs off the grid are jitter.
 PHASE_RUN_MIN_ROWS = 10
 #: A dropout interval further than this [steps] from a whole number moved the sample phase (_infer_rate).
@@ -99,6 +106,13 @@ def _check_structure(raw: pd.DataFrame, source: str) -> None:
         raise TelemetryError(f"timestamps must be strictly increasing; {kind} time at {bad.size} place(s), "
                              f"first t_s={float(t[bad[0]])!r} then {float(t[bad[0] + 1])!r}", file=source, column="t_s",
                              rows=rows)
+
+
+def time_origin_s(t0_s: float) -> float:
+    """The origin [s] the pipeline's times count from for a record starting at t0_s: 0, or for a
+    record stamped in large absolute times (|t0_s| >= TIME_ORIGIN_ABOVE_S) its first timestamp's
+    whole second (so t - origin is exact in float64 and starts within a second of zero)."""
+    return float(math.floor(t0_s)) if math.isfinite(t0_s) and abs(t0_s) >= TIME_ORIGIN_ABOVE_S else 0.0
 
 
 def _infer_rate(t: np.ndarray) -> float:
@@ -323,7 +337,8 @@ def preprocess(raw: pd.DataFrame, params: PreprocessParams = PreprocessParams(),
     """
     _check_structure(raw, source)
     validate(raw, RawTelemetry, source)
-    t = raw["t_s"].to_numpy()
+    origin = time_origin_s(float(raw["t_s"].iloc[0]))
+    t = raw["t_s"].to_numpy() - origin  # exact (Sterbenz) for an origin within a factor 2 of t
     rate, dt, inferred, t0, k, resid, retimed = _grid(t, params, source)
     n = int(k[-1]) + 1
     t_grid = t0 + np.arange(n, dtype=np.float64) * dt
@@ -400,6 +415,7 @@ def preprocess(raw: pd.DataFrame, params: PreprocessParams = PreprocessParams(),
         sensors=profiles,
         retimed=tuple((float(t_grid[k[a]]), float(t_grid[k[b - 1]]), int(b - a), float(shift))
                       for a, b, shift in retimed),
+        time_origin_s=origin,
     )
     validate(frame, PreprocessedTelemetry, source)
     return result

@@ -74,6 +74,9 @@ class PreprocessResult:
         ``(t_start_s, t_end_s, n_rows, shift_s)`` of every run of rows re-timed onto the grid
         because the record's sample phase moved at a dropout (grid times of its first and last
         row; shift_s = grid time - raw time, at most half a step; ``t_raw_s`` keeps the raw time).
+    time_origin_s:
+        What ``t_s`` and ``t_raw_s`` count from [s]: 0, or for a record stamped in absolute
+        times (Unix time) its first timestamp's whole second (recorded time = t_raw_s + origin).
     """
 
     frame: pd.DataFrame
@@ -98,6 +101,7 @@ class PreprocessResult:
     n_used_by_channel: dict = field(default_factory=dict)
     sensors: dict = field(default_factory=dict)
     retimed: tuple = ()
+    time_origin_s: float = 0.0
 
     @property
     def usable_share(self) -> dict:
@@ -200,6 +204,7 @@ class PreprocessResult:
             p + "usable_share": json.dumps(self.usable_share, sort_keys=True),
             p + "sensors": json.dumps(self.sensors, sort_keys=True),
             p + "retimed": json.dumps([list(r) for r in self.retimed]),
+            p + "time_origin_s": repr(self.time_origin_s),
             "aerosid.findings": json.dumps([f.as_dict() for f in self.findings]),
         }
 
@@ -209,7 +214,9 @@ class PreprocessResult:
         lines = [
             f"preprocess {self.source}: {self.n_raw_rows} raw rows -> {self.n_grid_rows} grid rows "
             f"({self.n_inserted_rows} inserted) at {self.nominal_rate_hz:.6g} Hz "
-            f"({'inferred' if self.rate_inferred else 'given'})",
+            f"({'inferred' if self.rate_inferred else 'given'})"
+            + (f"; times in s since {self.time_origin_s:.0f} (the record's first whole second)"
+               if self.time_origin_s else ""),
             f"  rows used (every channel a measurement or a held value): {self.n_used_rows} of "
             f"{self.n_raw_rows} recorded ({100.0 * share['share']:.2f} %)",
             f"  usable rows (all channels): {self.n_usable_rows} "

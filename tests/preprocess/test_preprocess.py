@@ -807,3 +807,20 @@ def test_acceptance_on_the_simulated_reference_flight(reference_flight):
     assert fp <= 2 and n_clean > 100_000
     assert fp_sharp == 0 and n_clean_sharp > 2000
     assert len(res.long_gaps) >= 1 and res.longest_gap_s >= 1.9   # the 2 s sync gap
+
+
+def test_a_record_in_unix_time_is_processed_in_seconds_since_its_first_whole_second():
+    """At 1.7e9 s a float64 timestamp resolves 2.4e-7 s: the grid's steps would scatter by 2e-5 of
+    a 100 Hz step, and the smoother refused the flight as a broken clock."""
+    fl = make_flight(seed=11, duration_s=30.0)
+    raw = fl.raw.copy()
+    raw["t_s"] = raw["t_s"] + 1.7e9
+    ref, res = preprocess(fl.raw), preprocess(raw)
+    assert ref.time_origin_s == 0.0 and res.time_origin_s == math.floor(1.7e9 + fl.raw["t_s"].iloc[0])
+    t = res.frame["t_s"].to_numpy()
+    d = np.diff(t)
+    assert 0.0 <= t[0] < 1.0 and np.allclose(d, np.median(d), rtol=1e-9, atol=0.0)  # the smoother's test, tighter
+    np.testing.assert_allclose(t, ref.frame["t_s"].to_numpy() - (res.time_origin_s - 1.7e9), atol=1e-5)  # 1e-3 step
+    assert np.array_equal(res.frame["flags"].to_numpy(), ref.frame["flags"].to_numpy())
+    assert res.metadata()["aerosid.preprocess.time_origin_s"] == repr(res.time_origin_s)
+    assert f"times in s since {res.time_origin_s:.0f}" in res.summary()
