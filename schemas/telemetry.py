@@ -262,13 +262,18 @@ class PreprocessedTelemetry(RawTelemetry):
 
     @pa.dataframe_check(name="t_raw_snapped_to_nearest_grid_point")
     def _t_raw_near_grid(cls, df: pd.DataFrame) -> pd.Series:
+        from aerosid.preprocess.flags import QualityFlag
+
         t = df["t_s"].to_numpy()
         tr = df["t_raw_s"].to_numpy()
         ok = np.ones(t.shape, dtype=bool)
         if t.size > 1:
             dt = np.median(np.diff(t))
+            # a TIME_JITTER row may sit up to a step away (moved off a point another row holds)
+            jitter = (df["flags"].to_numpy().astype(np.int64) & int(QualityFlag.TIME_JITTER)) != 0
+            reach = np.where(jitter, 1.0, 0.5) * dt * (1 + 1e-9)
             with np.errstate(invalid="ignore"):
-                ok = np.isnan(tr) | (np.abs(tr - t) <= 0.5 * dt * (1 + 1e-9))
+                ok = np.isnan(tr) | (np.abs(tr - t) <= reach)
             present = ~np.isnan(tr)
             trp = tr[present]
             inc = np.ones(trp.shape, dtype=bool)

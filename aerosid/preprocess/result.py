@@ -148,7 +148,9 @@ class PreprocessResult:
               JITTER_MIN_ROWS,
               lambda n: f"{n} timestamp(s) lie more than snap_tolerance = {self.params.snap_tolerance:g} of a step "
                         f"from the {rate:.6g} Hz grid (clock jitter, or the sample phase moved after a dropout); "
-                        "those rows are treated as missing: check the record's clock or nominal_rate_hz")
+                        "those rows are treated as missing: check the record's clock or nominal_rate_hz (if the "
+                        "samples are uniform and only their stamps jitter, a larger snap_tolerance, up to 0.49, "
+                        "keeps them: aerosid run --preprocess snap_tolerance=0.45)")
         for t0, t1, n, shift in self.retimed:
             out.append(Finding("phase_shift", "preprocess", "t_s", t0, t1, n, False,
                                f"the sample phase moved at a dropout: {n} row(s) lie {-shift / self.dt_s:+.2f} of a "

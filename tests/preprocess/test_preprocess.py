@@ -824,3 +824,32 @@ def test_a_record_in_unix_time_is_processed_in_seconds_since_its_first_whole_sec
     assert np.array_equal(res.frame["flags"].to_numpy(), ref.frame["flags"].to_numpy())
     assert res.metadata()["aerosid.preprocess.time_origin_s"] == repr(res.time_origin_s)
     assert f"times in s since {res.time_origin_s:.0f}" in res.summary()
+
+
+def test_a_clock_with_gaussian_jitter_keeps_its_rate_and_loses_only_the_rows_off_the_grid():
+    """0.2 step rms of timestamp jitter: counting whole steps between rows took intervals stretched
+    past 1.5 steps for dropouts (103.2 Hz inferred for 100 Hz), and rows half a step off collided
+    with their neighbours; the coherent rate and the collision rule keep the record."""
+    fl = make_flight(seed=12, duration_s=30.0, faults=False, jitter=0.0)
+    raw = fl.raw.copy()
+    rng = np.random.default_rng(12)
+    t = raw["t_s"].to_numpy() + 0.2 / 100.0 * rng.standard_normal(len(raw))
+    keep = np.r_[True, np.diff(t) > 0] & np.r_[np.diff(t) > 0, True]  # a sorted record
+    raw = raw[keep].assign(t_s=t[keep]).reset_index(drop=True)
+    res = preprocess(raw)
+    assert res.rate_inferred and res.nominal_rate_hz == pytest.approx(100.0, rel=1e-5)
+    jit = (res.frame["flags"].to_numpy() & int(F.TIME_JITTER)) != 0
+    assert 0.15 < jit.mean() < 0.28  # P(|e| > 0.25 step) = 0.21 at 0.2 rms
+    assert res.n_grid_rows == res.n_raw_rows + res.n_inserted_rows and res.n_inserted_rows < 0.01 * res.n_raw_rows
+    off = np.abs(res.frame["t_raw_s"] - res.frame["t_s"]).to_numpy() * 100.0
+    assert np.nanmax(off[~jit]) <= 0.25 + 1e-9 and np.nanmax(off) <= 1.0
+
+
+def test_two_rows_close_to_one_grid_point_are_still_refused():
+    fl = make_flight(seed=13, duration_s=5.0, faults=False)
+    raw = fl.raw.copy()
+    t = raw["t_s"].to_numpy().copy()
+    t[200] = t[199] + 0.001  # a duplicated sample 1 ms later, both within 0.25 step of one point
+    raw["t_s"] = t
+    with pytest.raises(TelemetryError, match="same grid point"):
+        preprocess(raw, PreprocessParams(nominal_rate_hz=100.0))
