@@ -168,7 +168,14 @@ def import_csv(csv_path: str | Path, map_path: str | Path) -> ImportedFlight:
         if entry.column not in frame.columns:
             raise ImportDataError(csv_path, f"not found in the CSV (mapped to {entry.target} by {cmap.path}); the "
                                   f"CSV has {list(frame.columns)}", column=entry.column)
-        values = _numbers(frame[entry.column], csv_path, entry.column)
+        clock = entry.target == "t_s" and _clock_times(frame[entry.column])
+        if clock:
+            values, form = clock
+            if entry.unit != "s":
+                raise ImportDataError(csv_path, f"holds {form} (e.g. {str(frame[entry.column].iloc[0]).strip()!r}): "
+                                      f"its unit in the map must be \"s\", not {entry.unit!r}", column=entry.column)
+        else:
+            values = _numbers(frame[entry.column], csv_path, entry.column)
         conv = conversion(entry.target, entry.unit, source=f"CSV column {entry.column!r}", sign=entry.sign,
                           where=cmap.path)
         if entry.target == "t_s":
@@ -186,6 +193,34 @@ def import_csv(csv_path: str | Path, map_path: str | Path) -> ImportedFlight:
     return ImportedFlight(importer="csv", source=str(csv_path), telemetry=telemetry, vehicle_toml=cmap.vehicle_toml,
                           vehicle_name=vehicle_name, conversions=tuple(convs), notes=notes,
                           extra_metadata={"aerosid.map": cmap.path, "aerosid.map_sha256": sha256_file(cmap.path)})
+
+
+def _clock_times(column: pd.Series) -> tuple[np.ndarray, str] | None:
+    """The time column as seconds when it holds clock times rather than numbers: times of day
+    ("13:52:30.060", IRIG-style "045:13:52:30.060" day-of-year first) -> seconds since midnight
+    (of day 1); dates with times (ISO 8601, "2002-02-13 13:52:30.06") -> seconds since
+    1970-01-01 UTC (the preprocessing counts a record's times from its first whole second,
+    aerosid.preprocess.core.time_origin_s).  None when any cell is a plain number, or when not every cell
+    parses as one kind of clock time (the number reader then names the first bad row)."""
+    text = column.astype(str).str.strip()
+    if text.empty or text.eq("").any() or pd.to_numeric(text, errors="coerce").notna().any():
+        return None
+    doy = text.str.fullmatch(r"\d{1,3}:\d{1,2}:\d{2}:\d{2}(\.\d*)?")
+    if doy.all():  # IRIG-B: day of year, then the time of day
+        day, rest = text.str.split(":", n=1).str[0].astype(int), text.str.split(":", n=1).str[1]
+        tod = pd.to_timedelta(rest, errors="coerce")
+        if tod.notna().all():
+            return (day.to_numpy() - 1) * 86400.0 + tod.dt.total_seconds().to_numpy(), "day-of-year clock times"
+        return None
+    if text.str.fullmatch(r"\d{1,2}:\d{2}:\d{2}(\.\d*)?").all():
+        tod = pd.to_timedelta(text, errors="coerce")
+        return (tod.dt.total_seconds().to_numpy(), "times of day") if tod.notna().all() else None
+    stamps = pd.to_datetime(text, errors="coerce", utc=True, format="ISO8601")
+    if stamps.notna().all():
+        ns = stamps.dt.as_unit("ns").astype("int64").to_numpy()
+        # whole seconds and their fraction apart: float64 keeps 0.24 us at 1.7e9 s, not the ns
+        return (ns // 1_000_000_000).astype(float) + (ns % 1_000_000_000) / 1e9, "dates with times (UTC)"
+    return None
 
 
 def _numbers(column: pd.Series, csv_path: Path, name: str) -> np.ndarray:

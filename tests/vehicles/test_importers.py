@@ -253,6 +253,29 @@ def test_bad_csv_is_named_by_file_column_and_row(tmp_path):
     assert np.isnan(import_csv(tmp_path / "gap.csv", EXAMPLE_MAP).telemetry["h_m"].iloc[9])
 
 
+def test_clock_time_stamps_are_read_as_seconds(tmp_path):
+    """A data system's time column as times of day, IRIG day-of-year times or ISO dates: seconds
+    since midnight / since 1970 (UTC), the same record as the numeric one."""
+    csv = write_twin_otter_csv(F018, tmp_path / "to18.csv")
+    frame = pd.read_csv(csv)
+    ref = import_csv(csv, EXAMPLE_MAP).telemetry["t_s"].to_numpy()
+    ns = np.round(frame["time"].to_numpy() * 1e9).astype("int64")  # seconds since midnight, as written
+    stamps = {
+        "tod": pd.to_datetime(ns, unit="ns").strftime("%H:%M:%S.%f"),
+        "irig": pd.to_datetime(ns, unit="ns").strftime("044:%H:%M:%S.%f"),  # 13 Feb = day 44
+        "iso": pd.to_datetime(ns + np.int64(1013558400) * 10**9, unit="ns").strftime("%Y-%m-%dT%H:%M:%S.%fZ"),
+    }
+    offset = {"tod": 0.0, "irig": 43 * 86400.0, "iso": 1013558400.0}  # 2002-02-13 00:00 UTC
+    for kind, text in stamps.items():
+        frame.assign(time=text).to_csv(tmp_path / f"{kind}.csv", index=False)
+        t = import_csv(tmp_path / f"{kind}.csv", EXAMPLE_MAP).telemetry["t_s"].to_numpy()
+        np.testing.assert_allclose(t - offset[kind], ref, rtol=0, atol=2e-6, err_msg=kind)
+    bad = tmp_path / "s_unit.toml"
+    bad.write_text(_map_text(replace=('t_s = { column = "time", unit = "s" }', 't_s = { column = "time", unit = "ms" }')))
+    with pytest.raises(ImportDataError, match="times of day.*must be"):
+        import_csv(tmp_path / "tod.csv", bad)
+
+
 def test_bad_mat_files_are_named(tmp_path, fdata18):
     sio.savemat(tmp_path / "nofdata.mat", {"x": np.zeros(3)})
     with pytest.raises(ImportDataError, match=r"nofdata\.mat.*'fdata'"):
