@@ -7,6 +7,7 @@ The map (TOML)::
     [csv]                         # optional reading options
     delimiter = ","
     comment = "#"                 # lines starting with it are skipped
+    decimal = "."                 # "," for a decimal comma (then the delimiter is usually ";")
     time_from_zero = false        # true: subtract the first time stamp
 
     [columns]                     # raw column = { column = CSV header, unit = its unit [, sign = -1] }
@@ -33,7 +34,7 @@ from aerosid.vehicles.importers import ImportDataError, ImportedFlight, check_ti
 from aerosid.vehicles.units import TARGET_UNITS, Conversion, UnitError, conversion
 
 _ENTRY_KEYS = {"column", "unit", "sign"}
-_CSV_KEYS = {"delimiter", "comment", "time_from_zero"}
+_CSV_KEYS = {"delimiter", "comment", "decimal", "time_from_zero"}
 
 
 @dataclass(frozen=True)
@@ -57,6 +58,7 @@ class CsvMap:
     delimiter: str = ","
     comment: str | None = None
     time_from_zero: bool = False
+    decimal: str = "."
 
     def summary(self) -> str:
         rows = [f"map {self.path}: vehicle from {self.vehicle_origin}"]
@@ -109,7 +111,17 @@ def load_csv_map(path: str | Path) -> CsvMap:
     text, origin = _vehicle_text(doc.get("vehicle"), path)
     return CsvMap(path=src, columns=tuple(entries), vehicle_toml=text, vehicle_origin=origin,
                   delimiter=str(opts.get("delimiter", ",")), comment=opts.get("comment"),
-                  time_from_zero=bool(opts.get("time_from_zero", False)))
+                  time_from_zero=bool(opts.get("time_from_zero", False)), decimal=_decimal(opts, path))
+
+
+def _decimal(opts: dict, path: Path) -> str:
+    """The [csv] decimal mark: "." or ","; a comma cannot also be the delimiter."""
+    mark = opts.get("decimal", ".")
+    if mark not in (".", ","):
+        raise ImportDataError(path, f"[csv] decimal must be \".\" or \",\", got {mark!r}")
+    if mark == "," and opts.get("delimiter", ",") == ",":
+        raise ImportDataError(path, "[csv] decimal = \",\" needs another delimiter (delimiter = \";\")")
+    return mark
 
 
 def _vehicle_text(spec, map_path: Path) -> tuple[str, str]:
@@ -175,7 +187,7 @@ def import_csv(csv_path: str | Path, map_path: str | Path) -> ImportedFlight:
                 raise ImportDataError(csv_path, f"holds {form} (e.g. {str(frame[entry.column].iloc[0]).strip()!r}): "
                                       f"its unit in the map must be \"s\", not {entry.unit!r}", column=entry.column)
         else:
-            values = _numbers(frame[entry.column], csv_path, entry.column)
+            values = _numbers(frame[entry.column], csv_path, entry.column, cmap.decimal)
         conv = conversion(entry.target, entry.unit, source=f"CSV column {entry.column!r}", sign=entry.sign,
                           where=cmap.path)
         if entry.target == "t_s":
@@ -223,9 +235,12 @@ def _clock_times(column: pd.Series) -> tuple[np.ndarray, str] | None:
     return None
 
 
-def _numbers(column: pd.Series, csv_path: Path, name: str) -> np.ndarray:
-    """A CSV column as floats: empty cells and NaN are dropouts; any other text is an error."""
+def _numbers(column: pd.Series, csv_path: Path, name: str, decimal: str = ".") -> np.ndarray:
+    """A CSV column as floats (decimal: the decimal mark): empty cells and NaN are dropouts; any
+    other text is an error."""
     text = column.astype(str).str.strip()
+    if decimal == ",":
+        text = text.str.replace(",", ".", regex=False)
     empty = text.eq("") | text.str.lower().isin(["nan", "na", "null"])
     values = pd.to_numeric(text.where(~empty, None), errors="coerce").to_numpy(dtype=float)
     bad = np.flatnonzero(np.isnan(values) & ~empty.to_numpy())

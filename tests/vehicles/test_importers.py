@@ -276,6 +276,19 @@ def test_clock_time_stamps_are_read_as_seconds(tmp_path):
         import_csv(tmp_path / "tod.csv", bad)
 
 
+def test_a_csv_with_decimal_commas_reads_as_the_same_record(tmp_path):
+    csv = write_twin_otter_csv(F018, tmp_path / "to18.csv")
+    ref = import_csv(csv, EXAMPLE_MAP).telemetry
+    pd.read_csv(csv).to_csv(tmp_path / "eu.csv", index=False, sep=";", decimal=",")
+    eu_map = tmp_path / "eu.toml"
+    eu_map.write_text(_map_text(replace=('delimiter = ","', 'delimiter = ";"\ndecimal = ","')))
+    pd.testing.assert_frame_equal(import_csv(tmp_path / "eu.csv", eu_map).telemetry, ref)
+    bad = tmp_path / "bad.toml"
+    bad.write_text(_map_text(replace=('delimiter = ","', 'delimiter = ","\ndecimal = ","')))
+    with pytest.raises(ImportDataError, match="another delimiter"):
+        load_csv_map(bad)
+
+
 def test_bad_mat_files_are_named(tmp_path, fdata18):
     sio.savemat(tmp_path / "nofdata.mat", {"x": np.zeros(3)})
     with pytest.raises(ImportDataError, match=r"nofdata\.mat.*'fdata'"):
