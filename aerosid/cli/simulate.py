@@ -1,6 +1,8 @@
 """``aerosid simulate``: a flight whose truth is known (the built-in simulator or JSBSim)."""
 from __future__ import annotations
 
+import re
+from contextlib import contextmanager
 from pathlib import Path
 
 import click
@@ -75,7 +77,7 @@ def simulate(case_name, effects, hidden, seed, out_dir, duration, rate, no_fault
 
         table = _input_table(input_file, jsbsim=True)
         try:
-            with stage_progress("simulate") as progress:
+            with stage_progress("simulate") as progress, _reopened_output_notices_dropped():
                 flight = simulate_jsbsim(jsbsim_aircraft, manoeuvre, seed=seed, faults=not no_faults,
                                          progress=progress, input_table=table, turbulence=turbulence)
                 progress("write", 0.0)
@@ -121,6 +123,42 @@ def simulate(case_name, effects, hidden, seed, out_dir, duration, rate, no_fault
     click.echo(flight.summary())
     for kind, path in paths.items():
         click.echo(f"  wrote {path}")
+
+
+#: JSBSim's notice, on stdout, when it re-opens an aircraft's <output> file that it holds open
+#: already (at every initial-condition run after the first), and the line that follows it.
+_REOPEN_NOTICE = re.compile(r"ERROR: unable to open the file (?P<path>\S+)\n\s*=> Output to this file is disabled\.\n")
+
+
+@contextmanager
+def _reopened_output_notices_dropped():
+    """JSBSim's stdout during the flight, less its re-open notices for files in aerosid's scratch
+    folder.  An aircraft whose XML asks for an output file (pogo: pogo.csv) has it opened at the
+    first initial-condition run and re-opened at every later one; the stream being open, JSBSim
+    prints "ERROR: unable to open the file ..." (265 times for pogo's trim and design): harmless,
+    aerosid disables those outputs, but it read as a failure.  stdout (fd 1, JSBSim's C++ stream)
+    goes to a temporary file meanwhile and the rest of it is written back after the flight; the
+    progress display is on stderr."""
+    import os
+    import sys
+    import tempfile
+
+    scratch = tempfile.gettempdir()
+    sys.stdout.flush()
+    saved = os.dup(1)
+    with tempfile.TemporaryFile() as cap:
+        os.dup2(cap.fileno(), 1)
+        try:
+            yield
+        finally:
+            sys.stdout.flush()
+            os.dup2(saved, 1)
+            os.close(saved)
+            cap.seek(0)
+            text = cap.read().decode(errors="replace")
+            kept = _REOPEN_NOTICE.sub(lambda m: "" if m["path"].startswith(scratch) else m[0], text)
+            sys.stdout.write(re.sub(r"\n{3,}", "\n\n", kept))
+            sys.stdout.flush()
 
 
 def _input_table(path, jsbsim: bool):
