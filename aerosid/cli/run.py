@@ -96,6 +96,8 @@ def run(telemetry, vehicle, out_dir, flight, windows, model_spec, mach_half_widt
         if pooled and windows:
             raise click.UsageError("--window applies to one telemetry file; cut each manoeuvre's file to its "
                                    "window before pooling them")
+        if windows:
+            windows = _windows_in_run_time(telemetry[0], windows)
         # bad input fails here, before Prefect starts
         named = [_preflight(t, vehicle, model_spec, params, windows, min_segment_s) for t in telemetry]
         if flight is not None:
@@ -186,6 +188,28 @@ def _preprocess_options(items, min_segment_s):
     if min_segment_s is not None and not min_segment_s > 0:
         raise click.BadParameter(f"must be > 0, got {min_segment_s}", param_hint="--min-segment-s")
     return params, min_segment_s if min_segment_s is not None else from_items
+
+
+def _windows_in_run_time(telemetry, windows) -> tuple:
+    """--window pairs in the run's time: a record stamped in absolute time (Unix time) is processed
+    in seconds since its first whole second (aerosid.preprocess.core.time_origin_s), so a window
+    given in the record's own clock (both ends at or past that origin) is moved by it, with a note."""
+    import pyarrow.parquet as pq
+
+    from aerosid.preprocess.core import time_origin_s
+
+    try:
+        t_s = pq.read_table(telemetry, columns=["t_s"]).column("t_s")
+        origin = time_origin_s(float(t_s[0].as_py())) if len(t_s) else 0.0
+    except Exception:  # an unreadable file or no t_s: the preflight names it
+        return tuple(windows)
+    if not origin:
+        return tuple(windows)
+    out = tuple((a - origin, b - origin) if min(a, b) >= origin else (a, b) for a, b in windows)
+    if out != tuple(windows):
+        click.echo(f"note: --window in the record's clock, counted from t_s = {origin:.0f}: "
+                   + ", ".join(f"{a:g}..{b:g} s" for a, b in out))
+    return out
 
 
 def _echo_usable_share(share: dict | None, time_origin_s: float | None = None) -> None:

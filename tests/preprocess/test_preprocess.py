@@ -853,3 +853,13 @@ def test_two_rows_close_to_one_grid_point_are_still_refused():
     raw["t_s"] = t
     with pytest.raises(TelemetryError, match="same grid point"):
         preprocess(raw, PreprocessParams(nominal_rate_hz=100.0))
+
+
+def test_a_window_in_the_record_s_unix_clock_is_moved_to_the_run_s_time(tmp_path):
+    from aerosid.cli.run import _windows_in_run_time
+
+    path = tmp_path / "t.parquet"
+    pd.DataFrame({"t_s": 1.7e9 + 0.25 + np.arange(1000) * 0.01}).to_parquet(path)
+    assert _windows_in_run_time(path, [(1.7e9 + 2.0, 1.7e9 + 8.0), (1.0, 3.0)]) == ((2.0, 8.0), (1.0, 3.0))
+    pd.DataFrame({"t_s": 100.0 + np.arange(1000) * 0.01}).to_parquet(path)
+    assert _windows_in_run_time(path, [(101.0, 105.0)]) == ((101.0, 105.0),)
