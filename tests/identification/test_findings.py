@@ -2,6 +2,7 @@
 samples and an end-of-flight excursion out of the force database are each reported with
 their span, cut, and the rest of the segment is used."""
 import numpy as np
+import pandas as pd
 import pytest
 
 from aerosid.ebm import process_telemetry
@@ -76,3 +77,19 @@ def test_true_runs_and_dilate_agree():
     assert true_runs(m) == [(3, 6), (20, 21), (48, 50)]
     d = dilate(m, 2)
     assert true_runs(d) == [(1, 8), (18, 23), (46, 50)]
+
+
+def test_rows_at_a_fraction_of_the_flight_s_dynamic_pressure_are_cut_and_said():
+    from aerosid.identification.flight_data import LOW_QBAR_SHARE, low_qbar_rows
+
+    taxi = pd.DataFrame({"t_s": np.arange(300) * 0.01 - 10.0, "segment": "seg00", "qbar_pa": 10.0 + np.arange(300)})
+    flight = pd.DataFrame({"t_s": np.arange(2000) * 0.01, "segment": "seg01",
+                           "qbar_pa": 1300.0 + 50.0 * np.sin(np.arange(2000) * 0.01)})
+    low, found = low_qbar_rows(pd.concat([taxi, flight], ignore_index=True))
+    q95 = np.percentile(np.r_[taxi.qbar_pa, flight.qbar_pa], 95)
+    assert np.array_equal(low, np.r_[taxi.qbar_pa < LOW_QBAR_SHARE * q95, np.zeros(2000, bool)]) and low[:300].all()
+    (f,) = found
+    assert (f["kind"], f["segment"], f["n_samples"], f["cut"]) == ("low_qbar", "seg00", 300, True)
+    assert f["t0_s"] == -10.0 and "95th percentile" in f["detail"]
+    low, found = low_qbar_rows(flight)  # a flight at its manoeuvre speed loses nothing
+    assert not low.any() and found == []
