@@ -19,7 +19,7 @@ from aerosid.identification.derivatives import zero_phase_low_pass
 from aerosid.estimation.findings import DEPARTURE_MIN_S, DEPARTURE_SIGMA, Finding, dilate, span_findings
 from aerosid.identification.band import (accel_at_cg, band_limited_signals, band_noise_gain, bridge_spikes,
                                          finite_runs, low_pass_runs, white_noise_sigma)
-from aerosid.identification.vanes import advance, angles_at_cg, vane_delay
+from aerosid.identification.vanes import MAX_DELAY_S, advance, angles_at_cg, vane_delay
 from aerosid.identification.crb import R_COLUMNS
 from aerosid.identification.inversion import invert_alpha_beta, total_angles
 from aerosid.vehicles.vehicle import Vehicle
@@ -239,6 +239,16 @@ def _vane_timing(t, ok, clean: dict, bl, vehicle: Vehicle, segment: str) -> tupl
         return [], None
     record = {"segment": segment, **{k: (v if not isinstance(v, float) or math.isfinite(v) else None)
                                      for k, v in vd.as_dict().items()}}
+    if not vd.follows and not vehicle.turbulent_air:  # in turbulence the vane reads the gusts' angle too
+        ts = t[ok]
+        lost = "" if math.isfinite(vd.delay_s) else f", and no delay within {MAX_DELAY_S:g} s fits"
+        return [Finding("vane_mismatch", segment, vehicle.alpha_column, float(ts[0]), float(ts[-1]), vd.n, False,
+                        f"the vane alpha does not follow the IMU's kinematic alpha (gain {vd.gain:.3g} per rad, "
+                        f"about 1 expected{lost}): a dead, floating or miscalibrated vane, the wrong column, or "
+                        "turbulence (the vane reads the air's angle, the kinematics the body's: then set "
+                        "[estimation] turbulent_air = true in the vehicle file). Every coefficient read through "
+                        "alpha (C_N,alpha, C_m,alpha, the alpha-dot damping) is then suspect: check the vane and "
+                        "its calibration before using them")], record
     if not vd.detected:
         return [], record
     total = vd.delay_s + vd.applied_s

@@ -100,6 +100,10 @@ PASSES = 3
 #: An estimate beyond this [s] is no delay the kinematics can tell (the vane does not follow
 #: the kinematic alpha at all): no result (the range of the vehicle file's delay_s).
 MAX_DELAY_S = 0.5
+#: A vane whose alpha per kinematic alpha (VaneDelay.gain) lies outside this range does not
+#: follow the aircraft: dead, floating, miscalibrated, or the wrong column (healthy flights:
+#: 0.94..1.005 on c182, f15, sgs233 and the Twin Otter).
+GAIN_RANGE = (0.5, 2.0)
 G_M_S2 = 9.80665
 
 
@@ -138,8 +142,14 @@ class VaneDelay:
                 f"{abs(self.delay_s) * 1e3:.1f} +- {self.sigma_s * 1e3:.1f} ms{already} (p = {self.p_value:.2g}; "
                 f"gain {self.gain:.3f}, {self.n} samples, sample interval {self.sample_s * 1e3:.3g} ms)")
 
+    @property
+    def follows(self) -> bool:
+        """The vane alpha follows the IMU's kinematic alpha: a delay within MAX_DELAY_S fits and
+        the gain lies in GAIN_RANGE."""
+        return bool(math.isfinite(self.delay_s) and GAIN_RANGE[0] <= self.gain <= GAIN_RANGE[1])
+
     def as_dict(self) -> dict:
-        return {**asdict(self), "p_value": self.p_value, "detected": self.detected}
+        return {**asdict(self), "p_value": self.p_value, "detected": self.detected, "follows": self.follows}
 
 
 def advance(t_s: np.ndarray, x: np.ndarray, delay_s: float) -> np.ndarray:
@@ -247,10 +257,10 @@ def vane_delay(t_s, alpha_vane_rad, beta_rad, p_rad_s, q_rad_s, r_rad_s, ax_cg_m
         fit = fit_linear(y, X, channel="alpha_vane", groups=np.concatenate(groups) if len(runs) > 1 else None)
         g, m = (float(v) for v in fit.estimate[-2:])
         if not (math.isfinite(g) and abs(g) > 1e-6):
-            return None
+            return VaneDelay(math.nan, math.nan, g if math.isfinite(g) else 0.0, n, dt, float(applied_s))
         tau += -m / g
-        if not abs(tau) <= MAX_DELAY_S:
-            return None
+        if not abs(tau) <= MAX_DELAY_S:  # no delay the kinematics can tell: the vane does not follow them
+            return VaneDelay(math.nan, math.nan, g, n, dt, float(applied_s))
     g, m = (float(v) for v in fit.estimate[-2:])
     C = np.asarray(fit.cov, float)[-2:, -2:]
     J = np.array([m / g ** 2, -1.0 / g])  # d(-m/g)/d(g, m)

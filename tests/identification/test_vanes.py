@@ -221,10 +221,37 @@ def test_the_position_correction_against_the_exact_velocity_of_the_vanes_point()
 
 
 def test_a_vane_that_does_not_follow_the_kinematics_gives_no_delay():
-    """A vane column unrelated to the flight (noise, a wrong channel): no estimate, or none
-    reported; never an exception or a wild delay."""
+    """A vane column unrelated to the flight (noise, a wrong channel): no delay reported, never an
+    exception or a wild delay, and the result says the vane does not follow (a dead vane on c182
+    gave C_N,alpha 1.5 against 5.5 with the run saying "ok"); a healthy one follows."""
     t, alpha, sig = kinematic_flight()
     rng = np.random.default_rng(11)
     for vane in (0.05 + 1e-3 * rng.standard_normal(t.size), 0.05 + 0.02 * np.sin(5.0 * t) ** 3):
         vd = vane_delay(t, vane, **sig)
-        assert vd is None or (not vd.detected and abs(vd.delay_s) <= 0.5)
+        assert not vd.detected and not vd.follows
+        assert not math.isfinite(vd.delay_s) or abs(vd.delay_s) <= 0.5
+    healthy = vane_delay(t, alpha, **sig)
+    assert healthy.follows and abs(healthy.gain - 1.0) < 0.05
+    assert not vane_delay(t, 0.4 * alpha, **sig).follows  # a vane reading 0.4 of the angle: miscalibrated
+
+
+@pytest.mark.skipif(not F018.is_file(), reason=f"Twin Otter data not found ({DATA})")
+def test_a_dead_vane_on_the_twin_otter_is_a_finding_and_the_healthy_one_is_not():
+    """Real data: the healthy vane follows the kinematics (gain ~1, no vane_mismatch); the same
+    flight with the alpha vane replaced by noise about its mean says so (before: "ok", with
+    C_N,alpha a third of its value on a JSBSim c182)."""
+    from aerosid.ebm import process_telemetry
+    from aerosid.vehicles.sidpac import import_sidpac
+
+    flight = import_sidpac(F018)
+    vehicle = load_vehicle(flight.write(Path(__import__("tempfile").mkdtemp()))["vehicle"])
+    healthy = process_telemetry(flight.telemetry, vehicle)
+    assert not [f for f in healthy.findings if f["kind"] == "vane_mismatch"]
+    (rec,) = healthy.flight_data.attrs["vane_timing"]
+    assert rec["follows"] and 0.9 < rec["gain"] < 1.1
+    tel = flight.telemetry.copy()
+    a = tel["alpha_vane_rad"].to_numpy()
+    tel["alpha_vane_rad"] = np.nanmean(a) + 0.005 * np.random.default_rng(2).standard_normal(a.size)
+    dead = process_telemetry(tel, vehicle)
+    (f,) = [f for f in dead.findings if f["kind"] == "vane_mismatch"]
+    assert f["channel"] == "alpha_vane_rad" and not f["cut"] and "does not follow" in f["detail"]
