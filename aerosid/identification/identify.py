@@ -250,6 +250,11 @@ def identify(flight_data: pd.DataFrame, vehicle: Vehicle, models: dict[str, Chan
                                                              instrumental=instrumental, control_eiv=control_eiv),
                                    bias_pairs,
                                    skip=identities)
+    if vehicle.vehicle_class == "aircraft":
+        from aerosid.identification.term_report import control_sign_warnings
+
+        fits = {**fits, **{ch: replace(fits[ch], warnings=tuple(fits[ch].warnings) + (text,))
+                           for ch, text in control_sign_warnings(fits, models).items()}}
     refs = AeroModel.preflight(vehicle).linear_truth() if vehicle.preflight is not None else {}
     window = (float(fd["mach"].min()), float(fd["mach"].max()))
     crb = identification_bounds(fd, vehicle, models, fits, identities)

@@ -127,6 +127,45 @@ def damping_term(channel: str, expression: str) -> tuple[str, float] | None:
     return None
 
 
+#: An aircraft's primary control terms and the sign of their derivative under aerosid's
+#: conventions (docs/real-flight.md, [controls]: elevator and ailerons positive trailing edge down,
+#: rudder trailing edge left, mixed into delta_p, delta_r, delta_y): the elevator pitches nose down,
+#: the roll control rolls right, the rudder yaws nose left.  All 25 JSBSim aircraft that fly and
+#: the Twin Otter have these signs (a canard is the exception in pitch).
+AIRCRAFT_CONTROL_SIGNS = {"Cm": ("delta_p", -1.0), "Cl": ("delta_r", 1.0), "Cn": ("delta_y", -1.0)}
+
+
+def control_sign_warnings(fits: dict, models: dict) -> dict[str, str]:
+    """channel -> a warning, for an aircraft's primary control derivative (AIRCRAFT_CONTROL_SIGNS)
+    whose whole 95 % interval has the other sign: the sign of that surface in the telemetry (an
+    import map's ``sign = -1``) or the vehicle's mixing is the likely cause, far more than the
+    aircraft (a flipped elevator on c182 gave C_m,delta_p +0.652 +- 0.016, every other estimate
+    as before, and nothing said so)."""
+    out = {}
+    x = np.array([-2.0, -0.5, 1.0, 3.0])
+    for channel, (signal, sign) in AIRCRAFT_CONTROL_SIGNS.items():
+        fit, model = fits.get(channel), models.get(channel)
+        if fit is None or model is None:
+            continue
+        ci = np.asarray(fit.conf_int(), float)
+        for j, term in enumerate(model.terms):
+            try:
+                ratio = np.asarray(evaluate(str(term.expression), {signal: x}), float) / x
+            except (ValueError, TypeError, SyntaxError, ZeroDivisionError, KeyError):
+                continue
+            if not (np.all(np.isfinite(ratio)) and ratio[0] > 0 and np.ptp(ratio) <= 1e-12 * ratio[0]):
+                continue
+            lo, hi = (float(v) for v in ci[j])
+            if (sign < 0 and lo > 0) or (sign > 0 and hi < 0):
+                out[channel] = (f"{term.coefficient} came out {'positive' if sign < 0 else 'negative'} at 95 % "
+                                f"[{lo:.4g}, {hi:.4g}], where aerosid's control conventions give an aircraft a "
+                                f"{'negative' if sign < 0 else 'positive'} one (elevator and ailerons positive "
+                                "trailing edge down, rudder trailing edge left): check that surface's sign in the "
+                                "telemetry (an import map's sign = -1) and the vehicle file's [controls] mixing "
+                                "before using the estimates" + ("; a canard is the exception" if channel == "Cm" else ""))
+    return out
+
+
 def damping_signal(channel: str, expression: str) -> str | None:
     """The rate signal of a pure damping term of `channel` (:func:`damping_term`), or None."""
     found = damping_term(channel, expression)

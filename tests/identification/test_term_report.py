@@ -199,3 +199,29 @@ def test_the_wrong_sign_column_counts_only_true():
     df = _damping_table()
     df["wrong_sign"] = [False, np.nan, None, False, True]  # the rule on the intervals still holds
     assert wrong_sign(df) == ["Cm_alpha_dot", "Cl_p", "Cn_r"]
+
+
+def test_an_aircraft_control_derivative_of_the_other_sign_is_warned_of():
+    """A flipped elevator (c182: C_m,delta_p +0.652 +- 0.016, nothing said) gets a warning in its
+    channel; the conventional sign, an interval holding 0 and a scaled term behave as they should."""
+    import numpy as np
+
+    from aerosid.identification.regression import fit_linear
+    from aerosid.identification.term_report import control_sign_warnings
+    from aerosid.modelling.models import ChannelModel, Term
+
+    rng = np.random.default_rng(0)
+    n = 2000
+    a, d = rng.standard_normal(n), rng.standard_normal(n)
+    model = ChannelModel("Cm", (Term("Cm_0", "1"), Term("Cm_alpha", "alpha"), Term("Cm_delta_p", "delta_p/2")))
+
+    def warnings_for(cm_delta: float, noise: float = 0.01) -> dict:
+        y = 0.01 - 0.8 * a + cm_delta * d / 2 + noise * rng.standard_normal(n)
+        fit = fit_linear(y, np.column_stack([np.ones(n), a, d / 2]), names=["Cm_0", "Cm_alpha", "Cm_delta_p"],
+                         channel="Cm")
+        return control_sign_warnings({"Cm": fit}, {"Cm": model})
+
+    (text,) = warnings_for(+0.65).values()
+    assert "Cm_delta_p came out positive at 95 %" in text and "sign = -1" in text and "canard" in text
+    assert warnings_for(-0.65) == {}
+    assert warnings_for(+0.001, noise=1.0) == {}  # not determined: nothing to say
