@@ -19,6 +19,7 @@ from aerosid.identification.derivatives import zero_phase_low_pass
 from aerosid.estimation.findings import DEPARTURE_MIN_S, DEPARTURE_SIGMA, Finding, dilate, span_findings
 from aerosid.identification.band import (accel_at_cg, band_limited_signals, band_noise_gain, bridge_spikes,
                                          finite_runs, low_pass_runs, white_noise_sigma)
+from aerosid.identification.low_qbar import low_qbar_rows
 from aerosid.identification.vanes import MAX_DELAY_S, advance, angles_at_cg, vane_delay
 from aerosid.identification.crb import R_COLUMNS
 from aerosid.identification.inversion import invert_alpha_beta, total_angles
@@ -27,9 +28,6 @@ from aerosid.vehicles.vehicle import Vehicle
 FIN_COLUMNS = ("d1_rad", "d2_rad", "d3_rad", "d4_rad")
 #: The margin cut around a condemned span: one band period, at most this [s].
 MAX_MARGIN_S = 1.0
-#: Flight-data rows below this share of the flight's 95th-percentile dynamic pressure are left out
-#: (low_qbar_rows): at a quarter of it the coefficients' noise variance is 16 x.
-LOW_QBAR_SHARE = 0.25
 BAND_IMU = ("ax_m_s2", "ay_m_s2", "az_m_s2", "p_rad_s", "q_rad_s", "r_rad_s")
 #: The band path's regressor signals before its low-pass (band path only; see _wideband_signals):
 #: {flight-data column: its wide-band column}.
@@ -467,31 +465,6 @@ def build_flight_data_segments(preprocessed: pd.DataFrame, smoothed: list[pd.Dat
     frame.attrs["vane_timing"] = [r for part in parts for r in part.attrs.get("vane_timing", [])]
     return frame
 
-
-def low_qbar_rows(frame: pd.DataFrame) -> tuple[np.ndarray, list[dict]]:
-    """Rows of a flight's flight data whose dynamic pressure is below LOW_QBAR_SHARE of the
-    flight's 95th percentile, and their findings (``low_qbar``, cut).  A record that holds the
-    taxi or take-off roll besides the manoeuvres (c182 with 30 s at 4 m/s ahead of its flight)
-    gave C_N,alpha -37, C_m,alpha 0 and a positive C_l,p: the flight-derived coefficients are
-    moments over qbar, so their noise grows as 1/qbar (16 x the variance at a quarter of it) and an
-    unweighted fit is ruled by those rows, where the vanes float and the aerodynamics are not the
-    flight's anyway.  Nothing moves on a flight flown at its manoeuvre speed (the benches' lowest
-    qbar is 0.67 of the 95th percentile, seed-rlv's)."""
-    q = frame["qbar_pa"].to_numpy(float) if len(frame) else np.zeros(0)
-    if not q.size:
-        return np.zeros(0, bool), []
-    q95 = float(np.percentile(q, 95))
-    low = q < LOW_QBAR_SHARE * q95
-    found = []
-    for seg in pd.unique(frame.loc[low, "segment"]) if low.any() else ():
-        rows = (frame["segment"] == seg).to_numpy()
-        f, _ = span_findings("low_qbar", str(seg), "qbar_pa", frame["t_s"].to_numpy(float)[rows], low[rows], 1, True,
-                             f"dynamic pressure below {LOW_QBAR_SHARE:g} of the flight's 95th percentile "
-                             f"({q95:.4g} Pa): taxi, take-off or a low-speed leg, where the coefficients' noise "
-                             "grows as 1/qbar and the vanes float; left out of the regression (cut the record with "
-                             "--window to keep only the manoeuvres)")
-        found += [x.as_dict() for x in f]
-    return low, found
 
 
 def build_pooled_flight_data(flights: list[tuple[str, pd.DataFrame, list[pd.DataFrame]]], vehicle: Vehicle,

@@ -80,7 +80,7 @@ def test_true_runs_and_dilate_agree():
 
 
 def test_rows_at_a_fraction_of_the_flight_s_dynamic_pressure_are_cut_and_said():
-    from aerosid.identification.flight_data import LOW_QBAR_SHARE, low_qbar_rows
+    from aerosid.identification.low_qbar import LOW_QBAR_SHARE, low_qbar_rows
 
     taxi = pd.DataFrame({"t_s": np.arange(300) * 0.01 - 10.0, "segment": "seg00", "qbar_pa": 10.0 + np.arange(300)})
     flight = pd.DataFrame({"t_s": np.arange(2000) * 0.01, "segment": "seg01",
