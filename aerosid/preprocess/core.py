@@ -207,7 +207,7 @@ def _grid(t: np.ndarray, params: PreprocessParams, source: str):
     retimed = _phase_runs(pos, params.snap_tolerance)
     for a, b, phi in retimed:
         pos[a:b] -= phi
-    k = _resolve_collisions(pos, np.round(pos).astype(np.int64), params.snap_tolerance)
+    k = _resolve_collisions(pos, np.round(pos).astype(np.int64))
     resid = pos - k
     t0 += (k[0] - k_global[0]) * dt  # a re-timed first run may start one grid step off
     k -= k[0]
@@ -221,12 +221,13 @@ def _grid(t: np.ndarray, params: PreprocessParams, source: str):
     return rate, dt, inferred, t0, k, resid, tuple((a, b, -phi * dt) for a, b, phi in retimed)
 
 
-def _resolve_collisions(pos: np.ndarray, k: np.ndarray, tol: float) -> np.ndarray:
+def _resolve_collisions(pos: np.ndarray, k: np.ndarray) -> np.ndarray:
     """Grid points k (int, non-decreasing) of rows at positions pos [steps] with two rows on one
-    point resolved where the row further from it is more than tol off (already TIME_JITTER) and
-    the neighbouring point on its side is free: it moves there (treated as missing all the
-    same).  A jittered clock (0.2 step rms) puts a row half a step off now and then; two rows
-    both within tol of one point stay a collision (duplicated timestamps, a wrong rate)."""
+    point resolved where the neighbouring point on the side of the row further from it is free:
+    that row moves there.  It is then more than half a step off its point, so TIME_JITTER and
+    treated as missing: no value is used at a time it was not taken.  A jittered clock (0.2 step
+    rms) puts two rows within a quarter step of each other now and then (c182: 2.4 ms apart at
+    100 Hz); where every neighbour is taken (a wrong nominal rate) the collision stays."""
     coll = np.flatnonzero(np.diff(k) == 0)
     if not coll.size:
         return k
@@ -236,8 +237,6 @@ def _resolve_collisions(pos: np.ndarray, k: np.ndarray, tol: float) -> np.ndarra
         if k[j] != k[j + 1]:
             continue  # resolved by an earlier move
         far = j if abs(pos[j] - k[j]) >= abs(pos[j + 1] - k[j + 1]) else j + 1
-        if not abs(pos[far] - k[far]) > tol:
-            continue
         if far == j and (j == 0 or k[j - 1] < k[j] - 1) and pos[j] < k[j]:
             k[j] -= 1
         elif far == j + 1 and (j + 2 >= n or k[j + 2] > k[j + 1] + 1) and pos[j + 1] > k[j + 1]:

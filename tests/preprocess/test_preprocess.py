@@ -845,14 +845,20 @@ def test_a_clock_with_gaussian_jitter_keeps_its_rate_and_loses_only_the_rows_off
     assert np.nanmax(off[~jit]) <= 0.25 + 1e-9 and np.nanmax(off) <= 1.0
 
 
-def test_two_rows_close_to_one_grid_point_are_still_refused():
+def test_two_rows_on_one_grid_point_keep_the_closer_and_a_wrong_rate_is_still_refused():
     fl = make_flight(seed=13, duration_s=5.0, faults=False)
     raw = fl.raw.copy()
     t = raw["t_s"].to_numpy().copy()
-    t[200] = t[199] + 0.001  # a duplicated sample 1 ms later, both within 0.25 step of one point
+    t[200] = t[199] + 0.0024  # 2.4 ms after its neighbour (c182 with 2 ms rms of jitter had such a pair)
     raw["t_s"] = t
-    with pytest.raises(TelemetryError, match="same grid point"):
-        preprocess(raw, PreprocessParams(nominal_rate_hz=100.0))
+    res = preprocess(raw, PreprocessParams(nominal_rate_hz=100.0))
+    fr = res.frame
+    moved = np.flatnonzero(np.isclose(fr["t_raw_s"].to_numpy(), t[200], rtol=0, atol=1e-12))
+    assert moved.size == 1 and fr["flags"].iloc[moved[0]] & int(F.TIME_JITTER)  # missing, not used late
+    assert not fr["flags"].iloc[moved[0] - 1] & int(F.TIME_JITTER)  # the row on its own point is kept
+    assert res.n_grid_rows == res.n_raw_rows + res.n_inserted_rows
+    with pytest.raises(TelemetryError, match="same grid point"):  # every neighbour taken: a wrong rate
+        preprocess(fl.raw, PreprocessParams(nominal_rate_hz=50.0))
 
 
 def test_a_window_in_the_record_s_unix_clock_is_moved_to_the_run_s_time(tmp_path):
