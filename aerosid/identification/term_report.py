@@ -115,15 +115,25 @@ def damping_term(channel: str, expression: str) -> tuple[str, float] | None:
     that reads that signal alone, proportional to it with a positive factor (``q_hat`` -> 1,
     ``(q_hat)`` -> 1, ``2*q_hat`` -> 2: the derivative is the coefficient times the factor);
     None for anything else."""
-    x = np.array([-2.0, -0.5, 1.0, 3.0])
     for rate in DAMPING_TERMS.get(str(channel), ()):
-        try:
-            y = evaluate(str(expression), {rate: x})
-        except (ValueError, TypeError, SyntaxError, ZeroDivisionError, KeyError):
-            continue
-        ratio = np.asarray(y, float) / x
-        if np.all(np.isfinite(ratio)) and ratio[0] > 0 and np.ptp(ratio) <= 1e-12 * abs(ratio[0]):
-            return rate, float(ratio[0])
+        factor = pure_term_factor(expression, rate)
+        if factor is not None:
+            return rate, factor
+    return None
+
+
+def pure_term_factor(expression: str, signal: str) -> float | None:
+    """The positive factor c of an expression that is c x `signal` alone (``q_hat`` -> 1,
+    ``delta_p/2`` -> 0.5), or None for anything else (another signal, an offset, a negative or
+    non-constant factor)."""
+    x = np.array([-2.0, -0.5, 1.0, 3.0])
+    try:
+        y = evaluate(str(expression), {signal: x})
+    except (ValueError, TypeError, SyntaxError, ZeroDivisionError, KeyError):
+        return None
+    ratio = np.asarray(y, float) / x
+    if np.all(np.isfinite(ratio)) and ratio[0] > 0 and np.ptp(ratio) <= 1e-12 * abs(ratio[0]):
+        return float(ratio[0])
     return None
 
 
@@ -142,18 +152,13 @@ def control_sign_warnings(fits: dict, models: dict) -> dict[str, str]:
     aircraft (a flipped elevator on c182 gave C_m,delta_p +0.652 +- 0.016, every other estimate
     as before, and nothing said so)."""
     out = {}
-    x = np.array([-2.0, -0.5, 1.0, 3.0])
     for channel, (signal, sign) in AIRCRAFT_CONTROL_SIGNS.items():
         fit, model = fits.get(channel), models.get(channel)
         if fit is None or model is None:
             continue
         ci = np.asarray(fit.conf_int(), float)
         for j, term in enumerate(model.terms):
-            try:
-                ratio = np.asarray(evaluate(str(term.expression), {signal: x}), float) / x
-            except (ValueError, TypeError, SyntaxError, ZeroDivisionError, KeyError):
-                continue
-            if not (np.all(np.isfinite(ratio)) and ratio[0] > 0 and np.ptp(ratio) <= 1e-12 * ratio[0]):
+            if pure_term_factor(term.expression, signal) is None:
                 continue
             lo, hi = (float(v) for v in ci[j])
             if (sign < 0 and lo > 0) or (sign > 0 and hi < 0):

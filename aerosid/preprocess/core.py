@@ -271,10 +271,10 @@ def _phase_runs(pos: np.ndarray, tol: float) -> list[tuple[int, int, float]]:
     for a, b in zip(edges[:-1], edges[1:]):
         if b - a < PHASE_RUN_MIN_ROWS:
             continue
-        after_dropout = a > 0 and d[a - 1] >= 1.5
-        before_dropout = b < pos.size and d[b - 1] >= 1.5
+        if not ((a > 0 and d[a - 1] >= 1.5) or (b < pos.size and d[b - 1] >= 1.5)):
+            continue  # no dropout at either end: a clock glitch, left to the jitter test
         phi = _circular_phase(pos[a:b])
-        if (after_dropout or before_dropout) and abs(phi) > tol:
+        if abs(phi) > tol:
             out.append((int(a), int(b), phi))
     return out
 
