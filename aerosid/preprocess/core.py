@@ -126,28 +126,44 @@ def _infer_rate(t: np.ndarray) -> float:
     """Sample rate [Hz] from the timestamps: a first step dt0 = median interval, the
     sample count between consecutive rows = round(interval / dt0) (>= 1), then the
     least-squares slope of t against the cumulative sample index (the median alone
-    drifts by samples over a long jittered record).  A dropout across which the sample
-    phase moved (an interval of >= 1.5 steps that is not a whole number of them) counts its
-    fractional steps: rounded, each such jump would tilt the slope (0.13 % on 20 s of 50 Hz
-    with two half-step jumps, a step and a half of drift)."""
+    drifts by samples over a long jittered record).  An interval across which the sample
+    phase moved (one of >= 1.5 steps that is not a whole number of them, or one further off a
+    whole number than the clock's own scatter) starts a new run with its own intercept, and the slope is the one
+    within runs: counted as whole steps, each such jump would tilt it (0.13 % on 20 s of 50 Hz
+    with two half-step jumps; a 100 Hz record with dropouts thinned to 10 Hz has jumps of 1.2
+    and 1.5 steps, read as 9.965 Hz and refused by the schema)."""
     d = np.diff(t)
     dt0 = float(np.median(d))
     if not (dt0 > 0):
         return float("inf")
     for _ in range(2):
         x = d / dt0
-        steps = np.where((x >= 1.5) & (np.abs(x - np.round(x)) > PHASE_STEP_RESOLUTION), x,
-                         np.maximum(1, np.round(x)))
-        k = np.concatenate(([0.0], np.cumsum(steps)))
-        kc = k - k.mean()
+        moved = _phase_moves(x)
+        k = np.concatenate(([0.0], np.cumsum(np.maximum(1, np.round(x)))))
+        if moved.any():
+            run = np.concatenate(([0], np.cumsum(moved)))
+            count = np.bincount(run)
+            kc = k - (np.bincount(run, k) / count)[run]
+            tc = t - (np.bincount(run, t) / count)[run]
+        else:
+            kc, tc = k - k.mean(), t - t.mean()
         denom = float(np.dot(kc, kc))
         if denom <= 0:
             break
-        dt0 = float(np.dot(kc, t - t.mean()) / denom)
+        dt0 = float(np.dot(kc, tc) / denom)
     x = d * (1.0 / dt0)
     if np.mean(np.abs(x - np.round(x)) > JITTERY_STEP) > JITTERY_SHARE:
         return _coherent_rate(t, 1.0 / float(np.median(d)))
     return 1.0 / dt0
+
+
+def _phase_moves(x: np.ndarray) -> np.ndarray:
+    """Intervals x [steps] across which the sample phase moved: off a whole number of steps by
+    more than the clock's own scatter (5 x the median offset, within PHASE_STEP_RESOLUTION ..
+    JITTERY_STEP), or by more than PHASE_STEP_RESOLUTION in a dropout (>= 1.5 steps)."""
+    off = np.abs(x - np.round(x))
+    tol = min(JITTERY_STEP, max(PHASE_STEP_RESOLUTION, 5.0 * float(np.median(off)))) if off.size else 0.0
+    return ((x >= 1.5) & (off > PHASE_STEP_RESOLUTION)) | (off > tol)
 
 
 def _coherent_rate(t: np.ndarray, f0: float) -> float:
@@ -256,23 +272,28 @@ def _phase_runs(pos: np.ndarray, tol: float) -> list[tuple[int, int, float]]:
     """Runs of rows that lie off the grid together because the record's sample phase moved at a
     dropout (a recorder that resumes on another phase; telemetry thinned after dropouts): (first
     row, end row, the run's phase [steps]) for every run of at least PHASE_RUN_MIN_ROWS rows,
-    delimited by dropouts (intervals of >= 1.5 steps: a phase can move there by any amount, and
-    quarter steps add up) or by intervals more than tol off a whole step, at least one of them
-    a dropout, whose own phase is more than tol off the grid.
+    delimited by intervals across which the phase moved (_phase_moves: a phase can move at a
+    dropout by any amount, and fractions add up), whose own phase is more than tol off the grid,
+    with rows lost at one end at least (an interval longer than a step by more than the clock's
+    scatter) and at neither end rows closer than a step.
     Such a run is re-timed onto the grid by its phase (at most half a step; the rows keep their
-    spacing, every channel moves alike) instead of being lost as jitter.  A run off the grid
-    between two unbroken intervals is a clock glitch and stays jitter."""
+    spacing, every channel moves alike) instead of being lost as jitter.  A run that sits off the
+    grid between unbroken intervals, or comes back early (a late clock: intervals of 1.4 and then
+    0.6 steps), is a clock glitch and stays jitter."""
     if pos.size < PHASE_RUN_MIN_ROWS:
         return []
     d = np.diff(pos)
-    breaks = np.flatnonzero((d >= 1.5) | (np.abs(d - np.round(d)) > tol)) + 1
-    edges = np.concatenate(([0], breaks, [pos.size]))
+    moved = _phase_moves(d)
+    edges = np.concatenate(([0], np.flatnonzero(moved) + 1, [pos.size]))
+    lost = moved & (d > 1.0)  # time passed without rows
+    early = moved & (d < 1.0)  # rows closer than a step
     out = []
     for a, b in zip(edges[:-1], edges[1:]):
         if b - a < PHASE_RUN_MIN_ROWS:
             continue
-        if not ((a > 0 and d[a - 1] >= 1.5) or (b < pos.size and d[b - 1] >= 1.5)):
-            continue  # no dropout at either end: a clock glitch, left to the jitter test
+        ends = [j for j in (a - 1, b - 1) if 0 <= j < d.size]
+        if not any(lost[j] for j in ends) or any(early[j] for j in ends):
+            continue  # no rows lost at either end, or a clock that came back early: a glitch
         phi = _circular_phase(pos[a:b])
         if abs(phi) > tol:
             out.append((int(a), int(b), phi))

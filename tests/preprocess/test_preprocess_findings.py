@@ -108,3 +108,17 @@ def test_the_re_timed_rows_keep_their_values_in_order():
     fr = preprocess(raw).frame
     got = fr.loc[np.isfinite(fr["t_raw_s"]), ["t_raw_s", "q_rad_s"]].to_numpy()
     assert np.array_equal(got[:, 0], raw["t_s"].to_numpy()) and np.array_equal(got[:, 1], raw["q_rad_s"].to_numpy())
+
+
+def test_a_record_thinned_to_10_hz_after_dropouts_keeps_its_rate():
+    """Dropouts of 2 and 5 rows, then every 10th row kept: the 10 Hz record's phase moves by
+    0.2 and 0.5 of a step, in intervals of 1.2 and 1.5 steps. Counted as whole steps they read
+    as 9.97 Hz and the rows drifted off the grid (the schema refused the preprocessed frame)."""
+    fl = make_flight(seed=9, duration_s=40.0, faults=False, jitter=0.0)
+    keep = np.ones(len(fl.raw), bool)
+    keep[1200:1202] = False
+    keep[2800:2805] = False
+    raw = fl.raw[keep].iloc[::10].reset_index(drop=True)
+    res = preprocess(raw)
+    assert res.nominal_rate_hz == pytest.approx(10.0, rel=1e-9)
+    assert res.n_used_rows == res.n_raw_rows
