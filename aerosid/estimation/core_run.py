@@ -54,9 +54,35 @@ class CoreRun:
                 f"smoother {np.nanmean(self.nis_smoother):.3f}")
 
 
+#: A sample interval [s] above which a breakdown's message names the coarse sampling (below 20 Hz).
+COARSE_DT_S = 0.05
+
+
+class FilterBreakdown(ArithmeticError):
+    """The EKF's covariance lost positive definiteness (a Cholesky factor of the innovation
+    covariance failed): a numerical breakdown of the filter, not a poor fit."""
+
+
 def run_filter_smoother(z, cand, x0, P0, model: PlantModel, Qd, R_diag, gate_threshold=np.inf,
                         use_numba: bool = True, segment_length: int = 64, q_local=None,
                         q_shares=None, gate_off=None) -> CoreRun:
+    """One EKF + MBF pass (_run_filter_smoother); a numerical breakdown of the covariance
+    raises FilterBreakdown naming the sample interval, not the kernel's bare ZeroDivisionError
+    (c182 thinned to 5 Hz: "division by zero")."""
+    try:
+        return _run_filter_smoother(z, cand, x0, P0, model, Qd, R_diag, gate_threshold, use_numba, segment_length,
+                                    q_local, q_shares, gate_off)
+    except (ZeroDivisionError, np.linalg.LinAlgError) as exc:
+        coarse = (f" A record sampled below {1 / COARSE_DT_S:g} Hz gives the filter few samples per period of the "
+                  "vehicle's motion; a faster record may run." if model.dt_s > COARSE_DT_S else "")
+        raise FilterBreakdown(
+            f"the filter's innovation covariance lost positive definiteness ({exc}) at a sample interval of "
+            f"{model.dt_s:.4g} s: a numerical breakdown, not a fit.{coarse}") from None
+
+
+def _run_filter_smoother(z, cand, x0, P0, model: PlantModel, Qd, R_diag, gate_threshold=np.inf,
+                         use_numba: bool = True, segment_length: int = 64, q_local=None,
+                         q_shares=None, gate_off=None) -> CoreRun:
     """One EKF + MBF pass.  z (N,6), cand (N,6) bool (channels allowed), x0/P0 prior at
     sample 0, Qd (21,21), R_diag (6,), gate_threshold (chi2(1) per channel, inf = off);
     q_local (N,6) chain multipliers per transition with q_shares (6,21,21) the chains'

@@ -248,3 +248,21 @@ def test_mbf_equals_rts_with_nonlinear_mean_on_the_ekf(short_flight):
     assert np.max(np.abs(ref.P_smooth - Ps)) / np.max(np.abs(Ps)) < 1e-9
     fast = run_filter_smoother(sf.z, valid, x0, P0, sf.model, Qd, R_DIAG)
     assert col_rel_err(fast.x_smooth, xs) < 1e-9
+
+
+@pytest.mark.parametrize("use_numba", [True, False])
+def test_a_covariance_that_is_not_positive_definite_is_a_named_breakdown(use_numba):
+    """c182 thinned to 5 Hz failed its segment with the kernel's bare "division by zero"; a
+    breakdown of the covariance is now FilterBreakdown naming the sample interval (here forced
+    by a zero prior, process and measurement covariance: a singular innovation covariance), and
+    below 20 Hz it names the coarse sampling."""
+    from aerosid.estimation.core_run import FilterBreakdown
+
+    x, _ = _prior(4)
+    z = np.stack([measure(x, MODEL)] * 3)
+    zero = np.zeros((21, 21))
+    for model, coarse in ((MODEL, False), (PlantModel(MODEL.inertia_kg_m2, MODEL.sensor_offset_m, 0.2), True)):
+        with pytest.raises(FilterBreakdown) as err:
+            run_filter_smoother(z, np.ones((3, 6), bool), x, zero, model, zero, np.zeros(6), use_numba=use_numba)
+        assert f"sample interval of {model.dt_s:g} s" in str(err.value)
+        assert ("below 20 Hz" in str(err.value)) == coarse
