@@ -116,7 +116,8 @@ def test_07_degrees_where_radians_are_expected(flight, tmp_path):
     _, raw = flight
     bad = write(raw.assign(d1_rad=np.degrees(raw["d1_rad"]) + 20.0), tmp_path / "fins_in_degrees.parquet")
     text = run_fails_fast([str(bad)], tmp_path / "run", str(bad), "column 'd1_rad'", "rows [0, 1, 2",
-                          "mostly_in_physical_range")
+                          "mostly_in_physical_range", "the values look like deg, not rad",
+                          "multiply the column by 0.0174533")
     assert "values [20." in text
 
 

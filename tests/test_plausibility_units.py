@@ -12,7 +12,7 @@ import pandas as pd
 import pytest
 
 from aerosid.modelling.effects import parse_effect_spec
-from aerosid.plausibility import units as U
+from aerosid.plausibility import kinematics as K
 from aerosid.plausibility.units import check_units, unit_findings
 from aerosid.preprocess import TelemetryError
 from aerosid.simulation import load_case, simulate
@@ -92,12 +92,12 @@ def test_the_kinematic_tests_alone_find_deg_s_and_km(flights):
         wide = dataclasses.replace(veh.envelope, rate_rad_s=100.0, h_m=(-1000.0, 1e6), qbar_pa=(0.0, 1e8),
                                    V_m_s=(0.0, 20000.0))
         wide_vehicle = dataclasses.replace(veh, plausibility=wide)
-        assert U._pitch_rate_kinematic(frame, wide_vehicle) is None, label
-        assert U._altitude_kinematic(frame) is None, label
-        q = U._pitch_rate_kinematic(with_factor(frame, ["q_rad_s"], 1 / DEG), wide_vehicle)
+        assert K._pitch_rate_kinematic(frame, wide_vehicle) is None, label
+        assert K._altitude_kinematic(frame) is None, label
+        q = K._pitch_rate_kinematic(with_factor(frame, ["q_rad_s"], 1 / DEG), wide_vehicle)
         assert q is not None and q.likely == "deg/s", label
         for factor, unit in ((1e-3, "km"), (1 / 0.3048, "ft")):
-            h = U._altitude_kinematic(with_factor(frame, ["h_m"], factor))
+            h = K._altitude_kinematic(with_factor(frame, ["h_m"], factor))
             assert h is not None and h.likely == unit, (label, unit)
 
 
@@ -112,3 +112,37 @@ def test_a_wider_envelope_in_the_vehicle_file_accepts_a_fast_vehicle(tmp_path, r
     frame = reference_flight.telemetry.assign(p_rad_s=reference_flight.telemetry["p_rad_s"] * 20)
     assert [f.columns for f in unit_findings(frame, load_vehicle("seed-rlv"))] == [("p_rad_s",)]
     assert unit_findings(frame, fast) == []
+
+
+# (label, column, factor, the columns the finding names, its kind, the vehicle needs vanes, attitude)
+SIGN_AND_DEGREE_MISTAKES = [
+    ("az from a z-up accelerometer", "az_m_s2", -1.0, ("az_m_s2",), "sign", False, False),
+    ("pitch gyro flipped", "q_rad_s", -1.0, ("q_rad_s",), "sign", True, False),
+    ("alpha vane flipped", "alpha_vane_rad", -1.0, ("alpha_vane_rad",), "sign", True, False),
+    ("alpha vane in deg", "alpha_vane_rad", 1 / DEG, ("alpha_vane_rad",), "unit", True, False),
+    ("theta flipped", "theta_rad", -1.0, ("theta_rad",), "sign", True, True),
+    ("theta in deg", "theta_rad", 1 / DEG, ("theta_rad",), "unit", False, True),
+]
+
+
+def test_sign_and_degree_mistakes_are_found_naming_the_column(flights):
+    """A z-up accelerometer (aircraft), a flipped pitch gyro or vane, vanes or attitude in
+    degrees: each refused naming the column. Before, a flipped q turned C_m,alpha and
+    C_m,delta positive on c182 and the run blamed the vane; a z-up az flipped C_N,alpha."""
+    checked = 0
+    for label, frame, veh in flights:
+        vanes = veh.air_data_source == "vanes" and veh.alpha_column in frame.columns
+        attitude = {"phi_rad", "theta_rad"} <= set(frame.columns)
+        for what, col, factor, named, kind, needs_vanes, needs_attitude in SIGN_AND_DEGREE_MISTAKES:
+            if (needs_vanes and not vanes) or (needs_attitude and not attitude) or col not in frame.columns:
+                continue
+            if col == "az_m_s2" and veh.vehicle_class != "aircraft":
+                continue  # a finned vehicle's az may have either sign
+            found = unit_findings(with_factor(frame, [col], factor), veh)
+            assert found and found[0].columns == named and found[0].kind == kind, (label, what, found)
+            with pytest.raises(TelemetryError) as ei:
+                check_units(with_factor(frame, [col], factor), veh, "flight.parquet")
+            assert ei.value.column == named[0]
+            assert ("sign looks flipped" if kind == "sign" else "look like deg") in str(ei.value)
+            checked += 1
+    assert checked >= 6

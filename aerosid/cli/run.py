@@ -262,7 +262,7 @@ def _preflight(telemetry: Path, vehicle: str | None, model_spec: str | None, pre
 
     from aerosid.io import telemetry_vehicle
     from aerosid.modelling.models import default_models, load_models
-    from aerosid.plausibility.units import check_units
+    from aerosid.plausibility.units import check_units, range_unit_hint
     from aerosid.preprocess import TelemetryError
     from aerosid.preprocess.core import time_origin_s
     from aerosid.vehicles.vehicle import load_vehicle
@@ -279,6 +279,10 @@ def _preflight(telemetry: Path, vehicle: str | None, model_spec: str | None, pre
                 raise TelemetryError(f"{exc.reason}; columns outside the contract {extra}: misnamed? "
                                      f"(the raw contract is {list(RAW_COLUMNS)})", file=exc.file,
                                      column=exc.column, rows=exc.rows) from None
+        if exc.column in RAW_COLUMNS and "mostly_in_physical_range" in exc.reason:
+            hint = range_unit_hint(exc.column, pq.read_table(telemetry, columns=[exc.column]).column(0).to_numpy())
+            if hint:
+                raise TelemetryError(exc.reason + hint, file=exc.file, column=exc.column, rows=exc.rows) from None
         raise
     if len(frame) == 0:
         raise TelemetryError("no rows: nothing to process", file=str(telemetry))

@@ -242,8 +242,9 @@ def _vane_timing(t, ok, clean: dict, bl, vehicle: Vehicle, segment: str) -> tupl
         lost = "" if math.isfinite(vd.delay_s) else f", and no delay within {MAX_DELAY_S:g} s fits"
         return [Finding("vane_mismatch", segment, vehicle.alpha_column, float(ts[0]), float(ts[-1]), vd.n, False,
                         f"the vane alpha does not follow the IMU's kinematic alpha (gain {vd.gain:.3g} per rad, "
-                        f"about 1 expected{lost}): a dead, floating or miscalibrated vane, the wrong column, or "
-                        "turbulence (the vane reads the air's angle, the kinematics the body's: then set "
+                        f"about 1 expected{lost}): a dead, floating or miscalibrated vane, the wrong column, an "
+                        "airspeed V_m_s in other units (the kinematic alpha reads V: knots turned c182's gain to "
+                        "0.17), or turbulence (the vane reads the air's angle, the kinematics the body's: then set "
                         "[estimation] turbulent_air = true in the vehicle file). Every coefficient read through "
                         "alpha (C_N,alpha, C_m,alpha, the alpha-dot damping) is then suspect: check the vane and "
                         "its calibration before using them")], record

@@ -21,6 +21,7 @@ class Plausibility:
     h_m: tuple[float, float]  # median altitude [m]
     qbar_pa: tuple[float, float]  # median dynamic pressure (US-1976 density) [Pa]
     alpha_rad: tuple[float, float]  # the angle of attack the flight stays within [rad]
+    az_m_s2: tuple[float, float] = (-1000.0, 1000.0)  # median az [m/s^2], body z down (lift reads negative)
     preflight_factor: float = 3.0  # an estimate beyond preflight x/÷ this factor is reported
 
     def summary(self) -> str:
@@ -28,12 +29,14 @@ class Plausibility:
 
 
 #: Defaults per vehicle class.  Aircraft: 0.25-5 g median load, 10-1000 m/s (JSBSim's F4N
-#: flies its identification manoeuvre at 470 m/s, M 1.6), below 25 km, up to 150 kPa.  Finned (seed-rlv class: missiles, re-entry and
-#: hypersonic vehicles): 2-1000 m/s^2 (a vehicle whose aerodynamic forces are measurable),
-#: 30-8000 m/s, up to 100 km, 10 Pa - 500 kPa.
+#: flies its identification manoeuvre at 470 m/s, M 1.6), below 25 km, up to 150 kPa, a negative
+#: median az (z down: the lift holds it up; positive is a z-up accelerometer).  Finned (seed-rlv
+#: class: missiles, re-entry and hypersonic vehicles): 2-1000 m/s^2 (a vehicle whose aerodynamic
+#: forces are measurable), 30-8000 m/s, up to 100 km, 10 Pa - 500 kPa, az of either sign.
 CLASS_DEFAULTS: dict[str, Plausibility] = {
     "aircraft": Plausibility(rate_rad_s=2.0, specific_force_m_s2=(2.5, 50.0), V_m_s=(10.0, 1000.0),
-                             h_m=(-500.0, 25000.0), qbar_pa=(20.0, 150000.0), alpha_rad=(-0.35, 0.7)),
+                             h_m=(-500.0, 25000.0), qbar_pa=(20.0, 150000.0), alpha_rad=(-0.35, 0.7),
+                             az_m_s2=(-50.0, 0.0)),
     "finned": Plausibility(rate_rad_s=2.0, specific_force_m_s2=(2.0, 1000.0), V_m_s=(30.0, 8000.0),
                            h_m=(-500.0, 100000.0), qbar_pa=(10.0, 500000.0), alpha_rad=(-0.6, 0.6)),
 }

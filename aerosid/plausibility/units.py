@@ -1,5 +1,6 @@
-"""Unit mistakes in raw telemetry: a channel whose values fit another unit far better
-than the declared one (deg/s for rad/s, g for m/s^2, km or ft for m, kt for m/s).
+"""Unit and sign mistakes in raw telemetry: a channel whose values fit another unit far
+better than the declared one (deg/s for rad/s, g for m/s^2, km or ft for m, kt for m/s, deg
+for rad), or the other sign (an accelerometer z axis pointing up, a flipped gyro or vane).
 
 Two kinds of evidence, each compared for the declared unit and the candidates:
 
@@ -7,21 +8,18 @@ Two kinds of evidence, each compared for the declared unit and the candidates:
   file's ``[plausibility]`` table or its class defaults): the 99th percentile of |p|,
   |q|, |r| against ``rate_rad_s``; the medians of the specific force |(ax, ay, az)|,
   the airspeed, the altitude and the dynamic pressure (US-1976 density) against their
-  ranges; the median Mach against the preflight model's Mach range (finned vehicles).
+  ranges; the median Mach against the preflight model's Mach range (finned vehicles);
+  the median az against ``az_m_s2`` (an aircraft's is negative: z down, its lift holds it
+  up); the vane angles against 90 deg and the median alpha against ``alpha_rad``.
   A channel is refused only when its declared unit is outside the envelope *and* a
   candidate unit puts it inside.
-* **Kinematics**, which need no envelope: (a) the pitch rate integrates to the
-  change of pitch attitude; with the flight path's change from the normal
-  acceleration, what is left is the change of angle of attack, which the vanes
-  measure (aircraft) or which stays within ``alpha_rad`` (finned): a pitch gyro in
-  deg/s integrates to 57 times too much.  (b) The altitude's second derivative is the
-  vertical acceleration: per window, h is regressed on the doubly integrated
-  -(az + g) (with a quadratic for the unknown initial climb rate and attitude); the
-  slope is 1 for metres, 0.001 for kilometres and 3.28 for feet.
+* **Kinematics**, which need no envelope (aerosid.plausibility.kinematics): the pitch rate
+  against the vanes and the flight path, the altitude against the vertical acceleration, the
+  attitude columns against the gyros.
 
-Found mistakes raise ``TelemetryError`` naming the file, the column, the likely unit
-and the evidence.  Neither test fires on the shipped flights (seed-rlv, JSBSim c172x,
-the SIDPAC Twin Otter data): tests/test_plausibility_units.py.
+Found mistakes raise ``TelemetryError`` naming the file, the column, the likely unit (or
+sign) and the evidence.  No test fires on the shipped flights (seed-rlv, JSBSim c172x, the
+SIDPAC Twin Otter data): tests/test_plausibility_units.py.
 """
 from __future__ import annotations
 
@@ -40,11 +38,6 @@ ACCEL_UNITS = {"g": G0, "ft/s^2": 0.3048}
 SPEED_UNITS = {"kt": 0.514444, "km/h": 1.0 / 3.6, "ft/s": 0.3048, "mph": 0.44704}
 ALTITUDE_UNITS = {"km": 1000.0, "ft": 0.3048}
 
-#: Kinematic windows [s] and the evidence they need.
-ALPHA_WINDOW_S = 2.0
-ALTITUDE_WINDOW_S = 6.0
-MIN_T_STAT = 10.0  # pooled slope / its standard error, before a kinematic slope is believed
-SLOPE_TOLERANCE = 2.0  # a candidate unit fits when the slope is within this factor of its value
 
 
 @dataclass(frozen=True)
@@ -56,13 +49,20 @@ class UnitFinding:
     likely: str
     factor: float  # SI value = factor x value as written
     evidence: str
+    kind: str = "unit"  # "unit", or "sign": declared is then aerosid's sign convention, factor -1
+    overridable: bool = True  # a vehicle file's [plausibility] range can accept the values
 
     def message(self) -> str:
         cols = ", ".join(self.columns)
+        if self.kind == "sign":
+            return (f"the sign looks flipped: {self.evidence}. aerosid's convention: {self.declared}. Multiply "
+                    f"{'the column' if len(self.columns) == 1 else 'the wrong one of ' + cols} by -1 (an import "
+                    "map's sign = -1)" + ("; if the values are right, widen the vehicle file's [plausibility] "
+                                          "table" if self.overridable else ""))
         return (f"values look like {self.likely}, not {self.declared}: {self.evidence}. Convert "
                 f"{'the column' if len(self.columns) == 1 else 'the columns ' + cols} to {self.declared} "
-                f"(multiply by {self.factor:.6g}); if the values are right, widen the vehicle file's "
-                "[plausibility] table")
+                f"(multiply by {self.factor:.6g})" + ("; if the values are right, widen the vehicle file's "
+                                                       "[plausibility] table" if self.overridable else ""))
 
 
 def _usable(x: np.ndarray) -> np.ndarray:
@@ -147,6 +147,50 @@ def _rate_findings(frame: pd.DataFrame, env) -> list[UnitFinding]:
     return out
 
 
+def _az_sign_finding(frame: pd.DataFrame, env) -> UnitFinding | None:
+    """An accelerometer z axis pointing up: the median az outside the vehicle's az range
+    (an aircraft's is negative, its lift holding it up), inside it with the sign changed."""
+    x = _usable(frame["az_m_s2"].to_numpy(float))
+    if len(x) < 10:
+        return None
+    m = float(np.median(x))
+    if _inside(m, env.az_m_s2) or not _inside(-m, env.az_m_s2):
+        return None
+    return UnitFinding(("az_m_s2",), "body axes x forward, y right, z down (level flight reads az = -g)",
+                       "the opposite sign", -1.0,
+                       f"the median az_m_s2 is {m:+.4g} m/s^2, outside the vehicle's {_fmt_range(env.az_m_s2)} "
+                       "m/s^2 ([plausibility] az_m_s2): a z axis pointing up", kind="sign")
+
+
+#: Largest |angle| [rad] a vane or surface column holds (90 deg): in degrees most values lie beyond.
+ANGLE_BOUND_RAD = 1.6
+
+
+def _vane_findings(frame: pd.DataFrame, vehicle) -> list[UnitFinding]:
+    """Vane angles written in degrees: most values beyond ANGLE_BOUND_RAD, or the median alpha
+    outside the vehicle's alpha range, where as degrees they are inside."""
+    if vehicle.air_data_source != "vanes":
+        return []
+    out = []
+    for col in dict.fromkeys((vehicle.alpha_column, vehicle.beta_column)):
+        if col not in frame.columns:
+            continue
+        x = _usable(frame[col].to_numpy(float))
+        if len(x) < 10:
+            continue
+        beyond, beyond_deg = (float(np.mean(np.abs(v) > ANGLE_BOUND_RAD)) for v in (x, x * DEG))
+        if beyond > 0.5 and beyond_deg <= 0.5:
+            out.append(UnitFinding((col,), "rad", "deg", DEG, f"{beyond:.0%} of the values lie beyond "
+                                   f"{ANGLE_BOUND_RAD:g} rad (90 deg); as deg {beyond_deg:.0%}", overridable=False))
+        elif col == vehicle.alpha_column:
+            m, env = float(np.median(x)), vehicle.envelope
+            if not _inside(m, env.alpha_rad) and _inside(m * DEG, env.alpha_rad):
+                out.append(UnitFinding((col,), "rad", "deg", DEG, f"the median alpha {m:.4g} is outside the "
+                                       f"vehicle's {_fmt_range(env.alpha_rad)} rad ([plausibility] alpha_rad); "
+                                       f"as deg it is {m * DEG:.3g} rad"))
+    return out
+
+
 def _air_data_findings(frame: pd.DataFrame, vehicle) -> list[UnitFinding]:
     """V and h against the envelope (airspeed, altitude, dynamic pressure, Mach range)."""
     env = vehicle.envelope
@@ -193,153 +237,52 @@ def _air_data_findings(frame: pd.DataFrame, vehicle) -> list[UnitFinding]:
                         f"{vehicle.mach_reference:g}")]
 
 
-# --------------------------------------------------------------------------- kinematics
-def _windows(t: np.ndarray, length_s: float, max_gap_s: float = 0.25):
-    """Index arrays of consecutive windows of about length_s without a gap > max_gap_s."""
-    if len(t) < 3:
-        return
-    breaks = np.flatnonzero(np.diff(t) > max_gap_s) + 1
-    for run in np.split(np.arange(len(t)), breaks):
-        if len(run) < 3:
-            continue
-        tt = t[run]
-        start = tt[0]
-        while start + length_s <= tt[-1] + 1e-9:
-            idx = run[(tt >= start) & (tt < start + length_s)]
-            if len(idx) >= 20:
-                yield idx
-            start += length_s
+#: Candidate units by a column's unit suffix, for the raw schema's range check (range_unit_hint).
+SUFFIX_UNITS = (("_rad_s", "rad/s", RATE_UNITS), ("_rad", "rad", {"deg": DEG}), ("_m_s2", "m/s^2", ACCEL_UNITS),
+                ("_m_s", "m/s", SPEED_UNITS), ("_m", "m", ALTITUDE_UNITS))
 
 
-def _cumtrapz(y: np.ndarray, t: np.ndarray) -> np.ndarray:
-    out = np.zeros_like(y)
-    out[1:] = np.cumsum(0.5 * (y[1:] + y[:-1]) * np.diff(t))
-    return out
+def range_unit_hint(column: str, values: np.ndarray) -> str:
+    """For a column the raw schema refused as mostly outside its physical range: the unit in
+    which most of its values would be inside ("" when none is): a control surface in degrees."""
+    from schemas.telemetry import PHYSICAL_BOUNDS, RAW_MAX_OUT_OF_RANGE_FRACTION
 
-
-def _despike(x: np.ndarray) -> np.ndarray:
-    """A running median of 5 samples: isolated spikes do not integrate into steps."""
-    return pd.Series(x).rolling(5, center=True, min_periods=1).median().to_numpy()
-
-
-def _pooled_slope(pairs) -> tuple[float, float, int]:
-    """Slope k of y = k x + nuisance (per window), pooled over windows: (k, se, n)."""
-    sxx = sxy = 0.0
-    resid_parts, n_nuis = [], 0
-    xs, ys = [], []
-    for x, y, nuisance in pairs:
-        bx = np.linalg.lstsq(nuisance, x, rcond=None)[0]
-        by = np.linalg.lstsq(nuisance, y, rcond=None)[0]
-        xt, yt = x - nuisance @ bx, y - nuisance @ by
-        xs.append(xt), ys.append(yt)
-        sxx += float(xt @ xt)
-        sxy += float(xt @ yt)
-        n_nuis += nuisance.shape[1]
-    n = sum(len(x) for x in xs)
-    if sxx <= 0 or n <= n_nuis + 1:
-        return math.nan, math.nan, n
-    k = sxy / sxx
-    for xt, yt in zip(xs, ys):
-        resid_parts.append(yt - k * xt)
-    r = np.concatenate(resid_parts)
-    se = math.sqrt(float(r @ r) / (n - n_nuis - 1) / sxx)
-    return k, se, n
-
-
-def _clean_rows(frame: pd.DataFrame, cols: list[str]) -> pd.DataFrame:
-    rows = frame[["t_s", *cols]].copy()
-    ok = np.isfinite(rows.to_numpy(float)).all(axis=1)
-    return rows[ok].reset_index(drop=True)
-
-
-def _pitch_rate_kinematic(frame: pd.DataFrame, vehicle) -> UnitFinding | None:
-    """Integrated q against the vanes' alpha (with the flight-path change from az), or
-    against the vehicle's alpha range when there are no vanes."""
-    env = vehicle.envelope
-    vane = vehicle.alpha_column if vehicle.air_data_source == "vanes" else None
-    cols = ["q_rad_s", "az_m_s2", "V_m_s"] + ([vane] if vane and vane in frame.columns else [])
-    rows = _clean_rows(frame, cols)
-    if len(rows) < 100:
-        return None
-    t = rows["t_s"].to_numpy(float)
-    q = _despike(rows["q_rad_s"].to_numpy(float))
-    gdot = -(rows["az_m_s2"].to_numpy(float) + G0) / np.maximum(rows["V_m_s"].to_numpy(float), 1.0)
-    if len(cols) == 4:  # vanes: alpha + flight-path change = k * integral of q
-        alpha = _despike(rows[vane].to_numpy(float))
-        pairs = []
-        for idx in _windows(t, ALPHA_WINDOW_S * 2):
-            tt = t[idx] - t[idx][0]
-            Q, G = _cumtrapz(q[idx], tt), _cumtrapz(gdot[idx], tt)
-            pairs.append((Q, alpha[idx] + G, np.column_stack([np.ones_like(tt), tt])))
-        k, se, _ = _pooled_slope(pairs)
-        if not (math.isfinite(k) and k > 0 and k / se >= MIN_T_STAT):
-            return None
-        if abs(math.log(k / DEG)) < math.log(SLOPE_TOLERANCE) and abs(math.log(k)) > math.log(5.0):
-            return UnitFinding(("q_rad_s",), "rad/s", "deg/s", DEG,
-                               f"integrated, the pitch rate changes the pitch attitude {1 / k:.3g} times as much "
-                               f"as the vane angle of attack ({vane}) and the flight path (from az_m_s2) change "
-                               f"together (1 for rad/s, 57.3 for deg/s)")
-        return None
-    width = env.alpha_rad[1] - env.alpha_rad[0]
-    swings = []
-    for idx in _windows(t, ALPHA_WINDOW_S):
-        tt = t[idx] - t[idx][0]
-        d = _cumtrapz(q[idx], tt) - _cumtrapz(gdot[idx], tt)
-        d = d - np.polyval(np.polyfit(tt, d, 1), tt)
-        swings.append(float(np.ptp(d)))
-    if len(swings) < 3:
-        return None
-    swing = float(np.percentile(swings, 90))
-    if swing > width and swing * DEG <= 0.5 * width:
-        return UnitFinding(("q_rad_s",), "rad/s", "deg/s", DEG,
-                           f"integrated over {ALPHA_WINDOW_S:g} s windows, pitch rate minus flight-path rate "
-                           f"(the change of angle of attack) swings by {swing:.3g} rad in 10 % of the windows, more "
-                           f"than the vehicle's whole angle-of-attack range {_fmt_range(env.alpha_rad)} rad "
-                           f"([plausibility] alpha_rad); as deg/s it is {swing * DEG:.3g} rad")
-    return None
-
-
-def _altitude_kinematic(frame: pd.DataFrame) -> UnitFinding | None:
-    """h against the doubly integrated vertical acceleration -(az + g), per window."""
-    rows = _clean_rows(frame, ["h_m", "az_m_s2"])
-    if len(rows) < 100:
-        return None
-    t = rows["t_s"].to_numpy(float)
-    h = _despike(rows["h_m"].to_numpy(float))
-    acc = -(_despike(rows["az_m_s2"].to_numpy(float)) + G0)
-    pairs = []
-    for idx in _windows(t, ALTITUDE_WINDOW_S):
-        tt = t[idx] - t[idx][0]
-        H = _cumtrapz(_cumtrapz(acc[idx], tt), tt)
-        pairs.append((H, h[idx], np.column_stack([np.ones_like(tt), tt, tt**2])))
-    k, se, _ = _pooled_slope(pairs)
-    if not (math.isfinite(k) and k > 0 and k / se >= MIN_T_STAT) or abs(math.log(k)) < math.log(2.5):
-        return None
-    unit, f = min(ALTITUDE_UNITS.items(), key=lambda u: abs(math.log(k * u[1])))
-    if abs(math.log(k * f)) >= math.log(SLOPE_TOLERANCE):
-        return None
-    return UnitFinding(("h_m",), "m", unit, f,
-                       f"the altitude changes {k:.3g} times as much as the vertical acceleration (-(az_m_s2 + g), "
-                       f"integrated twice) says it does (1 for metres, 0.001 for km, 3.28 for ft)")
+    x = _usable(values)
+    if column not in PHYSICAL_BOUNDS or x.size == 0:
+        return ""
+    lo, hi = PHYSICAL_BOUNDS[column]
+    declared, units = next(((d, u) for suffix, d, u in SUFFIX_UNITS if column.endswith(suffix)), (None, {}))
+    for unit, k in units.items():
+        if np.mean((x * k < lo) | (x * k > hi)) <= RAW_MAX_OUT_OF_RANGE_FRACTION:
+            return (f"; the values look like {unit}, not {declared}: as {unit} they lie inside {lo:g}..{hi:g} "
+                    f"{declared} (multiply the column by {k:.6g})")
+    return ""
 
 
 # --------------------------------------------------------------------------- entry points
 def unit_findings(frame: pd.DataFrame, vehicle) -> list[UnitFinding]:
-    """Every unit mistake found in a raw telemetry frame (RawTelemetry columns), most
-    basic first: the accelerometers (the kinematic tests use az), rates, air data,
-    then the kinematic tests of the channels that passed."""
+    """Every unit or sign mistake found in a raw telemetry frame (RawTelemetry columns), most
+    basic first: the accelerometers (the kinematic tests use az), rates, air data, vanes,
+    then the kinematic tests (aerosid.plausibility.kinematics) of the channels that passed."""
+    from aerosid.plausibility.kinematics import (_altitude_kinematic, _attitude_kinematic,
+                                                 _pitch_rate_kinematic, _vane_confirms_q)
+
     env = vehicle.envelope
-    accel = _accel_finding(frame, env)
-    if accel is not None:
-        return [accel]
-    found = _rate_findings(frame, env) + _air_data_findings(frame, vehicle)
+    for basic in (_accel_finding(frame, env), _az_sign_finding(frame, env)):
+        if basic is not None:
+            return [basic]
+    found = _rate_findings(frame, env) + _air_data_findings(frame, vehicle) + _vane_findings(frame, vehicle)
     flagged = {c for f in found for c in f.columns}
-    if "q_rad_s" not in flagged and "V_m_s" not in flagged:
+    if not flagged & {"q_rad_s", "V_m_s", vehicle.alpha_column}:
         kin = _pitch_rate_kinematic(frame, vehicle)
         if kin is not None:
             found.append(kin)
     if "h_m" not in flagged:
         kin = _altitude_kinematic(frame)
+        if kin is not None:
+            found.append(kin)
+    if not flagged & {"p_rad_s", "q_rad_s", "r_rad_s"} and not any(f.kind == "sign" for f in found):
+        kin = _attitude_kinematic(frame, _vane_confirms_q(frame, vehicle))
         if kin is not None:
             found.append(kin)
     return found

@@ -255,3 +255,4 @@ def test_a_dead_vane_on_the_twin_otter_is_a_finding_and_the_healthy_one_is_not()
     dead = process_telemetry(tel, vehicle)
     (f,) = [f for f in dead.findings if f["kind"] == "vane_mismatch"]
     assert f["channel"] == "alpha_vane_rad" and not f["cut"] and "does not follow" in f["detail"]
+    assert "airspeed V_m_s in other units" in f["detail"] and "turbulent_air" in f["detail"]  # the other causes
