@@ -370,3 +370,13 @@ def test_u15b_a_running_prefect_server_is_reused_only_if_it_answers_with_this_ve
     finally:
         httpd.shutdown()
     assert running_server(url) is None  # nothing listens any more
+
+
+def test_a_parquet_time_column_of_timestamps_points_to_the_importer(flight, tmp_path):
+    """A data system's Parquet with datetime t_s: the dtype error says what the column holds and
+    which command reads it (aerosid import csv FILE.parquet; test_importers.py)."""
+    _, raw = flight
+    stamps = pd.Timestamp("2026-11-20 14:00:00") + pd.to_timedelta(raw["t_s"], unit="s")
+    bad = write(raw.assign(t_s=stamps), tmp_path / "stamped.parquet")
+    run_fails_fast([str(bad), "--vehicle", "seed-rlv"], tmp_path / "run", str(bad), "column 't_s'",
+                   "t_s holds timestamps (timestamp[", "aerosid import csv FILE.parquet")

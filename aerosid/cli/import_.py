@@ -83,7 +83,8 @@ def sidpac(file, out_dir):
 def csv(file, map_file, out_dir):
     """A flight-test CSV, columns and units named in a map (deg, deg/s, g, ft, ft/s, kt,
     lbf/ft^2, slug/ft^3, ...; converted by pint, each conversion recorded in the
-    Parquet metadata)."""
+    Parquet metadata). A data system's Parquet table (FILE.parquet) is read with the same
+    map; a timestamp time column becomes seconds since 1970 UTC."""
     from aerosid.vehicles.csv_import import import_csv
 
     try:

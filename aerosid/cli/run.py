@@ -279,6 +279,15 @@ def _preflight(telemetry: Path, vehicle: str | None, model_spec: str | None, pre
                 raise TelemetryError(f"{exc.reason}; columns outside the contract {extra}: misnamed? "
                                      f"(the raw contract is {list(RAW_COLUMNS)})", file=exc.file,
                                      column=exc.column, rows=exc.rows) from None
+        if exc.column == "t_s" and "dtype" in exc.reason:
+            import pyarrow as pa
+
+            kind = pq.read_schema(telemetry).field("t_s").type
+            if pa.types.is_timestamp(kind) or pa.types.is_date(kind):
+                raise TelemetryError(f"{exc.reason}; t_s holds timestamps ({kind}), the raw contract seconds as "
+                                     "float64: `aerosid import csv FILE.parquet --map MAP --out DIR` reads a data "
+                                     "system's Parquet (its names, units and timestamps; docs/real-flight.md)",
+                                     file=exc.file, column=exc.column, rows=exc.rows) from None
         if exc.column in RAW_COLUMNS and "mostly_in_physical_range" in exc.reason:
             hint = range_unit_hint(exc.column, pq.read_table(telemetry, columns=[exc.column]).column(0).to_numpy())
             if hint:

@@ -162,17 +162,26 @@ def _toml_str(text: str) -> str:
     return json.dumps(text)
 
 
+PARQUET_SUFFIXES = (".parquet", ".pq")
+
+
 def import_csv(csv_path: str | Path, map_path: str | Path) -> ImportedFlight:
-    """Convert a flight-test CSV to aerosid's raw contract with the map's columns and units."""
+    """Convert a flight-test CSV to aerosid's raw contract with the map's columns and units.
+    A Parquet table (suffix .parquet or .pq: a data system's own names, units and types) is
+    read the same way; its numeric columns are taken as they are, a timestamp column (datetime
+    type) as seconds since 1970-01-01 UTC, others as text (the CSV's readers)."""
     cmap = load_csv_map(map_path)
     csv_path = Path(csv_path)
     if not csv_path.is_file():
         raise ImportDataError(csv_path, "no such CSV file")
-    try:
-        frame = pd.read_csv(csv_path, sep=cmap.delimiter, comment=cmap.comment, dtype=str, keep_default_na=False,
-                            skipinitialspace=True)
-    except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as exc:
-        raise ImportDataError(csv_path, f"not a readable CSV ({exc})") from None
+    if csv_path.suffix.lower() in PARQUET_SUFFIXES:
+        frame = _read_parquet_table(csv_path)
+    else:
+        try:
+            frame = pd.read_csv(csv_path, sep=cmap.delimiter, comment=cmap.comment, dtype=str,
+                                keep_default_na=False, skipinitialspace=True)
+        except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as exc:
+            raise ImportDataError(csv_path, f"not a readable CSV ({exc})") from None
     frame.columns = [str(c).strip() for c in frame.columns]
     convs: list[Conversion] = []
     data: dict[str, np.ndarray] = {}
@@ -180,13 +189,16 @@ def import_csv(csv_path: str | Path, map_path: str | Path) -> ImportedFlight:
         if entry.column not in frame.columns:
             raise ImportDataError(csv_path, f"not found in the CSV (mapped to {entry.target} by {cmap.path}); the "
                                   f"CSV has {list(frame.columns)}", column=entry.column)
-        clock = entry.target == "t_s" and _clock_times(frame[entry.column])
+        if frame[entry.column].dtype.kind == "f":  # a Parquet table's numbers (and timestamps, in s)
+            values, clock = frame[entry.column].to_numpy(), None
+        else:
+            clock = entry.target == "t_s" and _clock_times(frame[entry.column])
         if clock:
             values, form = clock
             if entry.unit != "s":
                 raise ImportDataError(csv_path, f"holds {form} (e.g. {str(frame[entry.column].iloc[0]).strip()!r}): "
                                       f"its unit in the map must be \"s\", not {entry.unit!r}", column=entry.column)
-        else:
+        elif frame[entry.column].dtype.kind != "f":
             values = _numbers(frame[entry.column], csv_path, entry.column, cmap.decimal)
         conv = conversion(entry.target, entry.unit, source=f"CSV column {entry.column!r}", sign=entry.sign,
                           where=cmap.path)
@@ -205,6 +217,30 @@ def import_csv(csv_path: str | Path, map_path: str | Path) -> ImportedFlight:
     return ImportedFlight(importer="csv", source=str(csv_path), telemetry=telemetry, vehicle_toml=cmap.vehicle_toml,
                           vehicle_name=vehicle_name, conversions=tuple(convs), notes=notes,
                           extra_metadata={"aerosid.map": cmap.path, "aerosid.map_sha256": sha256_file(cmap.path)})
+
+
+def _read_parquet_table(path: Path) -> pd.DataFrame:
+    """A Parquet table for the map: numeric columns as float64, datetime columns as seconds since
+    1970-01-01 UTC (float64, whole seconds and their fraction apart as _clock_times), any other
+    column as text."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    try:
+        table = pq.read_table(path)
+    except (pa.ArrowException, OSError) as exc:
+        raise ImportDataError(path, f"not a readable Parquet file ({exc})") from None
+    out = {}
+    for name, column in zip(table.column_names, table.columns):
+        kind = column.type
+        if pa.types.is_timestamp(kind):
+            ns = pd.to_datetime(column.to_pandas(), utc=True).dt.as_unit("ns").astype("int64").to_numpy()
+            out[name] = (ns // 1_000_000_000).astype(float) + (ns % 1_000_000_000) / 1e9
+        elif pa.types.is_integer(kind) or pa.types.is_floating(kind):
+            out[name] = column.to_numpy(zero_copy_only=False).astype(float)
+        else:
+            out[name] = column.to_pandas().astype(str).to_numpy()
+    return pd.DataFrame(out)
 
 
 def _clock_times(column: pd.Series) -> tuple[np.ndarray, str] | None:

@@ -336,3 +336,21 @@ def test_cli_import_sidpac_and_errors(tmp_path):
 def test_csv_columns_of_the_helper_are_all_mapped():
     cmap = load_csv_map(EXAMPLE_MAP)
     assert {c.column for c in cmap.columns} == set(CSV_COLUMNS)
+
+
+def test_a_parquet_table_with_its_own_names_units_and_timestamps_reads_as_the_same_record(tmp_path):
+    """A data system's Parquet (the CSV's columns, units and a datetime time column) imports with
+    the same map: the record of the CSV, times in seconds since 1970 UTC."""
+    csv = write_twin_otter_csv(F018, tmp_path / "to18.csv")
+    ref = import_csv(csv, EXAMPLE_MAP).telemetry
+    frame = pd.read_csv(csv)
+    frame.to_parquet(tmp_path / "to18.parquet", index=False)  # numbers as the CSV's
+    pd.testing.assert_frame_equal(import_csv(tmp_path / "to18.parquet", EXAMPLE_MAP).telemetry, ref)
+    ns = np.round(frame["time"].to_numpy() * 1e9).astype("int64") + np.int64(1013558400) * 10**9
+    frame.assign(time=pd.to_datetime(ns, unit="ns", utc=True)).to_parquet(tmp_path / "stamped.parquet", index=False)
+    got = import_csv(tmp_path / "stamped.parquet", EXAMPLE_MAP).telemetry
+    np.testing.assert_allclose(got["t_s"].to_numpy() - 1013558400.0, ref["t_s"].to_numpy(), rtol=0, atol=2e-6)
+    pd.testing.assert_frame_equal(got.drop(columns="t_s"), ref.drop(columns="t_s"))
+    (tmp_path / "broken.parquet").write_bytes(b"PAR1 not really")
+    with pytest.raises(ImportDataError, match="not a readable Parquet"):
+        import_csv(tmp_path / "broken.parquet", EXAMPLE_MAP)
