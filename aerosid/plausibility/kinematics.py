@@ -11,7 +11,9 @@ state and slow biases; the pooled slope is 1 when both are right:
   in degrees (57.3);
 * altitude: h against the doubly integrated -(az + g) (1 m, 0.001 km, 3.28 ft);
 * attitude (phi_rad, theta_rad when the telemetry has them): each angle against the gyros
-  through the Euler kinematics (-1: the rate or the angle flipped; 57.3: the angle in degrees).
+  through the Euler kinematics (-1: the rate or the angle flipped; 57.3: the angle in degrees);
+* sideslip: the vane beta against the integrated -r cos alpha, ay / V and the bank's gravity,
+  whose signs tell a flipped vane, yaw gyro or lateral accelerometer apart.
 
 Evidence is believed at |slope| / se >= MIN_T_STAT, a candidate within SLOPE_TOLERANCE.
 """
@@ -290,3 +292,69 @@ def _attitude_kinematic(frame: pd.DataFrame, q_confirmed: bool = False) -> UnitF
                                said + f" (+1 expected): {rate} or {angle} is flipped", kind="sign",
                                overridable=False)
     return None
+
+
+LATERAL_WINDOW_S = 4.0
+
+
+def _lateral_kinematic(frame: pd.DataFrame, vehicle) -> UnitFinding | None:
+    """The sideslip vane against the lateral kinematics, per window: beta = bP P + bR R + bY Y +
+    bG Gy with P = integral of p sin alpha, R = integral of -r cos alpha, Y = integral of ay / V,
+    Gy = integral of g cos theta sin phi / V (with no attitude columns, phi is the integrated roll
+    rate: its initial value goes into the window's slope).  Healthy: all 1.  R and Gy -1: the
+    vane is flipped (sideslip conventions differ between data systems); R alone: the yaw gyro;
+    Y alone: the lateral accelerometer; Gy alone (no attitude): the roll gyro.  P (small where
+    alpha is) only keeps the roll rate's part out of the others."""
+    if vehicle.air_data_source != "vanes" or vehicle.beta_column not in frame.columns:
+        return None
+    vane = vehicle.beta_column
+    alpha_col = vehicle.alpha_column if vehicle.alpha_column in frame.columns else None
+    attitude = {"phi_rad", "theta_rad"} <= set(frame.columns)
+    cols = ["p_rad_s", "r_rad_s", "ay_m_s2", "V_m_s", vane] + ([alpha_col] if alpha_col else []) + \
+        (["phi_rad", "theta_rad"] if attitude else [])
+    rows = _clean_rows(frame, cols)
+    if len(rows) < 100:
+        return None
+    t = rows["t_s"].to_numpy(float)
+    p, r, ay, beta = (_despike(rows[c].to_numpy(float)) for c in ("p_rad_s", "r_rad_s", "ay_m_s2", vane))
+    V = np.maximum(rows["V_m_s"].to_numpy(float), 1.0)
+    alpha = _despike(rows[alpha_col].to_numpy(float)) if alpha_col else np.zeros_like(t)
+    triples = []
+    for idx in _windows(t, LATERAL_WINDOW_S):
+        tt = t[idx] - t[idx][0]
+        if attitude:
+            bank = G0 * np.cos(rows["theta_rad"].to_numpy(float)[idx]) * np.sin(rows["phi_rad"].to_numpy(float)[idx])
+        else:
+            bank = G0 * np.sin(_cumtrapz(p[idx], tt))
+        X = np.column_stack([_cumtrapz(p[idx] * np.sin(alpha[idx]), tt), _cumtrapz(-r[idx] * np.cos(alpha[idx]), tt),
+                             _cumtrapz(ay[idx] / V[idx], tt), _cumtrapz(bank / V[idx], tt)])
+        triples.append((X, beta[idx], np.column_stack([np.ones_like(tt), tt])))
+    b, se = _pooled_fit(triples)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        sure = np.isfinite(b) & (np.abs(b) >= MIN_T_STAT * se)
+    if not (sure[1] and sure[3]):
+        return None
+    R, Y, G = (_sign_of(b[i]) if sure[i] else 0.0 for i in (1, 2, 3))
+    said = (f"beta = {b[1]:.3g} R {b[2]:+.3g} Y {b[3]:+.3g} Gy {b[0]:+.3g} P over windows (R: the integrated -r cos "
+            f"alpha, Y: ay / V, Gy: g cos theta sin phi / V{'' if attitude else ', phi from the roll rate'}, P: "
+            "p sin alpha; +1 each expected)")
+    if R < 0 and G < 0 and Y <= 0:
+        column, convention, why = vane, "beta positive with the relative wind from the right (nose left)", \
+            "the vane disagrees with the gyros and the accelerometer alike"
+    elif R < 0 and G > 0:
+        column, convention, why = "r_rad_s", "r positive nose right", "the yaw gyro disagrees with the vane and gravity"
+    elif R > 0 and G > 0 and Y < 0:
+        column, convention, why = "ay_m_s2", "ay positive to the right (body y axis)", \
+            "the lateral accelerometer disagrees with the vane, the yaw gyro and gravity"
+    elif R > 0 and G < 0 and not attitude:
+        column, convention, why = "p_rad_s", "p positive right wing down", \
+            "the bank from the roll rate disagrees with the vane and the yaw gyro"
+    else:
+        return None
+    return UnitFinding((column,), convention, "the opposite sign", -1.0, f"{said}: {why}", kind="sign",
+                       overridable=False)
+
+
+def _sign_of(x: float) -> float:
+    """+1 or -1 where x is within SLOPE_TOLERANCE of it, else 0."""
+    return 1.0 if _near(x, 1.0) else -1.0 if _near(x, -1.0) else 0.0
