@@ -124,7 +124,7 @@ def _start(jobs: list[FlightJob]):
     for job in jobs:
         Path(job.run_dir).mkdir(parents=True, exist_ok=True)
     settings = [j.preprocess_settings() for j in jobs]
-    pre_futures = [preprocess_task.submit(j.telemetry, j.run_dir, j.context(), params)
+    pre_futures = [preprocess_task.submit(j.telemetry, j.run_dir, j.context(), params, j.vehicle)
                    for j, (params, _) in zip(jobs, settings)]
     plans, seg_futures, pre = [], [], []
     for job, fut, (_, min_seg) in zip(jobs, pre_futures, settings):

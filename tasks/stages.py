@@ -17,6 +17,7 @@ from aerosid.identification.flight_data import (build_flight_data_segments, buil
                                  load_database)
 from aerosid.identification.identify import default_bias_pairs, identify
 from aerosid.modelling.models import default_models, load_models
+from aerosid.plausibility.units import check_units
 from aerosid.preprocess import PreprocessParams, preprocess
 from aerosid.preprocess.segments import plan_segments
 from aerosid.estimation.smoothing import smooth_segment_frame
@@ -50,11 +51,16 @@ IO_RETRIES = {"retries": 2, "retry_delay_seconds": [0.2, 1.0], "retry_condition_
 
 
 @task(name="preprocess", **IO_RETRIES)
-def preprocess_task(raw_path: str, run_dir: str, ctx: StageContext, params: dict) -> dict:
+def preprocess_task(raw_path: str, run_dir: str, ctx: StageContext, params: dict, vehicle: str | None = None) -> dict:
+    """Preprocess the raw telemetry; with the vehicle, its units and signs are checked first
+    (aerosid.plausibility.units: the same check as `aerosid run`'s pre-flight, here for the
+    inbox and campaign flows too)."""
     out = Path(run_dir) / "preprocessed.parquet"
 
     def produce() -> Produced:
         raw = read_validated(raw_path, RawTelemetry)
+        if vehicle is not None:
+            check_units(raw, load_vehicle(vehicle), raw_path)
         result = preprocess(raw, PreprocessParams.from_dict(params), source=raw_path)
         flagged = int((result.frame["flags"] != 0).sum())
         return Produced(result.frame, result.metadata(), rows_in=len(raw), flagged_rows=flagged,

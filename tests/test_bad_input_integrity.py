@@ -230,3 +230,22 @@ def test_i1_i3_tampered_outputs_are_recomputed_and_the_audit_names_what_changed(
     edited = audit()
     assert edited.exit_code == 1 and "Traceback" not in edited.output
     assert f"{out / 'ledger.jsonl'} line 1:" in edited.output and "edited" in edited.output
+
+
+def test_the_preprocess_stage_checks_units_and_signs_for_the_inbox_and_campaign_flows(flight, tmp_path):
+    """The unit and sign check ran only in `aerosid run`'s pre-flight: an inbox scan or a campaign
+    processed a pitch gyro in deg/s. The stage now refuses it, naming file and column, and writes
+    no output; without a vehicle (nothing to check against) it preprocesses as before."""
+    from aerosid.preprocess import TelemetryError
+    from tasks.runner import StageContext
+    from tasks.stages import preprocess_task
+
+    _, raw = flight
+    bad = write(raw.assign(q_rad_s=raw["q_rad_s"] * 57.29577951308232), tmp_path / "q_deg_s.parquet")
+    run_dir = tmp_path / "run"
+    ctx = StageContext(str(run_dir / "ledger.jsonl"), "local", "f")
+    with pytest.raises(TelemetryError) as err:
+        preprocess_task.fn(str(bad), str(run_dir), ctx, {}, "seed-rlv")
+    assert err.value.column == "q_rad_s" and "look like deg/s" in str(err.value) and "q_deg_s.parquet" in str(err.value)
+    assert not (run_dir / "preprocessed.parquet").exists()
+    assert preprocess_task.fn(str(flight[0]), str(run_dir), ctx, {}, "seed-rlv")["status"] == "ok"
