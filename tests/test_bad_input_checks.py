@@ -380,3 +380,20 @@ def test_a_parquet_time_column_of_timestamps_points_to_the_importer(flight, tmp_
     bad = write(raw.assign(t_s=stamps), tmp_path / "stamped.parquet")
     run_fails_fast([str(bad), "--vehicle", "seed-rlv"], tmp_path / "run", str(bad), "column 't_s'",
                    "t_s holds timestamps (timestamp[", "aerosid import csv FILE.parquet")
+
+
+def test_an_empty_control_column_the_vehicle_does_not_use_says_to_fill_it_with_zeros(flight, tmp_path):
+    """A data system without a fourth surface leaves d3 empty; the raw contract needs every
+    channel, and the refusal now says when the vehicle's mixing does not read it (fill it with 0)."""
+    _, raw = flight
+    text = open(load_vehicle("c172x").source).read()
+    one_aileron = text.replace("mixing = [[0.0, 0.5, -0.5, 0.0], [1.0, 0.0, 0.0, 0.0], [0.0, 0.0, 0.0, 1.0]]",
+                               "mixing = [[0.0, 1.0, 0.0, 0.0], [1.0, 0.0, 0.0, 0.0], [0.0, 0.0, 0.0, 1.0]]")
+    assert one_aileron != text
+    veh = tmp_path / "one_aileron.toml"
+    veh.write_text(one_aileron)
+    for column, hint in (("d3_rad", True), ("d2_rad", False)):
+        bad = write(raw.assign(**{column: np.nan}), tmp_path / f"no_{column}.parquet")
+        text = clean_failure(cli("run", str(bad), "--vehicle", str(veh), "--out", str(tmp_path / "run")),
+                             f"column '{column}'", "no value in the whole channel")
+        assert ("mixing does not read d3_rad (its column 3 is zero): fill it with 0" in text) == hint, text

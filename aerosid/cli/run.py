@@ -247,6 +247,27 @@ def _regular_file(path: Path, max_bytes: int) -> None:
         raise TelemetryError(f"{st.st_size} bytes: more than the {max_bytes} a telemetry file may have", file=str(path))
 
 
+def _unused_control(vehicle: str | None, column: str) -> str:
+    """For a control column d1..d4 that the vehicle's [controls] mixing does not read: the hint
+    to fill it with zeros ("" otherwise, or when the vehicle does not load)."""
+    import re
+
+    m = re.fullmatch(r"d([1-4])_rad", column)
+    if vehicle is None or m is None:
+        return ""
+    from aerosid.vehicles.vehicle import VehicleError, load_vehicle
+
+    try:
+        veh = load_vehicle(vehicle)
+    except (VehicleError, OSError, ValueError):
+        return ""
+    k = int(m.group(1)) - 1
+    if any(row[k] for row in veh.mixing):
+        return ""
+    return (f"; vehicle {veh.name}'s [controls] mixing does not read {column} (its column {k + 1} is zero): "
+            "fill it with 0")
+
+
 def _preflight(telemetry: Path, vehicle: str | None, model_spec: str | None, preprocess_params: dict | None = None,
                windows=(), min_segment_s: float | None = None) -> str:
     """Cheap checks of the inputs before any flow starts: the telemetry file is a
@@ -299,8 +320,8 @@ def _preflight(telemetry: Path, vehicle: str | None, model_spec: str | None, pre
         x = frame[c].to_numpy()
         if not (np.isfinite(x) & ~sentinel_mask(x)).any():
             raise TelemetryError(f"no value in the whole channel (all {len(frame)} rows NaN, infinite or a "
-                                 "no-data sentinel): the pipeline needs every channel", file=str(telemetry),
-                                 column=c, rows=range(len(frame)))
+                                 f"no-data sentinel): the pipeline needs every channel{_unused_control(vehicle, c)}",
+                                 file=str(telemetry), column=c, rows=range(len(frame)))
     for c in (m for m in MEASURED_AIR_DATA_CHANNELS if m in frame.columns):
         x = frame[c].to_numpy()
         if not (np.isfinite(x) & ~sentinel_mask(x)).any():
