@@ -61,48 +61,31 @@ def _despike(x: np.ndarray) -> np.ndarray:
     return pd.Series(x).rolling(5, center=True, min_periods=1).median().to_numpy()
 
 
-def _pooled_fit(triples) -> tuple[np.ndarray, np.ndarray]:
-    """Coefficients b of y = X b + nuisance (per window), pooled over windows, and their
-    standard errors (NaN when X is not determined)."""
+def _pooled_fit(triples, width: int) -> tuple[np.ndarray, np.ndarray]:
+    """Coefficients b (width of them) of y = X b + nuisance (per window), pooled over windows,
+    and their standard errors (NaN when X is not determined)."""
     xs, ys, n_nuis = [], [], 0
     for X, y, nuisance in triples:
         xs.append(X - nuisance @ np.linalg.lstsq(nuisance, X, rcond=None)[0])
         ys.append(y - nuisance @ np.linalg.lstsq(nuisance, y, rcond=None)[0])
         n_nuis += nuisance.shape[1]
+    undetermined = np.full(width, math.nan), np.full(width, math.nan)
     if not xs:
-        return np.full(2, math.nan), np.full(2, math.nan)
+        return undetermined
     X, y = np.concatenate(xs), np.concatenate(ys)
-    dof = len(y) - n_nuis - X.shape[1]
+    dof = len(y) - n_nuis - width
     xtx = X.T @ X
-    if dof <= 0 or np.linalg.cond(xtx) > 1e12:
-        return np.full(X.shape[1], math.nan), np.full(X.shape[1], math.nan)
+    if dof <= 0 or not np.all(np.diag(xtx) > 0) or np.linalg.cond(xtx) > 1e12:
+        return undetermined
     b = np.linalg.solve(xtx, X.T @ y)
     r = y - X @ b
     return b, np.sqrt(np.diag(np.linalg.inv(xtx)) * float(r @ r) / dof)
 
 
-def _pooled_slope(pairs) -> tuple[float, float, int]:
-    """Slope k of y = k x + nuisance (per window), pooled over windows: (k, se, n)."""
-    sxx = sxy = 0.0
-    resid_parts, n_nuis = [], 0
-    xs, ys = [], []
-    for x, y, nuisance in pairs:
-        bx = np.linalg.lstsq(nuisance, x, rcond=None)[0]
-        by = np.linalg.lstsq(nuisance, y, rcond=None)[0]
-        xt, yt = x - nuisance @ bx, y - nuisance @ by
-        xs.append(xt), ys.append(yt)
-        sxx += float(xt @ xt)
-        sxy += float(xt @ yt)
-        n_nuis += nuisance.shape[1]
-    n = sum(len(x) for x in xs)
-    if sxx <= 0 or n <= n_nuis + 1:
-        return math.nan, math.nan, n
-    k = sxy / sxx
-    for xt, yt in zip(xs, ys):
-        resid_parts.append(yt - k * xt)
-    r = np.concatenate(resid_parts)
-    se = math.sqrt(float(r @ r) / (n - n_nuis - 1) / sxx)
-    return k, se, n
+def _pooled_slope(pairs) -> tuple[float, float]:
+    """Slope k of y = k x + nuisance (per window), pooled over windows: (k, se)."""
+    b, se = _pooled_fit([(x[:, None], y, nuisance) for x, y, nuisance in pairs], 1)
+    return float(b[0]), float(se[0])
 
 
 def _clean_rows(frame: pd.DataFrame, cols: list[str]) -> pd.DataFrame:
@@ -125,7 +108,7 @@ def _vane_pitch_slopes(rows: pd.DataFrame, vane: str, t: np.ndarray, q: np.ndarr
         pairs.append((Q, alpha[idx] + G, nuisance))
         vane_pairs.append((Q - G, alpha[idx], nuisance))
         triples.append((np.column_stack([Q, G]), alpha[idx], nuisance))
-    return _pooled_slope(pairs)[:2], _pooled_slope(vane_pairs)[:2], _pooled_fit(triples)
+    return _pooled_slope(pairs), _pooled_slope(vane_pairs), _pooled_fit(triples, 2)
 
 
 def _pitch_inputs(frame: pd.DataFrame, vehicle):
@@ -237,7 +220,7 @@ def _altitude_kinematic(frame: pd.DataFrame) -> UnitFinding | None:
         tt = t[idx] - t[idx][0]
         H = _cumtrapz(_cumtrapz(acc[idx], tt), tt)
         pairs.append((H, h[idx], np.column_stack([np.ones_like(tt), tt, tt**2])))
-    k, se, _ = _pooled_slope(pairs)
+    k, se = _pooled_slope(pairs)
     if not (math.isfinite(k) and k > 0 and k / se >= MIN_T_STAT) or abs(math.log(k)) < math.log(2.5):
         return None
     unit, f = min(ALTITUDE_UNITS.items(), key=lambda u: abs(math.log(k * u[1])))
@@ -276,7 +259,7 @@ def _attitude_kinematic(frame: pd.DataFrame, q_confirmed: bool = False) -> UnitF
             tt = t[idx] - t[idx][0]
             pairs.append((_cumtrapz(rates[angle][idx], tt), angles[angle][idx],
                           np.column_stack([np.ones_like(tt), tt])))
-        k, se, _ = _pooled_slope(pairs)
+        k, se = _pooled_slope(pairs)
         if not (math.isfinite(k) and abs(k) / se >= MIN_T_STAT):
             continue
         said = (f"integrated through the Euler kinematics, the gyros change {angle} {1 / k:.3g} times as much as "
@@ -329,7 +312,7 @@ def _lateral_kinematic(frame: pd.DataFrame, vehicle) -> UnitFinding | None:
         X = np.column_stack([_cumtrapz(p[idx] * np.sin(alpha[idx]), tt), _cumtrapz(-r[idx] * np.cos(alpha[idx]), tt),
                              _cumtrapz(ay[idx] / V[idx], tt), _cumtrapz(bank / V[idx], tt)])
         triples.append((X, beta[idx], np.column_stack([np.ones_like(tt), tt])))
-    b, se = _pooled_fit(triples)
+    b, se = _pooled_fit(triples, 4)
     with np.errstate(invalid="ignore", divide="ignore"):
         sure = np.isfinite(b) & (np.abs(b) >= MIN_T_STAT * se)
     if not (sure[1] and sure[3]):
