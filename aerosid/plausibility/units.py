@@ -15,7 +15,7 @@ Two kinds of evidence, each compared for the declared unit and the candidates:
   candidate unit puts it inside.
 * **Kinematics**, which need no envelope (aerosid.plausibility.kinematics): the pitch rate
   against the vanes and the flight path, the altitude against the vertical acceleration, the
-  attitude columns against the gyros.
+  attitude columns against the gyros, the sideslip vane against the lateral kinematics.
 
 Found mistakes raise ``TelemetryError`` naming the file, the column, the likely unit (or
 sign) and the evidence.  No test fires on the shipped flights (seed-rlv, JSBSim c172x, the
@@ -54,15 +54,14 @@ class UnitFinding:
 
     def message(self) -> str:
         cols = ", ".join(self.columns)
+        widen = "; if the values are right, widen the vehicle file's [plausibility] table" if self.overridable else ""
         if self.kind == "sign":
             return (f"the sign looks flipped: {self.evidence}. aerosid's convention: {self.declared}. Multiply "
                     f"{'the column' if len(self.columns) == 1 else 'the wrong one of ' + cols} by -1 (an import "
-                    "map's sign = -1)" + ("; if the values are right, widen the vehicle file's [plausibility] "
-                                          "table" if self.overridable else ""))
+                    f"map's sign = -1){widen}")
         return (f"values look like {self.likely}, not {self.declared}: {self.evidence}. Convert "
                 f"{'the column' if len(self.columns) == 1 else 'the columns ' + cols} to {self.declared} "
-                f"(multiply by {self.factor:.6g})" + ("; if the values are right, widen the vehicle file's "
-                                                       "[plausibility] table" if self.overridable else ""))
+                f"(multiply by {self.factor:.6g}){widen}")
 
 
 def _usable(x: np.ndarray) -> np.ndarray:

@@ -127,11 +127,10 @@ def _infer_rate(t: np.ndarray) -> float:
     sample count between consecutive rows = round(interval / dt0) (>= 1), then the
     least-squares slope of t against the cumulative sample index (the median alone
     drifts by samples over a long jittered record).  An interval across which the sample
-    phase moved (one of >= 1.5 steps that is not a whole number of them, or one further off a
-    whole number than the clock's own scatter) starts a new run with its own intercept, and the slope is the one
-    within runs: counted as whole steps, each such jump would tilt it (0.13 % on 20 s of 50 Hz
-    with two half-step jumps; a 100 Hz record with dropouts thinned to 10 Hz has jumps of 1.2
-    and 1.5 steps, read as 9.965 Hz and refused by the schema)."""
+    phase moved (_phase_moves) starts a new run with its own intercept, and the slope is the
+    one within runs: counted as whole steps, each such jump would tilt it (0.13 % on 20 s of
+    50 Hz with two half-step jumps; a 100 Hz record with dropouts thinned to 10 Hz has jumps
+    of 1.2 and 1.5 steps, read as 9.965 Hz and refused by the schema)."""
     d = np.diff(t)
     dt0 = float(np.median(d))
     if not (dt0 > 0):
@@ -144,7 +143,8 @@ def _infer_rate(t: np.ndarray) -> float:
             run = np.concatenate(([0], np.cumsum(moved)))
             count = np.bincount(run)
             kc = k - (np.bincount(run, k) / count)[run]
-            tc = t - (np.bincount(run, t) / count)[run]
+            t1 = t - t[0]  # the group sums exact for a record in Unix time
+            tc = t1 - (np.bincount(run, t1) / count)[run]
         else:
             kc, tc = k - k.mean(), t - t.mean()
         denom = float(np.dot(kc, kc))
