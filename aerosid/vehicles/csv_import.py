@@ -173,7 +173,7 @@ def import_csv(csv_path: str | Path, map_path: str | Path) -> ImportedFlight:
     cmap = load_csv_map(map_path)
     csv_path = Path(csv_path)
     if not csv_path.is_file():
-        raise ImportDataError(csv_path, "no such CSV file")
+        raise ImportDataError(csv_path, "no such file")
     if csv_path.suffix.lower() in PARQUET_SUFFIXES:
         frame = _read_parquet_table(csv_path)
     else:
@@ -189,17 +189,7 @@ def import_csv(csv_path: str | Path, map_path: str | Path) -> ImportedFlight:
         if entry.column not in frame.columns:
             raise ImportDataError(csv_path, f"not found in the CSV (mapped to {entry.target} by {cmap.path}); the "
                                   f"CSV has {list(frame.columns)}", column=entry.column)
-        if frame[entry.column].dtype.kind == "f":  # a Parquet table's numbers (and timestamps, in s)
-            values, clock = frame[entry.column].to_numpy(), None
-        else:
-            clock = entry.target == "t_s" and _clock_times(frame[entry.column])
-        if clock:
-            values, form = clock
-            if entry.unit != "s":
-                raise ImportDataError(csv_path, f"holds {form} (e.g. {str(frame[entry.column].iloc[0]).strip()!r}): "
-                                      f"its unit in the map must be \"s\", not {entry.unit!r}", column=entry.column)
-        elif frame[entry.column].dtype.kind != "f":
-            values = _numbers(frame[entry.column], csv_path, entry.column, cmap.decimal)
+        values = _column_values(frame[entry.column], entry, csv_path, cmap.decimal)
         conv = conversion(entry.target, entry.unit, source=f"CSV column {entry.column!r}", sign=entry.sign,
                           where=cmap.path)
         if entry.target == "t_s":
@@ -219,6 +209,31 @@ def import_csv(csv_path: str | Path, map_path: str | Path) -> ImportedFlight:
                           extra_metadata={"aerosid.map": cmap.path, "aerosid.map_sha256": sha256_file(cmap.path)})
 
 
+def _column_values(column: pd.Series, entry, csv_path: Path, decimal: str) -> np.ndarray:
+    """A mapped column as floats in its map unit: a Parquet table's numbers (and timestamps,
+    already in s) as they are; the time column's clock times as seconds (its unit must be "s");
+    text as numbers (_numbers)."""
+    if column.dtype.kind == "f":
+        return column.to_numpy()
+    clock = _clock_times(column) if entry.target == "t_s" else None
+    if clock is None:
+        return _numbers(column, csv_path, entry.column, decimal)
+    values, form = clock
+    if entry.unit != "s":
+        raise ImportDataError(csv_path, f"holds {form} (e.g. {str(column.iloc[0]).strip()!r}): its unit in the map "
+                              f"must be \"s\", not {entry.unit!r}", column=entry.column)
+    return values
+
+
+def _epoch_seconds(stamps: pd.Series) -> np.ndarray:
+    """UTC datetimes as seconds since 1970-01-01, whole seconds and their fraction apart (float64
+    keeps 0.24 us at 1.7e9 s, not the ns); NaT -> NaN."""
+    stamps = pd.to_datetime(stamps, utc=True)
+    missing = stamps.isna().to_numpy()
+    ns = stamps.fillna(pd.Timestamp(0, tz="UTC")).dt.as_unit("ns").astype("int64").to_numpy()
+    return np.where(missing, np.nan, (ns // 1_000_000_000).astype(float) + (ns % 1_000_000_000) / 1e9)
+
+
 def _read_parquet_table(path: Path) -> pd.DataFrame:
     """A Parquet table for the map: numeric columns as float64, datetime columns as seconds since
     1970-01-01 UTC (float64, whole seconds and their fraction apart as _clock_times), any other
@@ -234,8 +249,7 @@ def _read_parquet_table(path: Path) -> pd.DataFrame:
     for name, column in zip(table.column_names, table.columns):
         kind = column.type
         if pa.types.is_timestamp(kind):
-            ns = pd.to_datetime(column.to_pandas(), utc=True).dt.as_unit("ns").astype("int64").to_numpy()
-            out[name] = (ns // 1_000_000_000).astype(float) + (ns % 1_000_000_000) / 1e9
+            out[name] = _epoch_seconds(column.to_pandas())
         elif pa.types.is_integer(kind) or pa.types.is_floating(kind):
             out[name] = column.to_numpy(zero_copy_only=False).astype(float)
         else:
@@ -265,9 +279,7 @@ def _clock_times(column: pd.Series) -> tuple[np.ndarray, str] | None:
         return (tod.dt.total_seconds().to_numpy(), "times of day") if tod.notna().all() else None
     stamps = pd.to_datetime(text, errors="coerce", utc=True, format="ISO8601")
     if stamps.notna().all():
-        ns = stamps.dt.as_unit("ns").astype("int64").to_numpy()
-        # whole seconds and their fraction apart: float64 keeps 0.24 us at 1.7e9 s, not the ns
-        return (ns // 1_000_000_000).astype(float) + (ns % 1_000_000_000) / 1e9, "dates with times (UTC)"
+        return _epoch_seconds(stamps), "dates with times (UTC)"
     return None
 
 

@@ -351,6 +351,12 @@ def test_a_parquet_table_with_its_own_names_units_and_timestamps_reads_as_the_sa
     got = import_csv(tmp_path / "stamped.parquet", EXAMPLE_MAP).telemetry
     np.testing.assert_allclose(got["t_s"].to_numpy() - 1013558400.0, ref["t_s"].to_numpy(), rtol=0, atol=2e-6)
     pd.testing.assert_frame_equal(got.drop(columns="t_s"), ref.drop(columns="t_s"))
+    gap = pd.Series(pd.to_datetime(ns, unit="ns", utc=True))
+    gap.iloc[5] = pd.NaT
+    frame.assign(time=gap).to_parquet(tmp_path / "nat.parquet", index=False)
+    with pytest.raises(ImportDataError) as err:  # a missing stamp is named, not a conversion error
+        import_csv(tmp_path / "nat.parquet", EXAMPLE_MAP)
+    assert "'time'" in str(err.value) and "5" in str(err.value), str(err.value)
     (tmp_path / "broken.parquet").write_bytes(b"PAR1 not really")
     with pytest.raises(ImportDataError, match="not a readable Parquet"):
         import_csv(tmp_path / "broken.parquet", EXAMPLE_MAP)
