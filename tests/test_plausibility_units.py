@@ -154,3 +154,23 @@ def test_sign_and_degree_mistakes_are_found_naming_the_column(flights):
             assert ("sign looks flipped" if kind == "sign" else "look like deg") in str(ei.value)
             checked += 1
     assert checked >= 9
+
+
+@pytest.mark.skipif(not twin_otter.available(), reason="the Twin Otter data are not on this machine")
+def test_real_flights_with_their_attitude_raise_nothing_and_their_flips_are_named(tmp_path):
+    """NASA's Twin Otter as `aerosid import sidpac` writes it (with phi_rad, theta_rad, so the
+    attitude and sideslip tests run): nothing on the recorded data; the pitch gyro, the pitch
+    attitude, the alpha vane and the accelerometer's z axis flipped, each named."""
+    from aerosid.vehicles.sidpac import import_sidpac
+
+    for name in twin_otter.FLIGHTS:
+        imported = import_sidpac(twin_otter.DATA / name)
+        frame = imported.telemetry
+        path = tmp_path / f"{name}.toml"
+        path.write_text(imported.vehicle_toml)
+        veh = load_vehicle(path)
+        assert {"phi_rad", "theta_rad"} <= set(frame.columns)
+        assert unit_findings(frame, veh) == [], name
+        for col in ("q_rad_s", "theta_rad", "alpha_vane_rad", "az_m_s2"):
+            found = unit_findings(with_factor(frame, [col], -1.0), veh)
+            assert found and found[0].columns == (col,) and found[0].kind == "sign", (name, col, found)
