@@ -126,8 +126,9 @@ SIGN_AND_DEGREE_MISTAKES = [
     ("beta vane flipped", "beta_vane_rad", -1.0, ("beta_vane_rad",), "sign", True, False),
     ("yaw gyro flipped", "r_rad_s", -1.0, ("r_rad_s",), "sign", True, False),
     ("lateral accelerometer flipped", "ay_m_s2", -1.0, ("ay_m_s2",), "sign", True, False),
+    ("beta vane in deg", "beta_vane_rad", 1 / DEG, ("beta_vane_rad",), "unit", True, False),  # mostly < 90 deg
 ]
-LATERAL = {"beta vane flipped", "yaw gyro flipped", "lateral accelerometer flipped"}
+LATERAL = {"beta vane flipped", "yaw gyro flipped", "lateral accelerometer flipped", "beta vane in deg"}
 
 
 def test_sign_and_degree_mistakes_are_found_naming_the_column(flights):
@@ -153,7 +154,7 @@ def test_sign_and_degree_mistakes_are_found_naming_the_column(flights):
             assert ei.value.column == named[0]
             assert ("sign looks flipped" if kind == "sign" else "look like deg") in str(ei.value)
             checked += 1
-    assert checked >= 9
+    assert checked >= 10
 
 
 @pytest.mark.skipif(not twin_otter.available(), reason="the Twin Otter data are not on this machine")

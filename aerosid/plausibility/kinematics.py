@@ -284,10 +284,11 @@ def _lateral_kinematic(frame: pd.DataFrame, vehicle) -> UnitFinding | None:
     """The sideslip vane against the lateral kinematics, per window: beta = bP P + bR R + bY Y +
     bG Gy with P = integral of p sin alpha, R = integral of -r cos alpha, Y = integral of ay / V,
     Gy = integral of g cos theta sin phi / V (with no attitude columns, phi is the integrated roll
-    rate: its initial value goes into the window's slope).  Healthy: all 1.  R and Gy -1: the
-    vane is flipped (sideslip conventions differ between data systems); R alone: the yaw gyro;
-    Y alone: the lateral accelerometer; Gy alone (no attitude): the roll gyro.  P (small where
-    alpha is) only keeps the roll rate's part out of the others."""
+    rate: its initial value goes into the window's slope).  Healthy: all 1.  R and Gy 57.3: the
+    vane is in degrees; -1: the vane is flipped (sideslip conventions differ between data
+    systems); R alone: the yaw gyro; Y alone: the lateral accelerometer; Gy alone (no
+    attitude): the roll gyro.  P (small where alpha is) only keeps the roll rate's part out of
+    the others."""
     if vehicle.air_data_source != "vanes" or vehicle.beta_column not in frame.columns:
         return None
     vane = vehicle.beta_column
@@ -317,10 +318,13 @@ def _lateral_kinematic(frame: pd.DataFrame, vehicle) -> UnitFinding | None:
         sure = np.isfinite(b) & (np.abs(b) >= MIN_T_STAT * se)
     if not (sure[1] and sure[3]):
         return None
-    R, Y, G = (_sign_of(b[i]) if sure[i] else 0.0 for i in (1, 2, 3))
     said = (f"beta = {b[1]:.3g} R {b[2]:+.3g} Y {b[3]:+.3g} Gy {b[0]:+.3g} P over windows (R: the integrated -r cos "
             f"alpha, Y: ay / V, Gy: g cos theta sin phi / V{'' if attitude else ', phi from the roll rate'}, P: "
             "p sin alpha; +1 each expected)")
+    if _near(b[1] * DEG, 1.0) and _near(b[3] * DEG, 1.0):
+        return UnitFinding((vane,), "rad", "deg", DEG, f"{said}: the vane changes 57.3 times as much as the "
+                           "kinematics say (1 for rad, 57.3 for deg)", overridable=False)
+    R, Y, G = (_sign_of(b[i]) if sure[i] else 0.0 for i in (1, 2, 3))
     if R < 0 and G < 0 and Y <= 0:
         column, convention, why = vane, "beta positive with the relative wind from the right (nose left)", \
             "the vane disagrees with the gyros and the accelerometer alike"
