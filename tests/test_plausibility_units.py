@@ -127,8 +127,12 @@ SIGN_AND_DEGREE_MISTAKES = [
     ("yaw gyro flipped", "r_rad_s", -1.0, ("r_rad_s",), "sign", True, False),
     ("lateral accelerometer flipped", "ay_m_s2", -1.0, ("ay_m_s2",), "sign", True, False),
     ("beta vane in deg", "beta_vane_rad", 1 / DEG, ("beta_vane_rad",), "unit", True, False),  # mostly < 90 deg
+    # p against phi alone cannot tell which; the sideslip fit's gravity from phi does
+    ("roll gyro flipped", "p_rad_s", -1.0, ("p_rad_s",), "sign", True, True),
+    ("bank angle flipped", "phi_rad", -1.0, ("phi_rad",), "sign", True, True),
 ]
-LATERAL = {"beta vane flipped", "yaw gyro flipped", "lateral accelerometer flipped", "beta vane in deg"}
+LATERAL = {"beta vane flipped", "yaw gyro flipped", "lateral accelerometer flipped", "beta vane in deg",
+           "roll gyro flipped", "bank angle flipped"}
 
 
 def test_sign_and_degree_mistakes_are_found_naming_the_column(flights):
@@ -154,7 +158,7 @@ def test_sign_and_degree_mistakes_are_found_naming_the_column(flights):
             assert ei.value.column == named[0]
             assert ("sign looks flipped" if kind == "sign" else "look like deg") in str(ei.value)
             checked += 1
-    assert checked >= 10
+    assert checked >= 12
 
 
 @pytest.mark.skipif(not twin_otter.available(), reason="the Twin Otter data are not on this machine")

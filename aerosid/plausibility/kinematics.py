@@ -11,7 +11,8 @@ state and slow biases; the pooled slope is 1 when both are right:
   in degrees (57.3);
 * altitude: h against the doubly integrated -(az + g) (1 m, 0.001 km, 3.28 ft);
 * attitude (phi_rad, theta_rad when the telemetry has them): each angle against the gyros
-  through the Euler kinematics (-1: the rate or the angle flipped; 57.3: the angle in degrees);
+  through the Euler kinematics (-1: the rate or the angle flipped, the vanes telling which;
+  57.3: the angle in degrees);
 * sideslip: the vane beta against the integrated -r cos alpha, ay / V and the bank's gravity,
   whose signs tell a flipped vane, yaw gyro or lateral accelerometer apart.
 
@@ -235,12 +236,13 @@ ATTITUDE_PAIRS = (("theta_rad", "q_rad_s", "theta positive nose up, q positive n
                   ("phi_rad", "p_rad_s", "phi positive right wing down, p positive right wing down"))
 
 
-def _attitude_kinematic(frame: pd.DataFrame, q_confirmed: bool = False) -> UnitFinding | None:
+def _attitude_kinematic(frame: pd.DataFrame, q_confirmed: bool = False, bank_sign: float = 0.0) -> UnitFinding | None:
     """The attitude columns (phi_rad, theta_rad, when the telemetry has them) against the gyros
     through the Euler kinematics, per window: theta' = q cos phi - r sin phi, phi' = p +
     tan theta (q sin phi + r cos phi).  Slope -1: the rate or the angle has its sign flipped
-    (for the pitch pair, q_confirmed: the vanes follow +q, so theta is the flipped one); 57.3:
-    the angle is in degrees."""
+    (for the pitch pair, q_confirmed: the vanes follow +q, so theta is the flipped one; for the
+    roll pair, bank_sign: the sideslip fit's gravity term from phi, -1 phi flipped, +1 phi right
+    so p flipped); 57.3: the angle is in degrees."""
     cols = ["p_rad_s", "q_rad_s", "r_rad_s", "phi_rad", "theta_rad"]
     if any(c not in frame.columns for c in cols):
         return None
@@ -271,6 +273,12 @@ def _attitude_kinematic(frame: pd.DataFrame, q_confirmed: bool = False) -> UnitF
                 return UnitFinding((angle,), convention, "the opposite sign", -1.0, said + " (+1 expected); the "
                                    "vane angle of attack follows +q, so theta_rad is the flipped one", kind="sign",
                                    overridable=False)
+            if angle == "phi_rad" and bank_sign != 0.0:
+                culprit = angle if bank_sign < 0 else rate
+                return UnitFinding((culprit,), convention, "the opposite sign", -1.0, said + " (+1 expected); the "
+                                   f"sideslip vane and the yaw gyro {'disagree' if bank_sign < 0 else 'agree'} with "
+                                   f"the bank's gravity from phi_rad, so {culprit} is the flipped one", kind="sign",
+                                   overridable=False)
             return UnitFinding((rate, angle), convention, "the opposite sign", -1.0,
                                said + f" (+1 expected): {rate} or {angle} is flipped", kind="sign",
                                overridable=False)
@@ -280,15 +288,9 @@ def _attitude_kinematic(frame: pd.DataFrame, q_confirmed: bool = False) -> UnitF
 LATERAL_WINDOW_S = 4.0
 
 
-def _lateral_kinematic(frame: pd.DataFrame, vehicle) -> UnitFinding | None:
-    """The sideslip vane against the lateral kinematics, per window: beta = bP P + bR R + bY Y +
-    bG Gy with P = integral of p sin alpha, R = integral of -r cos alpha, Y = integral of ay / V,
-    Gy = integral of g cos theta sin phi / V (with no attitude columns, phi is the integrated roll
-    rate: its initial value goes into the window's slope).  Healthy: all 1.  R and Gy 57.3: the
-    vane is in degrees; -1: the vane is flipped (sideslip conventions differ between data
-    systems); R alone: the yaw gyro; Y alone: the lateral accelerometer; Gy alone (no
-    attitude): the roll gyro.  P (small where alpha is) only keeps the roll rate's part out of
-    the others."""
+def _lateral_fit(frame: pd.DataFrame, vehicle):
+    """(b, sure, attitude, vane) of the sideslip fit (_lateral_kinematic), or None: b the
+    coefficients of P, R, Y, Gy, sure where each is determined (|t| >= MIN_T_STAT)."""
     if vehicle.air_data_source != "vanes" or vehicle.beta_column not in frame.columns:
         return None
     vane = vehicle.beta_column
@@ -316,6 +318,34 @@ def _lateral_kinematic(frame: pd.DataFrame, vehicle) -> UnitFinding | None:
     b, se = _pooled_fit(triples, 4)
     with np.errstate(invalid="ignore", divide="ignore"):
         sure = np.isfinite(b) & (np.abs(b) >= MIN_T_STAT * se)
+    return b, sure, attitude, vane
+
+
+def _bank_sign(frame: pd.DataFrame, vehicle) -> float:
+    """With the attitude columns: +1 when the bank's gravity (from phi_rad) agrees with the
+    sideslip vane and the yaw gyro, -1 when it has the other sign, 0 when the fit cannot tell."""
+    fit = _lateral_fit(frame, vehicle)
+    if fit is None or not fit[2]:
+        return 0.0
+    b, sure = fit[0], fit[1]
+    if not (sure[1] and sure[3] and _near(b[1], 1.0)):
+        return 0.0
+    return _sign_of(b[3])
+
+
+def _lateral_kinematic(frame: pd.DataFrame, vehicle) -> UnitFinding | None:
+    """The sideslip vane against the lateral kinematics, per window: beta = bP P + bR R + bY Y +
+    bG Gy with P = integral of p sin alpha, R = integral of -r cos alpha, Y = integral of ay / V,
+    Gy = integral of g cos theta sin phi / V (with no attitude columns, phi is the integrated roll
+    rate: its initial value goes into the window's slope).  Healthy: all 1.  R and Gy 57.3: the
+    vane is in degrees; -1: the vane is flipped (sideslip conventions differ between data
+    systems); R alone: the yaw gyro; Y alone: the lateral accelerometer; Gy alone (no
+    attitude): the roll gyro.  P (small where alpha is) only keeps the roll rate's part out of
+    the others."""
+    fit = _lateral_fit(frame, vehicle)
+    if fit is None:
+        return None
+    b, sure, attitude, vane = fit
     if not (sure[1] and sure[3]):
         return None
     said = (f"beta = {b[1]:.3g} R {b[2]:+.3g} Y {b[3]:+.3g} Gy {b[0]:+.3g} P over windows (R: the integrated -r cos "
