@@ -1,0 +1,130 @@
+"""Benchmark: the unit and sign check (aerosid/plausibility) on flights nobody tuned it on.
+
+Run:  python bench/bench_units_signs.py [--seeds 0 1] [--aircraft c172p c182 ...] [--sidpac DIR]
+                                        [--out bench/results/units_signs.md]
+
+Every JSBSim aircraft of the list (``aerosid simulate --jsbsim``'s flight, its generated
+vehicle file) and NASA's Twin Otter as ``aerosid import sidpac`` writes it: the recorded
+flight must raise nothing (a false alarm refuses a good flight), and each mistake below,
+made on one channel at a time, must be named -- the right column first (a pair where the
+kinematics cannot tell which: counted apart), never another one.  The 737 and 787-8 stay
+out (reserved for independent checks).
+"""
+from __future__ import annotations
+
+import argparse
+import datetime as _dt
+import math
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).parent))
+from machine import cpu_model as _cpu_model, loadavg as _loadavg  # noqa: E402  (bench/machine.py)
+
+AIRCRAFT = ["c172x", "c172p", "c172r", "c182", "c310", "pa28", "J3Cub", "OV10", "T37", "F4N", "A4", "f15",
+            "p51d", "sgs126", "minisgs", "sgs233", "t6texan2", "C130", "Boeing314", "DHC6", "B747", "F80C", "A320",
+            "global5000", "pogo-jsbsim"]
+DEG = 180.0 / math.pi
+#: label -> (column, factor, the column the finding must name)
+MISTAKES = {
+    "a_z with z up": ("az_m_s2", -1.0, "az_m_s2"),
+    "q flipped": ("q_rad_s", -1.0, "q_rad_s"),
+    "alpha vane flipped": ("alpha_vane_rad", -1.0, "alpha_vane_rad"),
+    "theta flipped": ("theta_rad", -1.0, "theta_rad"),
+    "p flipped": ("p_rad_s", -1.0, "p_rad_s"),
+    "phi flipped": ("phi_rad", -1.0, "phi_rad"),
+    "r flipped": ("r_rad_s", -1.0, "r_rad_s"),
+    "beta vane flipped": ("beta_vane_rad", -1.0, "beta_vane_rad"),
+    "a_y flipped": ("ay_m_s2", -1.0, "ay_m_s2"),
+    "alpha vane in deg": ("alpha_vane_rad", DEG, "alpha_vane_rad"),
+    "beta vane in deg": ("beta_vane_rad", DEG, "beta_vane_rad"),
+    "theta in deg": ("theta_rad", DEG, "theta_rad"),
+}
+
+
+def flights(aircraft: list[str], seeds: list[int], sidpac: Path | None, work: Path):
+    """(label, telemetry, vehicle) for every flight."""
+    from aerosid.simulation.jsbsim_aircraft import simulate_aircraft
+    from aerosid.simulation.jsbsim_flight import simulate_jsbsim
+    from aerosid.vehicles.vehicle import load_vehicle
+
+    for name in aircraft:
+        for seed in seeds:
+            if name == "c172x":  # the built-in vehicle and its own flight
+                yield f"{name} seed {seed}", simulate_jsbsim(name, "3211", seed=seed).telemetry, load_vehicle(name)
+                continue
+            fl = simulate_aircraft(name, seed)
+            path = work / f"{name}_{seed}.toml"
+            path.write_text(fl.files["vehicle.toml"])
+            yield f"{name} seed {seed}", fl.telemetry, load_vehicle(path)
+    if sidpac is not None:
+        from aerosid.vehicles.sidpac import import_sidpac
+
+        for mat in sorted(sidpac.glob("lon_*.mat")):
+            imported = import_sidpac(mat)
+            path = work / f"{mat.stem}.toml"
+            path.write_text(imported.vehicle_toml)
+            yield f"Twin Otter {mat.stem} (real)", imported.telemetry, load_vehicle(path)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--seeds", type=int, nargs="+", default=[0, 1])
+    ap.add_argument("--aircraft", nargs="+", default=AIRCRAFT)
+    ap.add_argument("--sidpac", type=Path, default=Path(__file__).parents[1] / "tests" / "data" / "sidpac-twin-otter")
+    ap.add_argument("--out", type=Path, default=Path(__file__).parent / "results" / "units_signs.md")
+    args = ap.parse_args()
+    from aerosid.plausibility.units import unit_findings
+
+    t0 = time.time()
+    counts = {m: {"named": 0, "pair": 0, "wrong": 0, "missed": 0, "n": 0} for m in MISTAKES}
+    false, n_flights, wrong = [], 0, []
+    with tempfile.TemporaryDirectory() as tmp:
+        for label, frame, veh in flights(args.aircraft, args.seeds, args.sidpac if args.sidpac.is_dir() else None,
+                                         Path(tmp)):
+            n_flights += 1
+            clean = unit_findings(frame, veh)
+            if clean:
+                false.append(f"{label}: {clean[0].message()[:160]}")
+            for m, (col, factor, want) in MISTAKES.items():
+                if col not in frame.columns:
+                    continue
+                found = unit_findings(frame.assign(**{col: frame[col] * factor}), veh)
+                c = counts[m]
+                c["n"] += 1
+                if not found:
+                    c["missed"] += 1
+                elif found[0].columns == (want,):
+                    c["named"] += 1
+                elif want in found[0].columns:
+                    c["pair"] += 1
+                else:
+                    c["wrong"] += 1
+                    wrong.append(f"{label}, {m}: named {found[0].columns}")
+    lines = [
+        "# The unit and sign check on flights it was not tuned on",
+        "",
+        f"{_dt.date.today()}, {_cpu_model()}, load {_loadavg()}; wall {time.time() - t0:.0f} s. "
+        f"`python bench/bench_units_signs.py --seeds {' '.join(map(str, args.seeds))}`.",
+        "",
+        __doc__.split("\n\n", 2)[2].strip(),
+        "",
+        f"Flights: {n_flights}. False alarms on the recorded flights: **{len(false)}**.",
+        "",
+        "| mistake | flights | named (the column alone) | a pair holding it | another column | missed |",
+        "|---|---|---|---|---|---|",
+    ]
+    for m, c in counts.items():
+        lines.append(f"| {m} | {c['n']} | {c['named']} | {c['pair']} | {c['wrong']} | {c['missed']} |")
+    if false:
+        lines += ["", "False alarms:", *[f"- {f}" for f in false]]
+    if wrong:
+        lines += ["", "Another column named:", *[f"- {w}" for w in wrong]]
+    args.out.write_text("\n".join(lines) + "\n")
+    print("\n".join(lines))
+
+
+if __name__ == "__main__":
+    main()
