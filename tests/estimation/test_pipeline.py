@@ -116,6 +116,16 @@ def test_numpy_path_and_no_tuning_options(short_flight):
         smooth_flight(sf.t_s[::-1], sf.z, valid, m.inertia_kg_m2, m.sensor_offset_m)
 
 
+def test_a_record_whose_nyquist_frequency_is_below_the_noise_band_is_refused_naming_it(short_flight):
+    """At 5 Hz the band above f_max_hz (4 Hz), where each channel's noise is measured, is empty:
+    R came out zero and the filter broke down ("division by zero"). Refused, naming the rates."""
+    sf = short_flight
+    t, z = sf.t_s[::20], sf.z[::20]  # 100 Hz -> 5 Hz
+    with pytest.raises(ValueError, match=r"Nyquist frequency 2\.5 Hz \(5 Hz sampling\) is not above \[estimation\] "
+                                         r"f_max_hz = 4 Hz"):
+        smooth_flight(t, z, np.ones_like(z, bool), sf.model.inertia_kg_m2, sf.model.sensor_offset_m)
+
+
 def test_a_tuning_step_that_breaks_the_smoother_falls_back_to_the_last_finite_iteration(short_flight, monkeypatch):
     """If an auto-tuning iteration returns a non-finite smoother (seen on JSBSim flights with R at
     its EM bound), the result is the last finite iteration, not NaN states."""
