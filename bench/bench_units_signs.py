@@ -44,6 +44,23 @@ MISTAKES = {
 }
 
 
+TURBULENT = ["c182", "c310", "pa28", "J3Cub", "A4", "f15"]
+
+
+def turbulent_flights(aircraft: list[str], work: Path):
+    """(label, telemetry, vehicle): seed 0 in light and in moderate turbulence (the vane reads
+    the air's angles, the kinematics the body's: the fits the signs are read from suffer)."""
+    from aerosid.simulation.jsbsim_aircraft import simulate_aircraft
+    from aerosid.vehicles.vehicle import load_vehicle
+
+    for name in aircraft:
+        for level in ("light", "moderate"):
+            fl = simulate_aircraft(name, 0, turbulence=level)
+            path = work / f"{name}_{level}.toml"
+            path.write_text(fl.files["vehicle.toml"])
+            yield f"{name} {level} turbulence", fl.telemetry, load_vehicle(path)
+
+
 def flights(aircraft: list[str], seeds: list[int], sidpac: Path | None, work: Path):
     """(label, telemetry, vehicle) for every flight."""
     from aerosid.simulation.jsbsim_aircraft import simulate_aircraft
@@ -69,40 +86,62 @@ def flights(aircraft: list[str], seeds: list[int], sidpac: Path | None, work: Pa
             yield f"Twin Otter {mat.stem} (real)", imported.telemetry, load_vehicle(path)
 
 
+def tally(cases) -> dict:
+    """Per mistake: named (the column alone), pair, wrong (another column), missed, n; and the
+    false alarms and wrong columns by flight."""
+    from aerosid.plausibility.units import unit_findings
+
+    counts = {m: {"named": 0, "pair": 0, "wrong": 0, "missed": 0, "n": 0} for m in MISTAKES}
+    false, wrong, n = [], [], 0
+    for label, frame, veh in cases:
+        n += 1
+        clean = unit_findings(frame, veh)
+        if clean:
+            false.append(f"{label}: {clean[0].message()[:160]}")
+        for m, (col, factor, want) in MISTAKES.items():
+            if col not in frame.columns:
+                continue
+            found = unit_findings(frame.assign(**{col: frame[col] * factor}), veh)
+            c = counts[m]
+            c["n"] += 1
+            if not found:
+                c["missed"] += 1
+            elif found[0].columns == (want,):
+                c["named"] += 1
+            elif want in found[0].columns:
+                c["pair"] += 1
+            else:
+                c["wrong"] += 1
+                wrong.append(f"{label}, {m}: named {found[0].columns}")
+    return {"counts": counts, "false": false, "wrong": wrong, "n": n}
+
+
+def table(result: dict, title: str) -> list[str]:
+    lines = [f"## {title}", "", f"Flights: {result['n']}. False alarms on the recorded flights: "
+             f"**{len(result['false'])}**.", "",
+             "| mistake | flights | named (the column alone) | a pair holding it | another column | missed |",
+             "|---|---|---|---|---|---|"]
+    for m, c in result["counts"].items():
+        lines.append(f"| {m} | {c['n']} | {c['named']} | {c['pair']} | {c['wrong']} | {c['missed']} |")
+    if result["false"]:
+        lines += ["", "False alarms:", *[f"- {f}" for f in result["false"]]]
+    if result["wrong"]:
+        lines += ["", "Another column named:", *[f"- {w}" for w in result["wrong"]]]
+    return lines + [""]
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seeds", type=int, nargs="+", default=[0, 1])
     ap.add_argument("--aircraft", nargs="+", default=AIRCRAFT)
     ap.add_argument("--sidpac", type=Path, default=Path(__file__).parents[1] / "tests" / "data" / "sidpac-twin-otter")
+    ap.add_argument("--turbulent", nargs="*", default=TURBULENT, help="aircraft also flown in turbulence")
     ap.add_argument("--out", type=Path, default=Path(__file__).parent / "results" / "units_signs.md")
     args = ap.parse_args()
-    from aerosid.plausibility.units import unit_findings
-
     t0 = time.time()
-    counts = {m: {"named": 0, "pair": 0, "wrong": 0, "missed": 0, "n": 0} for m in MISTAKES}
-    false, n_flights, wrong = [], 0, []
     with tempfile.TemporaryDirectory() as tmp:
-        for label, frame, veh in flights(args.aircraft, args.seeds, args.sidpac if args.sidpac.is_dir() else None,
-                                         Path(tmp)):
-            n_flights += 1
-            clean = unit_findings(frame, veh)
-            if clean:
-                false.append(f"{label}: {clean[0].message()[:160]}")
-            for m, (col, factor, want) in MISTAKES.items():
-                if col not in frame.columns:
-                    continue
-                found = unit_findings(frame.assign(**{col: frame[col] * factor}), veh)
-                c = counts[m]
-                c["n"] += 1
-                if not found:
-                    c["missed"] += 1
-                elif found[0].columns == (want,):
-                    c["named"] += 1
-                elif want in found[0].columns:
-                    c["pair"] += 1
-                else:
-                    c["wrong"] += 1
-                    wrong.append(f"{label}, {m}: named {found[0].columns}")
+        calm = tally(flights(args.aircraft, args.seeds, args.sidpac if args.sidpac.is_dir() else None, Path(tmp)))
+        rough = tally(turbulent_flights(args.turbulent, Path(tmp)))
     lines = [
         "# The unit and sign check on flights it was not tuned on",
         "",
@@ -111,17 +150,9 @@ def main() -> None:
         "",
         __doc__.split("\n\n", 2)[2].strip(),
         "",
-        f"Flights: {n_flights}. False alarms on the recorded flights: **{len(false)}**.",
-        "",
-        "| mistake | flights | named (the column alone) | a pair holding it | another column | missed |",
-        "|---|---|---|---|---|---|",
+        *table(calm, "Calm air: the JSBSim aircraft and the real Twin Otter"),
+        *table(rough, "Turbulence (seed 0, light and moderate; the vehicle files do not declare it)"),
     ]
-    for m, c in counts.items():
-        lines.append(f"| {m} | {c['n']} | {c['named']} | {c['pair']} | {c['wrong']} | {c['missed']} |")
-    if false:
-        lines += ["", "False alarms:", *[f"- {f}" for f in false]]
-    if wrong:
-        lines += ["", "Another column named:", *[f"- {w}" for w in wrong]]
     args.out.write_text("\n".join(lines) + "\n")
     print("\n".join(lines))
 

@@ -179,3 +179,21 @@ def test_real_flights_with_their_attitude_raise_nothing_and_their_flips_are_name
         for col in ("q_rad_s", "theta_rad", "alpha_vane_rad", "az_m_s2"):
             found = unit_findings(with_factor(frame, [col], -1.0), veh)
             assert found and found[0].columns == (col,) and found[0].kind == "sign", (name, col, found)
+
+
+def test_in_turbulence_the_sideslip_fit_names_no_wrong_column(tmp_path):
+    """In moderate turbulence the vane reads the air's sideslip and the lateral kinematics do not
+    fit it (c182: its a_y coefficient -3.4): a flipped beta vane was blamed on the yaw gyro and a
+    flipped yaw gyro on the vane. The sideslip fit now attributes a sign only where it fits."""
+    try:
+        from aerosid.simulation.jsbsim_aircraft import simulate_aircraft
+        fl = simulate_aircraft("c182", 0, turbulence="moderate")
+    except ImportError as exc:  # jsbsim is an optional extra
+        pytest.skip(f"jsbsim: {exc}")
+    path = tmp_path / "c182.toml"
+    path.write_text(fl.files["vehicle.toml"])
+    veh, frame = load_vehicle(path), fl.telemetry
+    assert unit_findings(frame, veh) == []
+    for col in ("beta_vane_rad", "r_rad_s", "p_rad_s", "phi_rad"):
+        found = unit_findings(with_factor(frame, [col], -1.0), veh)
+        assert not found or col in found[0].columns, (col, found[0].columns)

@@ -328,9 +328,17 @@ def _bank_sign(frame: pd.DataFrame, vehicle) -> float:
     if fit is None or not fit[2]:
         return 0.0
     b, sure = fit[0], fit[1]
-    if not (sure[1] and sure[3] and _near(b[1], 1.0)):
+    if not (sure[1] and sure[3] and _near(b[1], 1.0) and _consistent(b, sure)):
         return 0.0
     return _sign_of(b[3])
+
+
+def _consistent(b: np.ndarray, sure: np.ndarray) -> bool:
+    """Every determined coefficient of R, Y, Gy within SLOPE_TOLERANCE of +1 or -1: the lateral
+    kinematics fit the vane at all.  In turbulence the vane reads the air's sideslip and the
+    fit does not (c182 in moderate turbulence: Y -3.4), and a sign pattern read from it named
+    the yaw gyro for a flipped vane."""
+    return all(_sign_of(b[i]) != 0.0 for i in (1, 2, 3) if sure[i])
 
 
 def _lateral_kinematic(frame: pd.DataFrame, vehicle) -> UnitFinding | None:
@@ -348,10 +356,13 @@ def _lateral_kinematic(frame: pd.DataFrame, vehicle) -> UnitFinding | None:
     b, sure, attitude, vane = fit
     if not (sure[1] and sure[3]):
         return None
+    degrees = _near(b[1] * DEG, 1.0) and _near(b[3] * DEG, 1.0)
+    if not (degrees or _consistent(b, sure)):
+        return None
     said = (f"beta = {b[1]:.3g} R {b[2]:+.3g} Y {b[3]:+.3g} Gy {b[0]:+.3g} P over windows (R: the integrated -r cos "
             f"alpha, Y: ay / V, Gy: g cos theta sin phi / V{'' if attitude else ', phi from the roll rate'}, P: "
             "p sin alpha; +1 each expected)")
-    if _near(b[1] * DEG, 1.0) and _near(b[3] * DEG, 1.0):
+    if degrees:
         return UnitFinding((vane,), "rad", "deg", DEG, f"{said}: the vane changes 57.3 times as much as the "
                            "kinematics say (1 for rad, 57.3 for deg)", overridable=False)
     R, Y, G = (_sign_of(b[i]) if sure[i] else 0.0 for i in (1, 2, 3))
