@@ -305,8 +305,10 @@ def estimate_manoeuvre(run_dir, telemetry, model: IdentifiedModel, veh: Vehicle,
     RUN_DIR/run.json), in memory: (raw telemetry, EstimatedFlightData, flight data sorted by
     time, span id per row (-1 outside the model's Mach window or in a stretch shorter than
     MIN_SPAN_S), notes).  needs_attitude: check the attitude columns' units before the
-    estimation's minutes, not after ("required": also that they are there)."""
+    estimation's minutes, not after ("required": also that they are there); then every column's
+    units and signs (aerosid.plausibility.units)."""
     from aerosid.ebm import estimate_flight_data
+    from aerosid.plausibility.units import check_units
     from aerosid.preprocess.io import read_raw_parquet
 
     job = read_run_json(run_dir).get("job") or {}
@@ -315,6 +317,7 @@ def estimate_manoeuvre(run_dir, telemetry, model: IdentifiedModel, veh: Vehicle,
             and needs_attitude == "required":
         raise ValueError(f"{telemetry}: no {' / '.join(ATTITUDE_COLUMNS)} columns: the simulation needs the "
                          "attitude for gravity; add the measured roll and pitch attitude [rad] to the telemetry")
+    check_units(raw, veh, str(telemetry))  # the other manoeuvre's units and signs, as `aerosid run` checks its own
     est = estimate_flight_data(raw, veh, flight=Path(telemetry).stem, windows=windows,
                                preprocess_params=job.get("preprocess_params") or None,
                                smoothing_options=job.get("smoothing_options") or None,

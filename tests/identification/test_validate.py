@@ -121,6 +121,19 @@ def test_cli_errors_are_one_clear_line(small_run, tmp_path):
     assert not (tmp_path / "v").exists()
 
 
+def test_the_other_manoeuvre_s_units_and_signs_are_checked_as_the_run_s_own(small_run, tmp_path):
+    """validate (and refine) read a second telemetry file that no pre-flight had checked: a pitch
+    gyro in deg/s there was estimated and predicted as if it were rad/s. Refused naming it."""
+    raw = pd.read_parquet(small_run["other"])
+    bad = tmp_path / "q_deg_s.parquet"
+    write_parquet_atomic(raw.assign(q_rad_s=raw["q_rad_s"] * 57.29577951308232), bad,
+                         metadata={"aerosid.case": "seed-rlv"})
+    res = CliRunner().invoke(main, ["validate", str(small_run["run"]), str(bad), "--out", str(tmp_path / "v")])
+    assert res.exit_code == 1 and "Traceback" not in res.output, res.output
+    assert "column 'q_rad_s'" in res.output and "look like deg/s" in res.output and "q_deg_s.parquet" in res.output
+    assert not (tmp_path / "v").exists()
+
+
 def test_a_manoeuvre_outside_the_mach_window_is_refused_naming_the_window(small_run, tmp_path):
     case = load_case("seed-rlv", duration_s=8.0)
     fast = simulate(replace(case, faults=case.faults.without_faults()), seed=4)  # M 13.1..13.0: above 12.4 + 0.5
