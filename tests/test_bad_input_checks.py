@@ -397,3 +397,13 @@ def test_an_empty_control_column_the_vehicle_does_not_use_says_to_fill_it_with_z
         text = clean_failure(cli("run", str(bad), "--vehicle", str(veh), "--out", str(tmp_path / "run")),
                              f"column '{column}'", "no value in the whole channel")
         assert ("mixing does not read d3_rad (its column 3 is zero): fill it with 0" in text) == hint, text
+
+
+def test_a_record_too_coarse_to_measure_its_noise_in_is_refused_before_the_flow(flight, tmp_path):
+    """5 Hz: the Nyquist frequency (2.5 Hz) is not above f_max_hz (4 Hz), where each channel's
+    noise is measured; the smoother refuses it (test_pipeline.py), and the pre-flight now says so
+    before any flow starts, naming t_s (docs/bad-input.md row 42)."""
+    _, raw = flight
+    bad = write(raw.iloc[::20].reset_index(drop=True), tmp_path / "five_hz.parquet")
+    run_fails_fast([str(bad), "--vehicle", "seed-rlv"], tmp_path / "run", str(bad), "column 't_s'",
+                   "Nyquist frequency 2.5 Hz (5 Hz sampling) is not above [estimation] f_max_hz = 4 Hz")

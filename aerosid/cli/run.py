@@ -268,6 +268,25 @@ def _unused_control(vehicle: str | None, column: str) -> str:
             "fill it with 0")
 
 
+def _check_noise_band(t, veh, source: str) -> None:
+    """The smoother's refusal of a record too coarse to measure its noise in (Nyquist frequency
+    not above f_max_hz), before any flow starts, as a TelemetryError naming t_s."""
+    import numpy as np
+
+    from aerosid.estimation.pipeline import check_noise_band
+    from aerosid.estimation.smoothing import smoothing_options
+    from aerosid.preprocess import TelemetryError
+
+    d = np.diff(np.asarray(t, float))
+    d = d[np.isfinite(d) & (d > 0)]
+    if not d.size:
+        return
+    try:
+        check_noise_band(float(np.median(d)), smoothing_options(veh).f_max_hz)
+    except ValueError as exc:
+        raise TelemetryError(str(exc), file=source, column="t_s") from None
+
+
 def _preflight(telemetry: Path, vehicle: str | None, model_spec: str | None, preprocess_params: dict | None = None,
                windows=(), min_segment_s: float | None = None) -> str:
     """Cheap checks of the inputs before any flow starts: the telemetry file is a
@@ -349,6 +368,7 @@ def _preflight(telemetry: Path, vehicle: str | None, model_spec: str | None, pre
                              "vehicle file's [preprocess] min_segment_s)", file=str(telemetry), column="t_s",
                              rows=range(len(frame)))
     check_units(frame, veh, str(telemetry))
+    _check_noise_band(t, veh, str(telemetry))
     if veh.air_data_source == "vanes":
         for c in (veh.alpha_column, veh.beta_column):
             if c not in frame.columns:

@@ -253,6 +253,19 @@ def _fill(t, y, ok):
     return out
 
 
+def check_noise_band(dt_s: float, f_max_hz: float) -> None:
+    """ValueError unless the record's Nyquist frequency 0.5/dt_s [Hz] is above f_max_hz [Hz],
+    the frequency above which each channel's noise is measured (method.md §4): at 5 Hz the band
+    is empty, R came out zero and the filter broke down."""
+    if f_max_hz >= 0.5 / dt_s:
+        raise ValueError(
+            f"the record's Nyquist frequency {0.5 / dt_s:.3g} Hz ({1 / dt_s:.3g} Hz sampling) is not above "
+            f"[estimation] f_max_hz = {f_max_hz:g} Hz, above which each channel's noise is measured (method.md §4): "
+            "at this rate there is no band to measure it in, and the filter would take the sensors as noiseless. A "
+            "faster record is the remedy; a lower f_max_hz lets the filter run but counts the vehicle's motion as "
+            "noise (c182 at 5 Hz with 1.5 Hz: C_m,delta -28 %, C_n,beta -61 %, outside their intervals)")
+
+
 def smooth_flight(t_s, z, valid, inertia_kg_m2, sensor_offset_m, z_filled=None,
                   options: EBMOptions | None = None, q_local=None, gate_off=None) -> EBMResult:
     """Estimation Before Modeling state estimation of one flight segment.
@@ -282,13 +295,7 @@ def smooth_flight(t_s, z, valid, inertia_kg_m2, sensor_offset_m, z_filled=None,
     dt = float(np.median(d))
     if not (dt > 0 and np.allclose(d, dt, rtol=1e-6, atol=1e-9 * dt)):
         raise ValueError("t_s must be a uniform, increasing grid")
-    if opt.f_max_hz >= 0.5 / dt:
-        raise ValueError(
-            f"the record's Nyquist frequency {0.5 / dt:.3g} Hz ({1 / dt:.3g} Hz sampling) is not above [estimation] "
-            f"f_max_hz = {opt.f_max_hz:g} Hz, above which each channel's noise is measured (method.md §4): at this "
-            "rate there is no band to measure it in, and the filter would take the sensors as noiseless. A faster "
-            "record is the remedy; a lower f_max_hz lets the filter run but counts the vehicle's motion as noise "
-            "(c182 at 5 Hz with 1.5 Hz: C_m,delta -28 %, C_n,beta -61 %, outside their intervals)")
+    check_noise_band(dt, opt.f_max_hz)
     cand = valid & np.isfinite(z)
     model = PlantModel(tuple(float(v) for v in inertia_kg_m2), tuple(float(v) for v in sensor_offset_m), dt)
     if z_filled is None:
