@@ -268,9 +268,10 @@ def _unused_control(vehicle: str | None, column: str) -> str:
             "fill it with 0")
 
 
-def _check_noise_band(t, veh, source: str) -> None:
+def _check_noise_band(t, veh, pre_params, source: str) -> None:
     """The smoother's refusal of a record too coarse to measure its noise in (Nyquist frequency
-    not above f_max_hz), before any flow starts, as a TelemetryError naming t_s."""
+    not above f_max_hz), before any flow starts, as a TelemetryError naming t_s.  A rate outside
+    the preprocessing's rate_bounds_hz is left to its own error ("is t_s in seconds?")."""
     import numpy as np
 
     from aerosid.estimation.pipeline import check_noise_band
@@ -281,8 +282,12 @@ def _check_noise_band(t, veh, source: str) -> None:
     d = d[np.isfinite(d) & (d > 0)]
     if not d.size:
         return
+    rate = pre_params.nominal_rate_hz or 1.0 / float(np.median(d))
+    lo, hi = pre_params.rate_bounds_hz
+    if not lo <= rate <= hi:
+        return
     try:
-        check_noise_band(float(np.median(d)), smoothing_options(veh).f_max_hz)
+        check_noise_band(1.0 / rate, smoothing_options(veh).f_max_hz)
     except ValueError as exc:
         raise TelemetryError(str(exc), file=source, column="t_s") from None
 
@@ -359,7 +364,7 @@ def _preflight(telemetry: Path, vehicle: str | None, model_spec: str | None, pre
     veh = load_vehicle(vehicle)
     from aerosid.preprocess import DEFAULT_MIN_SEGMENT_S, PreprocessParams, merge_settings
 
-    PreprocessParams.from_dict(merge_settings(veh.preprocess, preprocess_params or {}))
+    pre_params = PreprocessParams.from_dict(merge_settings(veh.preprocess, preprocess_params or {}))
     shortest = next(v for v in (min_segment_s, veh.min_segment_s, DEFAULT_MIN_SEGMENT_S) if v is not None)
     t = frame["t_s"].to_numpy(float)
     if t[-1] - t[0] < shortest:
@@ -368,7 +373,7 @@ def _preflight(telemetry: Path, vehicle: str | None, model_spec: str | None, pre
                              "vehicle file's [preprocess] min_segment_s)", file=str(telemetry), column="t_s",
                              rows=range(len(frame)))
     check_units(frame, veh, str(telemetry))
-    _check_noise_band(t, veh, str(telemetry))
+    _check_noise_band(t, veh, pre_params, str(telemetry))
     if veh.air_data_source == "vanes":
         for c in (veh.alpha_column, veh.beta_column):
             if c not in frame.columns:
