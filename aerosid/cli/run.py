@@ -383,12 +383,10 @@ def _preflight(telemetry: Path, vehicle: str | None, model_spec: str | None, pre
     if model_spec:
         load_models(model_spec, base=default_models(veh), mach_reference=veh.mach_reference)
     if windows:  # windows too short to smooth are refused now, naming the limit (gaps are seen later)
-        from aerosid.preprocess import DEFAULT_MIN_SEGMENT_S
         from aerosid.preprocess.segments import plan_segments
 
-        min_seg = next(v for v in (min_segment_s, veh.min_segment_s, DEFAULT_MIN_SEGMENT_S) if v is not None)
-        t_s = frame["t_s"].to_numpy(float)  # in the pipeline's time (preprocess.time_origin_s)
-        plan = plan_segments(t_s - time_origin_s(float(t_s[0])), [], [tuple(w) for w in windows], float(min_seg))
+        # in the pipeline's time (preprocess.time_origin_s)
+        plan = plan_segments(t - time_origin_s(float(t[0])), [], [tuple(w) for w in windows], float(shortest))
         if not plan.segments:
             raise ValueError(f"{telemetry}: {plan.refusal()}")
     return vehicle

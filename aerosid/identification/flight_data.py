@@ -467,7 +467,6 @@ def build_flight_data_segments(preprocessed: pd.DataFrame, smoothed: list[pd.Dat
     return frame
 
 
-
 def build_pooled_flight_data(flights: list[tuple[str, pd.DataFrame, list[pd.DataFrame]]], vehicle: Vehicle,
                              db: AeroDatabase | None) -> pd.DataFrame:
     """Flight data of several manoeuvres of one aircraft, pooled for one regression:

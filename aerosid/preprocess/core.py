@@ -143,8 +143,7 @@ def _infer_rate(t: np.ndarray) -> float:
             run = np.concatenate(([0], np.cumsum(moved)))
             count = np.bincount(run)
             kc = k - (np.bincount(run, k) / count)[run]
-            t1 = t - t[0]  # the group sums exact for a record in Unix time
-            tc = t1 - (np.bincount(run, t1) / count)[run]
+            tc = t - (np.bincount(run, t) / count)[run]  # t counts from time_origin_s: group sums exact
         else:
             kc, tc = k - k.mean(), t - t.mean()
         denom = float(np.dot(kc, kc))
