@@ -321,10 +321,10 @@ def _lateral_fit(frame: pd.DataFrame, vehicle):
     return b, sure, attitude, vane
 
 
-def _bank_sign(frame: pd.DataFrame, vehicle) -> float:
-    """With the attitude columns: +1 when the bank's gravity (from phi_rad) agrees with the
-    sideslip vane and the yaw gyro, -1 when it has the other sign, 0 when the fit cannot tell."""
-    fit = _lateral_fit(frame, vehicle)
+def _bank_sign(fit) -> float:
+    """From the sideslip fit (_lateral_fit) with the attitude columns: +1 when the bank's gravity
+    (from phi_rad) agrees with the sideslip vane and the yaw gyro, -1 when it has the other sign,
+    0 when the fit cannot tell."""
     if fit is None or not fit[2]:
         return 0.0
     b, sure = fit[0], fit[1]
@@ -341,16 +341,15 @@ def _consistent(b: np.ndarray, sure: np.ndarray) -> bool:
     return all(_sign_of(b[i]) != 0.0 for i in (1, 2, 3) if sure[i])
 
 
-def _lateral_kinematic(frame: pd.DataFrame, vehicle) -> UnitFinding | None:
-    """The sideslip vane against the lateral kinematics, per window: beta = bP P + bR R + bY Y +
-    bG Gy with P = integral of p sin alpha, R = integral of -r cos alpha, Y = integral of ay / V,
+def _lateral_kinematic(fit) -> UnitFinding | None:
+    """From the sideslip fit (_lateral_fit): the sideslip vane against the lateral kinematics,
+    per window: beta = bP P + bR R + bY Y + bG Gy with P = integral of p sin alpha, R = integral of -r cos alpha, Y = integral of ay / V,
     Gy = integral of g cos theta sin phi / V (with no attitude columns, phi is the integrated roll
     rate: its initial value goes into the window's slope).  Healthy: all 1.  R and Gy 57.3: the
     vane is in degrees; -1: the vane is flipped (sideslip conventions differ between data
     systems); R alone: the yaw gyro; Y alone: the lateral accelerometer; Gy alone (no
     attitude): the roll gyro.  P (small where alpha is) only keeps the roll rate's part out of
     the others."""
-    fit = _lateral_fit(frame, vehicle)
     if fit is None:
         return None
     b, sure, attitude, vane = fit

@@ -264,7 +264,8 @@ def unit_findings(frame: pd.DataFrame, vehicle) -> list[UnitFinding]:
     basic first: the accelerometers (the kinematic tests use az), rates, air data, vanes,
     then the kinematic tests (aerosid.plausibility.kinematics) of the channels that passed."""
     from aerosid.plausibility.kinematics import (_altitude_kinematic, _attitude_kinematic, _bank_sign,
-                                                 _lateral_kinematic, _pitch_rate_kinematic, _vane_confirms_q)
+                                                 _lateral_fit, _lateral_kinematic, _pitch_rate_kinematic,
+                                                 _vane_confirms_q)
 
     env = vehicle.envelope
     for basic in (_accel_finding(frame, env), _az_sign_finding(frame, env)):
@@ -281,8 +282,9 @@ def unit_findings(frame: pd.DataFrame, vehicle) -> list[UnitFinding]:
         if kin is not None:
             found.append(kin)
     if not found:  # the attitude and the lateral tests read alpha, V and the gyros as they are
-        kin = _attitude_kinematic(frame, _vane_confirms_q(frame, vehicle), _bank_sign(frame, vehicle)) or \
-            _lateral_kinematic(frame, vehicle)
+        lateral = _lateral_fit(frame, vehicle)  # one sideslip fit for both
+        kin = _attitude_kinematic(frame, _vane_confirms_q(frame, vehicle), _bank_sign(lateral)) or \
+            _lateral_kinematic(lateral)
         if kin is not None:
             found.append(kin)
     return found
