@@ -84,6 +84,45 @@ def test_each_unit_mistake_is_found_naming_column_and_unit(flights):
             assert ei.value.column == cols[0] and f"look like {unit}" in str(ei.value)
 
 
+# (column, factor applied to the SI values, likely unit): measured air data in another unit
+AIR_DATA_MISTAKES = [("qbar_pa", 1 / 47.880259, "psf"), ("qbar_pa", 1e-3, "kPa"), ("rho_kg_m3", 1 / 515.378818, "slug/ft^3"),
+                     ("rho_kg_m3", 1 / 16.018463, "lb/ft^3"), ("p_static_pa", 1e-2, "hPa"),
+                     ("p_static_pa", 1 / 3386.389, "inHg"), ("p_static_pa", 1 / 6894.757, "psi")]
+
+
+def _with_measured_air_data(frame: pd.DataFrame) -> pd.DataFrame:
+    """The flight with measured density, dynamic and static pressure where it has none: the
+    US-1976 values at its altitude on a day 8 % denser (a real day is not the standard one)."""
+    from ambiance import Atmosphere
+
+    out = frame.copy()
+    h = np.clip(np.nan_to_num(out["h_m"].to_numpy(float), nan=0.0), -5000.0, 81000.0)
+    atm = Atmosphere(h)
+    if "rho_kg_m3" not in out:
+        out["rho_kg_m3"] = 1.08 * atm.density
+    if "qbar_pa" not in out:
+        out["qbar_pa"] = 0.5 * out["rho_kg_m3"] * out["V_m_s"] ** 2
+    if "p_static_pa" not in out:
+        out["p_static_pa"] = atm.pressure
+    return out
+
+
+def test_measured_air_data_in_other_units_are_found_naming_column_and_unit(flights):
+    """Dynamic pressure in psf or kPa, density in slug/ft^3 or lb/ft^3, static pressure in hPa,
+    inHg or psi: each passes the schema's range (30 psf is a plausible number of Pa) and, before
+    the check, ran to "ok" with every coefficient x47 (c182, qbar_pa in psf) or x515 (rho_kg_m3
+    in slug/ft^3).  Measured in SI, nothing is found."""
+    for label, frame, veh in flights:
+        measured = _with_measured_air_data(frame)
+        assert unit_findings(measured, veh) == [], label
+        for col, factor, unit in AIR_DATA_MISTAKES:
+            found = unit_findings(with_factor(measured, [col], factor), veh)
+            assert found and found[0].columns == (col,) and found[0].likely == unit, (label, col, unit, found)
+            with pytest.raises(TelemetryError) as ei:
+                check_units(with_factor(measured, [col], factor), veh, "flight.parquet")
+            assert ei.value.column == col and f"look like {unit}" in str(ei.value)
+
+
 def test_the_kinematic_tests_alone_find_deg_s_and_km(flights):
     """With an envelope so wide that no magnitude is implausible, the kinematics still
     tell: the pitch rate against the vanes / the alpha range, the altitude against the

@@ -37,6 +37,15 @@ RATE_UNITS = {"deg/s": DEG}
 ACCEL_UNITS = {"g": G0, "ft/s^2": 0.3048}
 SPEED_UNITS = {"kt": 0.514444, "km/h": 1.0 / 3.6, "ft/s": 0.3048, "mph": 0.44704}
 ALTITUDE_UNITS = {"km": 1000.0, "ft": 0.3048}
+PRESSURE_UNITS = {"psf": 47.880259, "hPa": 100.0, "kPa": 1000.0, "mmHg": 133.322387, "inHg": 3386.389,
+                  "psi": 6894.757}
+DENSITY_UNITS = {"slug/ft^3": 515.378818, "lb/ft^3": 16.018463, "g/cm^3": 1000.0}
+#: A measured air-data column (rho_kg_m3, qbar_pa, p_static_pa) is refused when its median ratio to
+#: the US-1976 value at the record's altitude (for qbar_pa: 0.5 rho V^2 with that density) lies
+#: outside this range and a candidate unit brings it inside.  A hot or cold day moves the density
+#: by about 20 %; an airspeed column that holds the indicated rather than the true airspeed makes
+#: 0.5 rho(h) V^2 low by rho_0 / rho(h), 3 at 10 km; every candidate unit is a factor of 16 or more.
+MEASURED_AIR_RATIO = (1.0 / 3.0, 3.0)
 
 
 
@@ -236,6 +245,48 @@ def _air_data_findings(frame: pd.DataFrame, vehicle) -> list[UnitFinding]:
                         f"{vehicle.mach_reference:g}")]
 
 
+def _measured_air_findings(frame: pd.DataFrame) -> list[UnitFinding]:
+    """Measured density, dynamic pressure and static pressure against the US-1976 atmosphere at
+    the record's altitude (MEASURED_AIR_RATIO): psf for Pa, slug/ft^3 for kg/m^3, hPa, inHg, ...
+    (the schema's range alone passes them: a dynamic pressure of 30 psf is a plausible number of Pa)."""
+    from aerosid.vehicles.atmosphere import H_MAX_M, H_MIN_M, density_kg_m3, pressure_pa
+    from schemas.telemetry import sentinel_mask
+
+    present = [c for c in ("rho_kg_m3", "qbar_pa", "p_static_pa") if c in frame.columns]
+    if not present:
+        return []
+    V, h = frame["V_m_s"].to_numpy(float), frame["h_m"].to_numpy(float)
+    base = np.isfinite(V) & np.isfinite(h) & ~sentinel_mask(V) & ~sentinel_mask(h) & (V > 0) & \
+        (h >= H_MIN_M) & (h <= H_MAX_M)
+    out = []
+    for col in present:
+        x = frame[col].to_numpy(float)
+        ok = base & np.isfinite(x) & ~sentinel_mask(x) & (x > 0)
+        if ok.sum() < 10:
+            continue
+        step = max(1, int(ok.sum()) // 2000)
+        rows = np.flatnonzero(ok)[::step]
+        if col == "p_static_pa":
+            ref, what, units, declared = pressure_pa(h[rows]), "US-1976 static pressure", PRESSURE_UNITS, "Pa"
+        elif col == "rho_kg_m3":
+            ref, what, units, declared = density_kg_m3(h[rows]), "US-1976 density", DENSITY_UNITS, "kg/m^3"
+        else:
+            ref, what, units, declared = _qbar_pa(V[rows], h[rows]), "0.5 rho V^2 (US-1976 density at h_m)", \
+                PRESSURE_UNITS, "Pa"
+        ratio = float(np.median(x[rows] / ref))
+        if _inside(ratio, MEASURED_AIR_RATIO):
+            continue
+        fits = sorted((abs(math.log(ratio * k)), unit, k) for unit, k in units.items()
+                      if _inside(ratio * k, MEASURED_AIR_RATIO))
+        if fits:
+            _, unit, k = fits[0]
+            out.append(UnitFinding((col,), declared, unit, k,
+                                   f"its median is {ratio:.3g} x the {what}, outside {MEASURED_AIR_RATIO[0]:.2g}.."
+                                   f"{MEASURED_AIR_RATIO[1]:g} x; as {unit} it is {ratio * k:.3g} x",
+                                   overridable=False))
+    return out
+
+
 #: Candidate units by a column's unit suffix, for the raw schema's range check (range_unit_hint).
 SUFFIX_UNITS = (("_rad_s", "rad/s", RATE_UNITS), ("_rad", "rad", {"deg": DEG}), ("_m_s2", "m/s^2", ACCEL_UNITS),
                 ("_m_s", "m/s", SPEED_UNITS), ("_m", "m", ALTITUDE_UNITS))
@@ -272,6 +323,8 @@ def unit_findings(frame: pd.DataFrame, vehicle) -> list[UnitFinding]:
         if basic is not None:
             return [basic]
     found = _rate_findings(frame, env) + _air_data_findings(frame, vehicle) + _vane_findings(frame, vehicle)
+    if not {f.columns[0] for f in found} & {"V_m_s", "h_m"}:  # the references are built from V and h
+        found += _measured_air_findings(frame)
     flagged = {c for f in found for c in f.columns}
     if not flagged & {"q_rad_s", "V_m_s", vehicle.alpha_column}:
         kin = _pitch_rate_kinematic(frame, vehicle)

@@ -46,6 +46,13 @@ def density_kg_m3(h_m):
     return Atmosphere(h).density.reshape(h.shape)
 
 
+def pressure_pa(h_m):
+    """Static pressure [Pa] at geometric altitude h_m [m]."""
+    h = np.asarray(h_m, dtype=float)
+    _check_altitude(h)
+    return Atmosphere(h).pressure.reshape(h.shape)
+
+
 def speed_of_sound_m_s(h_m):
     """Speed of sound [m/s] at geometric altitude h_m [m]."""
     h = np.asarray(h_m, dtype=float)
