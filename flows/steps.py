@@ -237,7 +237,8 @@ def _finish_flight(job: FlightJob, p: dict, plan: dict, futures: list, summary: 
         coeffs = regression_task([fd["path"]], job.run_dir, job.context(), job.vehicle, job.model_spec,
                                  job.mach_half_width)
         summary.update(flight_data=fd, coefficients=coeffs, air_data=_air_data(fd["path"]))
-        _record_findings(summary, _own_findings(p, done) + list(fd.get("findings", [])))
+        _record_findings(summary, _own_findings(p, done) + list(fd.get("findings", []))
+                         + list(coeffs.get("findings", [])))
         _artifacts(job, summary)
     write_run_summary_task(job.run_dir, summary)
     if done:
@@ -369,7 +370,7 @@ def run_pooled(pool: PoolJob) -> dict:
             coeffs = regression_task([fd["path"]], pool.run_dir, pool.context(), pool.vehicle, pool.model_spec,
                                      pool.mach_half_width)
             summary.update(flight_data=fd, coefficients=coeffs, air_data=_air_data(fd["path"]))
-            _record_findings(summary, fd.get("findings", []),
+            _record_findings(summary, list(fd.get("findings", [])) + list(coeffs.get("findings", [])),
                              inherited=any(fs.get("findings") for fs in summary["flights"]))
             _artifacts(pool, summary)
         write_run_summary_task(pool.run_dir, summary)

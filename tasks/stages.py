@@ -17,6 +17,7 @@ from aerosid.identification.flight_data import (build_flight_data_segments, buil
                                  load_database)
 from aerosid.identification.identify import default_bias_pairs, identify
 from aerosid.modelling.models import default_models, load_models
+from aerosid.plausibility.estimates import implausible_estimate_findings
 from aerosid.plausibility.units import check_units
 from aerosid.preprocess import PreprocessParams, preprocess
 from aerosid.preprocess.segments import plan_segments
@@ -194,6 +195,11 @@ def regression_task(flight_data_paths: list[str], run_dir: str, ctx: StageContex
         models = load_models(model_spec, base=default_models(veh), mach_reference=veh.mach_reference) \
             if model_spec else None
         ident = identify(fd, veh, models, mach_half_width, bias_pairs=pairs)
-        return Produced(ident.table(), {"aerosid.summary": ident.summary()}, rows_in=len(fd), note=ident.summary())
+        table = ident.table()
+        findings_seen.extend(implausible_estimate_findings(table, fd["t_s"]))
+        return Produced(table, {"aerosid.summary": ident.summary(), "aerosid.findings": json.dumps(findings_seen)},
+                        rows_in=len(fd), note=ident.summary())
 
-    return execute("regression", ctx, inputs, out, params, Coefficients, produce)
+    findings_seen: list = []
+    result = execute("regression", ctx, inputs, out, params, Coefficients, produce)
+    return {**result, "findings": findings_seen or stored_findings(result["path"])}

@@ -83,6 +83,30 @@ def test_diagnosis_finds_the_missing_pitch_damping_and_adding_it_makes_the_error
     assert d2.rank_of("pitch_damping") is None
 
 
+def test_a_lift_slope_or_roll_damping_no_wing_gives_is_reported_loudly(run, vehicle):
+    """An aircraft without preflight values: its C_N,alpha and C_l,p are checked against what
+    a wing can give.  Nothing on c172x as flown; with every coefficient x1/10.76 -- what a wing
+    area written in ft^2 does (c182 ran to "ok" that way) -- both are reported, in the table
+    and as run findings."""
+    from aerosid.identification.identify import format_table
+    from aerosid.plausibility.estimates import implausible_estimate_findings
+
+    fd = run.flight_data
+    good = identify(fd, vehicle, bias_pairs=0).table()
+    assert (good["preflight_warning"] == "").all(), good.loc[good["preflight_warning"] != "", "preflight_warning"]
+    assert implausible_estimate_findings(good, fd["t_s"]) == []
+    ft2 = fd.assign(**{c: fd[c] / 10.7639 for c in ("CN", "CY", "CA", "Cl", "Cm", "Cn")})
+    bad = identify(ft2, vehicle, bias_pairs=0).table()
+    warned = bad.set_index("coefficient")["preflight_warning"]
+    assert "cn_alpha_per_rad" in warned["CN_alpha"] and "S_m2 (ft^2" in warned["CN_alpha"]
+    assert "cl_p_per_rad" in warned["Cl_p"] and "span_m" in warned["Cl_p"]
+    assert (warned.drop(["CN_alpha", "Cl_p"]) == "").all()
+    found = implausible_estimate_findings(bad, ft2["t_s"])
+    assert {(f["kind"], f["channel"]) for f in found} == {("implausible_estimate", "CN"), ("implausible_estimate", "Cl")}
+    assert all(f["t0_s"] == fd["t_s"].min() and f["n_samples"] > 0 and not f["cut"] for f in found)
+    assert "!! WARNING CN_alpha: its 95 % interval" in format_table(bad)
+
+
 @pytest.mark.prefect
 def test_c172x_runs_through_the_same_cli_and_flow(tmp_path):
     from aerosid.cli import main
@@ -101,6 +125,20 @@ def test_c172x_runs_through_the_same_cli_and_flow(tmp_path):
     assert {"Cm_alpha", "Cm_delta_p", "Cm_q", "Cl_p", "Cn_r"} <= set(coef.index)
     assert np.isfinite(coef.loc["Cm_q", "estimate"]) and coef.loc["Cm_q", "estimate"] < 0
     assert (tmp_path / "run" / "report.html").is_file() and (tmp_path / "run" / "diagnosis.json").is_file()
+    assert not any(f["kind"] == "implausible_estimate" for f in run_doc["findings"])
+    # the same flight with the vehicle file's wing area written in ft^2: the run says so, not "ok"
+    from aerosid.vehicles.vehicle import resolve_vehicle_path
+
+    text = resolve_vehicle_path("c172x").read_text()
+    assert text.count("S_m2 = 16.1651") == 1
+    (tmp_path / "ft2.toml").write_text(text.replace("S_m2 = 16.1651", "S_m2 = 174.0"))
+    res = runner.invoke(main, ["run", str(tmp_path / "f" / "telemetry.parquet"), "--vehicle", str(tmp_path / "ft2.toml"),
+                               "--out", str(tmp_path / "run_ft2")])
+    assert res.exit_code == 0, res.output
+    doc = json.loads((tmp_path / "run_ft2" / "run.json").read_text())
+    assert doc["status"] == "ok with findings"
+    assert {f["channel"] for f in doc["findings"] if f["kind"] == "implausible_estimate"} == {"CN", "Cl"}
+    assert "regression CN: implausible_estimate" in res.output and "!! WARNING CN_alpha" in res.output
 
 
 def test_unknown_aircraft_and_manoeuvre_are_clear_errors():

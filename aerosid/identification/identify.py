@@ -18,7 +18,7 @@ from aerosid.identification.eiv_fit import (angle_eiv_sigma, angle_rate_free_cha
                                             eiv_corrected, rate_eiv_sigma, simex_channels)
 from aerosid.identification.prior_structure import with_prior_and_structure
 from aerosid.modelling.models import ChannelModel, default_models, vehicle_signals
-from aerosid.plausibility.estimates import preflight_departure
+from aerosid.plausibility.estimates import physical_range_departure, preflight_departure
 from aerosid.identification.regression import LinearFit, fit_linear
 from aerosid.vehicles.vehicle import Vehicle
 
@@ -46,6 +46,9 @@ class Identification:
     wrong_sign: dict = field(default_factory=dict)
     #: +/- pairs of the estimator-bias check counted in the sigma (aerosid.identification.bias_check); 0: none
     bias_pairs: int = 0
+    #: the vehicle's [plausibility] envelope: an aircraft's lift slope and roll damping are checked against
+    #: its ranges where no preflight value says more (aerosid.plausibility.estimates); None: no check
+    envelope: object = None
 
     def table(self, alpha: float = 0.05) -> pd.DataFrame:
         """The coefficients.parquet rows.  A channel in ``identities`` is reported without
@@ -61,6 +64,11 @@ class Identification:
                 reference = float(self.references.get(rec["coefficient"], np.nan))
                 ratio, departure = preflight_departure(float(rec["estimate"]), float(rec["std_error"]), reference,
                                                        self.preflight_factor)
+                expression = next((t.expression for t in self.models[channel].terms
+                                   if t.coefficient == rec["coefficient"]), "")
+                if not departure and self.envelope is not None:
+                    departure = physical_range_departure(channel, expression, (rec["ci_low"], rec["ci_high"]),
+                                                         self.envelope)
                 rows.append({
                     "channel": channel, "coefficient": rec["coefficient"],
                     "estimate": float(rec["estimate"]), "std_error": float(rec["std_error"]),
@@ -70,8 +78,7 @@ class Identification:
                     "ci_high": float(rec["ci_high"]), "reference": float(self.references.get(rec["coefficient"], np.nan)),
                     "t_value": float(rec["t_value"]), "p_value": float(rec["p_value"]),
                     "identifiable": ident, "note": IDENTITY_NOTE if identity else "",
-                    "expression": next((t.expression for t in self.models[channel].terms
-                                        if t.coefficient == rec["coefficient"]), ""),
+                    "expression": expression,
                     "f_stat": float(fit.f_stat), "f_stat_corrected": float(fit.f_stat_corrected),
                     "r2": float(fit.r2), "pse": float(fit.pse), "rms_residual": float(fit.rms_residual),
                     "condition_number": float(fit.condition_number), "n_obs": int(fit.n_obs),
@@ -259,7 +266,7 @@ def identify(flight_data: pd.DataFrame, vehicle: Vehicle, models: dict[str, Chan
     window = (float(fd["mach"].min()), float(fd["mach"].max()))
     crb = identification_bounds(fd, vehicle, models, fits, identities)
     return Identification(fits, dict(models), refs, len(fd), window, identities, vehicle.envelope.preflight_factor,
-                          crb.std, wrong_sign, bias_pairs)
+                          crb.std, wrong_sign, bias_pairs, vehicle.envelope)
 
 
 def _band_limited(fd: pd.DataFrame) -> bool:

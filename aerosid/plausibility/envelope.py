@@ -22,6 +22,8 @@ class Plausibility:
     qbar_pa: tuple[float, float]  # median dynamic pressure (US-1976 density) [Pa]
     alpha_rad: tuple[float, float]  # the angle of attack the flight stays within [rad]
     az_m_s2: tuple[float, float] = (-1000.0, 1000.0)  # median az [m/s^2], body z down (lift reads negative)
+    cn_alpha_per_rad: tuple[float, float] = (-1e9, 1e9)  # the estimated normal-force slope C_N,alpha [1/rad]
+    cl_p_per_rad: tuple[float, float] = (-1e9, 1e9)  # the estimated roll damping C_l,p [1/rad]
     preflight_factor: float = 3.0  # an estimate beyond preflight x/÷ this factor is reported
 
     def summary(self) -> str:
@@ -33,10 +35,15 @@ class Plausibility:
 #: median az (z down: the lift holds it up; positive is a z-up accelerometer).  Finned (seed-rlv
 #: class: missiles, re-entry and hypersonic vehicles): 2-1000 m/s^2 (a vehicle whose aerodynamic
 #: forces are measurable), 30-8000 m/s, up to 100 km, 10 Pa - 500 kPa, az of either sign.
+#: An aircraft's estimated lift slope C_N,alpha within 1-12 /rad (a wing gives at most about 2 pi;
+#: fuselage, tail and slipstream add some: 25 JSBSim aircraft 2.9-6.1 and c172x 10.0, the Twin
+#: Otter 6.6) and roll damping C_l,p within -1.5..-0.1 /rad (strip theory: -C_L,alpha/12 x
+#: (1 + 3 taper)/(1 + taper); the same aircraft -0.75..-0.38): a wing area in ft^2, a span in ft,
+#: a dynamic pressure in psf put them 10-50 x off (aerosid.plausibility.estimates).
 CLASS_DEFAULTS: dict[str, Plausibility] = {
     "aircraft": Plausibility(rate_rad_s=2.0, specific_force_m_s2=(2.5, 50.0), V_m_s=(10.0, 1000.0),
                              h_m=(-500.0, 25000.0), qbar_pa=(20.0, 150000.0), alpha_rad=(-0.35, 0.7),
-                             az_m_s2=(-50.0, 0.0)),
+                             az_m_s2=(-50.0, 0.0), cn_alpha_per_rad=(1.0, 12.0), cl_p_per_rad=(-1.5, -0.1)),
     "finned": Plausibility(rate_rad_s=2.0, specific_force_m_s2=(2.0, 1000.0), V_m_s=(30.0, 8000.0),
                            h_m=(-500.0, 100000.0), qbar_pa=(10.0, 500000.0), alpha_rad=(-0.6, 0.6)),
 }

@@ -155,6 +155,8 @@ TABLES: dict[str, dict[str, Key] | None] = {
         "qbar_pa": rng(0.0, 1e8, "median dynamic pressure from V and h (US-1976) [Pa]"),
         "alpha_rad": rng(-ANGLE_MAX_RAD, ANGLE_MAX_RAD, "angle of attack the flight stays within [rad]"),
         "az_m_s2": rng(-10_000.0, 10_000.0, "median normal specific force az, body z down [m/s^2]"),
+        "cn_alpha_per_rad": rng(-1e9, 1e9, "range of the estimated normal-force slope C_N,alpha [1/rad]"),
+        "cl_p_per_rad": rng(-1e9, 1e9, "range of the estimated roll damping C_l,p [1/rad]"),
         "preflight_factor": Key("number", 1.0, 1e6, positive=True,
                                 doc="warn when an estimate differs from its preflight value by more than this factor"),
     },
