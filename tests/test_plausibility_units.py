@@ -87,7 +87,8 @@ def test_each_unit_mistake_is_found_naming_column_and_unit(flights):
 # (column, factor applied to the SI values, likely unit): measured air data in another unit
 AIR_DATA_MISTAKES = [("qbar_pa", 1 / 47.880259, "psf"), ("qbar_pa", 1e-3, "kPa"), ("rho_kg_m3", 1 / 515.378818, "slug/ft^3"),
                      ("rho_kg_m3", 1 / 16.018463, "lb/ft^3"), ("p_static_pa", 1e-2, "hPa"),
-                     ("p_static_pa", 1 / 3386.389, "inHg"), ("p_static_pa", 1 / 6894.757, "psi")]
+                     ("p_static_pa", 1 / 3386.389, "inHg"), ("p_static_pa", 1 / 6894.757, "psi"),
+                     ("T_total_K", 1.8, "degR")]
 
 
 def _with_measured_air_data(frame: pd.DataFrame) -> pd.DataFrame:
@@ -104,12 +105,14 @@ def _with_measured_air_data(frame: pd.DataFrame) -> pd.DataFrame:
         out["qbar_pa"] = 0.5 * out["rho_kg_m3"] * out["V_m_s"] ** 2
     if "p_static_pa" not in out:
         out["p_static_pa"] = atm.pressure
+    if "T_total_K" not in out:  # 12 K warmer than the standard day
+        out["T_total_K"] = atm.temperature + 12.0 + out["V_m_s"] ** 2 / 2009.0
     return out
 
 
 def test_measured_air_data_in_other_units_are_found_naming_column_and_unit(flights):
     """Dynamic pressure in psf or kPa, density in slug/ft^3 or lb/ft^3, static pressure in hPa,
-    inHg or psi: each passes the schema's range (30 psf is a plausible number of Pa) and, before
+    inHg or psi, total temperature in degR: each passes the schema's range (30 psf is a plausible number of Pa) and, before
     the check, ran to "ok" with every coefficient x47 (c182, qbar_pa in psf) or x515 (rho_kg_m3
     in slug/ft^3).  Measured in SI, nothing is found."""
     for label, frame, veh in flights:
@@ -121,6 +124,19 @@ def test_measured_air_data_in_other_units_are_found_naming_column_and_unit(fligh
             with pytest.raises(TelemetryError) as ei:
                 check_units(with_factor(measured, [col], factor), veh, "flight.parquet")
             assert ei.value.column == col and f"look like {unit}" in str(ei.value)
+
+
+def test_a_total_temperature_in_celsius_or_fahrenheit_gets_the_conversion_in_the_schema_error():
+    """degC and degF fail the schema's 150..8000 K; the error then says how to convert (both fit
+    a mild day's values: both are named, not a guess)."""
+    from aerosid.plausibility.units import range_unit_hint
+
+    celsius = np.array([6.5, 6.4, 7.1, 5.9])
+    hint = range_unit_hint("T_total_K", celsius)
+    assert "degC (add 273.15)" in hint and "degF" in hint and "not K" in hint
+    only_f = range_unit_hint("T_total_K", np.array([-150.0, -140.0]))  # as degC 123 K, as degF 172 K
+    assert "degF" in only_f and "degC" not in only_f
+    assert range_unit_hint("T_total_K", np.array([1e5, 2e5])) == ""
 
 
 def test_the_kinematic_tests_alone_find_deg_s_and_km(flights):

@@ -333,7 +333,7 @@ def _preflight(telemetry: Path, vehicle: str | None, model_spec: str | None, pre
                                      "float64: `aerosid import csv FILE.parquet --map MAP --out DIR` reads a data "
                                      "system's Parquet (its names, units and timestamps; docs/real-flight.md)",
                                      file=exc.file, column=exc.column, rows=exc.rows) from None
-        if exc.column in RAW_COLUMNS and "mostly_in_physical_range" in exc.reason:
+        if exc.column in RAW_COLUMNS + MEASURED_AIR_DATA_CHANNELS and "mostly_in_physical_range" in exc.reason:
             hint = range_unit_hint(exc.column, pq.read_table(telemetry, columns=[exc.column]).column(0).to_numpy())
             if hint:
                 raise TelemetryError(exc.reason + hint, file=exc.file, column=exc.column, rows=exc.rows) from None

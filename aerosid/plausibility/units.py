@@ -46,6 +46,9 @@ DENSITY_UNITS = {"slug/ft^3": 515.378818, "lb/ft^3": 16.018463, "g/cm^3": 1000.0
 #: by about 20 %; an airspeed column that holds the indicated rather than the true airspeed makes
 #: 0.5 rho(h) V^2 low by rho_0 / rho(h), 3 at 10 km; every candidate unit is a factor of 16 or more.
 MEASURED_AIR_RATIO = (1.0 / 3.0, 3.0)
+#: ... and a measured total temperature's ratio to the US-1976 one (a day 50 K off the standard
+#: one is within; degR for K reads x1.8).
+TEMPERATURE_RATIO = (0.75, 1.35)
 
 
 
@@ -246,13 +249,14 @@ def _air_data_findings(frame: pd.DataFrame, vehicle) -> list[UnitFinding]:
 
 
 def _measured_air_findings(frame: pd.DataFrame) -> list[UnitFinding]:
-    """Measured density, dynamic pressure and static pressure against the US-1976 atmosphere at
-    the record's altitude (MEASURED_AIR_RATIO): psf for Pa, slug/ft^3 for kg/m^3, hPa, inHg, ...
+    """Measured density, dynamic pressure, static pressure and total temperature against the US-1976
+    atmosphere at the record's altitude (MEASURED_AIR_RATIO, TEMPERATURE_RATIO): psf for Pa,
+    slug/ft^3 for kg/m^3, hPa, inHg, degR for K ...
     (the schema's range alone passes them: a dynamic pressure of 30 psf is a plausible number of Pa)."""
-    from aerosid.vehicles.atmosphere import H_MAX_M, H_MIN_M, density_kg_m3, pressure_pa
+    from aerosid.vehicles.atmosphere import CP_AIR_J_KG_K, H_MAX_M, H_MIN_M, density_kg_m3, pressure_pa, temperature_K
     from schemas.telemetry import sentinel_mask
 
-    present = [c for c in ("rho_kg_m3", "qbar_pa", "p_static_pa") if c in frame.columns]
+    present = [c for c in ("rho_kg_m3", "qbar_pa", "p_static_pa", "T_total_K") if c in frame.columns]
     if not present:
         return []
     V, h = frame["V_m_s"].to_numpy(float), frame["h_m"].to_numpy(float)
@@ -266,7 +270,11 @@ def _measured_air_findings(frame: pd.DataFrame) -> list[UnitFinding]:
             continue
         step = max(1, int(ok.sum()) // 2000)
         rows = np.flatnonzero(ok)[::step]
-        if col == "p_static_pa":
+        bounds = MEASURED_AIR_RATIO
+        if col == "T_total_K":
+            ref = temperature_K(h[rows]) + V[rows] ** 2 / (2.0 * CP_AIR_J_KG_K)
+            what, units, declared, bounds = "US-1976 total temperature", {"degR": 5.0 / 9.0}, "K", TEMPERATURE_RATIO
+        elif col == "p_static_pa":
             ref, what, units, declared = pressure_pa(h[rows]), "US-1976 static pressure", PRESSURE_UNITS, "Pa"
         elif col == "rho_kg_m3":
             ref, what, units, declared = density_kg_m3(h[rows]), "US-1976 density", DENSITY_UNITS, "kg/m^3"
@@ -274,17 +282,21 @@ def _measured_air_findings(frame: pd.DataFrame) -> list[UnitFinding]:
             ref, what, units, declared = _qbar_pa(V[rows], h[rows]), "0.5 rho V^2 (US-1976 density at h_m)", \
                 PRESSURE_UNITS, "Pa"
         ratio = float(np.median(x[rows] / ref))
-        if _inside(ratio, MEASURED_AIR_RATIO):
+        if _inside(ratio, bounds):
             continue
-        fits = sorted((abs(math.log(ratio * k)), unit, k) for unit, k in units.items()
-                      if _inside(ratio * k, MEASURED_AIR_RATIO))
+        fits = sorted((abs(math.log(ratio * k)), unit, k) for unit, k in units.items() if _inside(ratio * k, bounds))
         if fits:
             _, unit, k = fits[0]
             out.append(UnitFinding((col,), declared, unit, k,
-                                   f"its median is {ratio:.3g} x the {what}, outside {MEASURED_AIR_RATIO[0]:.2g}.."
-                                   f"{MEASURED_AIR_RATIO[1]:g} x; as {unit} it is {ratio * k:.3g} x",
-                                   overridable=False))
+                                   f"its median is {ratio:.3g} x the {what}, outside {bounds[0]:.2g}.."
+                                   f"{bounds[1]:.3g} x; as {unit} it is {ratio * k:.3g} x", overridable=False))
     return out
+
+
+#: Temperatures in another unit: (unit, to kelvin, how to convert) -- the raw schema refuses a total
+#: temperature in degC or degF (below 150 K); one in degR passes it (MEASURED_AIR_RATIO's check).
+TEMPERATURE_UNITS = (("degC", lambda x: x + 273.15, "add 273.15"),
+                     ("degF", lambda x: (x - 32.0) * 5.0 / 9.0 + 273.15, "subtract 32, multiply by 5/9, add 273.15"))
 
 
 #: Candidate units by a column's unit suffix, for the raw schema's range check (range_unit_hint).
@@ -301,6 +313,11 @@ def range_unit_hint(column: str, values: np.ndarray) -> str:
     if column not in PHYSICAL_BOUNDS or x.size == 0:
         return ""
     lo, hi = PHYSICAL_BOUNDS[column]
+    if column.endswith("_K"):  # temperatures: an offset, not a factor; degC and degF often both fit
+        fits = [f"{unit} ({how})" for unit, to_kelvin, how in TEMPERATURE_UNITS
+                if np.mean((to_kelvin(x) < lo) | (to_kelvin(x) > hi)) <= RAW_MAX_OUT_OF_RANGE_FRACTION]
+        return (f"; the values look like {' or '.join(fits)}, not K: converted they lie inside {lo:g}..{hi:g} K"
+                if fits else "")
     declared, units = next(((d, u) for suffix, d, u in SUFFIX_UNITS if column.endswith(suffix)), (None, {}))
     for unit, k in units.items():
         if np.mean((x * k < lo) | (x * k > hi)) <= RAW_MAX_OUT_OF_RANGE_FRACTION:

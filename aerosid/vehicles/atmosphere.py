@@ -53,6 +53,13 @@ def pressure_pa(h_m):
     return Atmosphere(h).pressure.reshape(h.shape)
 
 
+def temperature_K(h_m):
+    """Static temperature [K] at geometric altitude h_m [m]."""
+    h = np.asarray(h_m, dtype=float)
+    _check_altitude(h)
+    return Atmosphere(h).temperature.reshape(h.shape)
+
+
 def speed_of_sound_m_s(h_m):
     """Speed of sound [m/s] at geometric altitude h_m [m]."""
     h = np.asarray(h_m, dtype=float)
