@@ -9,7 +9,8 @@ flight must raise nothing (a false alarm refuses a good flight), and each mistak
 made on one channel at a time, must be named -- the right column first (a pair where the
 kinematics cannot tell which: counted apart), never another one.  The measured air data's
 mistakes are made on the flight with a density, a dynamic and a static pressure added where it
-has none (the Twin Otter keeps its own).  The 737 and 787-8 stay
+has none (the Twin Otter keeps its own); the vane-noise rows change the vehicle file's
+[air_data] noise_rad, and "named" means the finding names that key.  The 737 and 787-8 stay
 out (reserved for independent checks).
 """
 from __future__ import annotations
@@ -52,6 +53,8 @@ MISTAKES = {
     "p_static in inHg": ("p_static_pa", 1 / 3386.389, "p_static_pa"),
 }
 AIR_COLUMNS = ("rho_kg_m3", "qbar_pa", "p_static_pa")
+#: label -> factor on the vehicle file's [air_data] noise_rad (the finding must name that key)
+SETTINGS = {"vane noise_rad in deg": 1 / DEG, "vane noise_rad x10": 10.0, "vane noise_rad x0.1": 0.1}
 
 
 def with_measured_air_data(frame):
@@ -118,7 +121,9 @@ def tally(cases) -> dict:
     false alarms and wrong columns by flight."""
     from aerosid.plausibility.units import unit_findings
 
-    counts = {m: {"named": 0, "pair": 0, "wrong": 0, "missed": 0, "n": 0} for m in MISTAKES}
+    import dataclasses
+
+    counts = {m: {"named": 0, "pair": 0, "wrong": 0, "missed": 0, "n": 0} for m in (*MISTAKES, *SETTINGS)}
     false, wrong, n = [], [], 0
     for label, frame, veh in cases:
         n += 1
@@ -140,6 +145,19 @@ def tally(cases) -> dict:
                 c["named"] += 1
             elif want in found[0].columns:
                 c["pair"] += 1
+            else:
+                c["wrong"] += 1
+                wrong.append(f"{label}, {m}: named {found[0].columns}")
+        for m, factor in SETTINGS.items():
+            if veh.air_data_source != "vanes" or not veh.vane_noise_rad > 0:
+                continue
+            found = unit_findings(frame, dataclasses.replace(veh, vane_noise_rad=veh.vane_noise_rad * factor))
+            c = counts[m]
+            c["n"] += 1
+            if not found:
+                c["missed"] += 1
+            elif found[0].kind == "setting":
+                c["named"] += 1
             else:
                 c["wrong"] += 1
                 wrong.append(f"{label}, {m}: named {found[0].columns}")

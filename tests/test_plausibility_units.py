@@ -126,6 +126,32 @@ def test_measured_air_data_in_other_units_are_found_naming_column_and_unit(fligh
             assert ei.value.column == col and f"look like {unit}" in str(ei.value)
 
 
+def test_a_vane_noise_the_telemetry_contradicts_is_refused(flights):
+    """[air_data] noise_rad sets the errors-in-variables correction of every coefficient: in
+    degrees (x57) or ten times off either way it is refused, naming the key and the noise the
+    vanes show (c182 with 0.15: C_N,alpha +473 % and "ok"); the declared noise passes (the
+    no-false-alarm test)."""
+    checked = 0
+    for label, frame, veh in flights:
+        if veh.air_data_source != "vanes" or not veh.vane_noise_rad > 0:
+            continue
+        checked += 1
+        for factor in (1 / DEG, 10.0, 0.1):
+            wrong = dataclasses.replace(veh, vane_noise_rad=veh.vane_noise_rad * factor)
+            found = unit_findings(frame, wrong)
+            assert found and found[0].kind == "setting" and found[0].declared == "[air_data] noise_rad", (label, factor)
+            assert found[0].factor == pytest.approx(1 / factor, rel=2.0)  # the measured noise, about the declared
+            with pytest.raises(TelemetryError) as ei:
+                check_units(frame, wrong, "flight.parquet")
+            assert "[air_data] noise_rad contradicts the telemetry" in str(ei.value)
+            assert ("degrees written for radians" in str(ei.value)) == (factor > 50)
+        # vanes low-passed before recording hide their noise from the differences: the engineer widens
+        wide = dataclasses.replace(veh, vane_noise_rad=veh.vane_noise_rad * 10.0,
+                                   plausibility=dataclasses.replace(veh.envelope, vane_noise_factor=30.0))
+        assert unit_findings(frame, wide) == [], label
+    assert checked >= 1
+
+
 def test_a_total_temperature_in_celsius_or_fahrenheit_gets_the_conversion_in_the_schema_error():
     """degC and degF fail the schema's 150..8000 K; the error then says how to convert (both fit
     a mild day's values: both are named, not a guess)."""

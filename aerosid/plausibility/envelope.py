@@ -24,6 +24,7 @@ class Plausibility:
     az_m_s2: tuple[float, float] = (-1000.0, 1000.0)  # median az [m/s^2], body z down (lift reads negative)
     cn_alpha_per_rad: tuple[float, float] = (-1e9, 1e9)  # the estimated normal-force slope C_N,alpha [1/rad]
     cl_p_per_rad: tuple[float, float] = (-1e9, 1e9)  # the estimated roll damping C_l,p [1/rad]
+    vane_noise_factor: float = 3.0  # [air_data] noise_rad within this factor of the vanes' measured white noise
     preflight_factor: float = 3.0  # an estimate beyond preflight x/÷ this factor is reported
 
     def summary(self) -> str:

@@ -61,12 +61,18 @@ class UnitFinding:
     likely: str
     factor: float  # SI value = factor x value as written
     evidence: str
-    kind: str = "unit"  # "unit", or "sign": declared is then aerosid's sign convention, factor -1
+    kind: str = "unit"  # "unit"; "sign": declared is then aerosid's sign convention, factor -1; "setting":
+    # a vehicle-file value (declared: its key) the telemetry contradicts, likely: the value it measures
     overridable: bool = True  # a vehicle file's [plausibility] range can accept the values
 
     def message(self) -> str:
         cols = ", ".join(self.columns)
         widen = "; if the values are right, widen the vehicle file's [plausibility] table" if self.overridable else ""
+        if self.kind == "setting":
+            return (f"the vehicle file's {self.declared} contradicts the telemetry: {self.evidence}. Set it to "
+                    f"about {self.likely} (or 0 to take the angles as exact); if the data system low-passes the "
+                    "vanes before recording (their noise then hides from the differences), keep the sensor's "
+                    "noise and widen [plausibility] vane_noise_factor")
         if self.kind == "sign":
             return (f"the sign looks flipped: {self.evidence}. aerosid's convention: {self.declared}. Multiply "
                     f"{'the column' if len(self.columns) == 1 else 'the wrong one of ' + cols} by -1 (an import "
@@ -299,6 +305,44 @@ TEMPERATURE_UNITS = (("degC", lambda x: x + 273.15, "add 273.15"),
                      ("degF", lambda x: (x - 32.0) * 5.0 / 9.0 + 273.15, "subtract 32, multiply by 5/9, add 273.15"))
 
 
+#: The vehicle file's vane noise ([air_data] noise_rad, the errors-in-variables correction's sigma of
+#: the vane angles) is refused when it is more than the vehicle's [plausibility] vane_noise_factor
+#: (default 3) from the white noise measured on the vane columns.  The correction trusts it: on c182
+#: a noise of 0.15 (degrees written for radians) ran to "ok" with C_N,alpha +473 %, C_l,p +489 %;
+#: ten times the true noise +88 %, +50 %.
+#: Order of the differences the vanes' white noise is measured with (the signal's own change
+#: cancels; aerosid.identification.band.white_noise_sigma: robust, 1.4826 MAD).
+VANE_NOISE_ORDER = 3
+
+
+def _vane_noise_finding(frame: pd.DataFrame, vehicle) -> UnitFinding | None:
+    """[air_data] noise_rad against the white noise measured on the vane columns ([plausibility]
+    vane_noise_factor)."""
+    from aerosid.identification.band import finite_runs, white_noise_sigma
+
+    declared = float(getattr(vehicle, "vane_noise_rad", 0.0))
+    if vehicle.air_data_source != "vanes" or not declared > 0:
+        return None
+    factor = float(vehicle.envelope.vane_noise_factor)
+    cols = [c for c in dict.fromkeys((vehicle.alpha_column, vehicle.beta_column)) if c in frame.columns]
+    sig = []
+    for c in cols:
+        x = frame[c].to_numpy(float)
+        sig.append(white_noise_sigma(x, finite_runs(np.isfinite(x)), VANE_NOISE_ORDER))
+    sig = [v for v in sig if math.isfinite(v) and v > 0]
+    outside = [not (1.0 / factor <= declared / v <= factor) for v in sig]
+    if not sig or not all(outside) or len({declared > v for v in sig}) > 1:
+        return None  # a setting both vanes contradict the same way (one vane alone: that vane's own matter)
+    measured = float(np.sqrt(np.mean(np.square(sig))))
+    ratio = declared / measured
+    degrees = " (degrees written for radians?)" if 1.0 / 3.0 <= ratio * DEG <= 3.0 else ""
+    return UnitFinding(tuple(cols), "[air_data] noise_rad", f"{measured:.2g} rad", measured / declared,
+                       f"noise_rad = {declared:.4g} rad is {ratio:.3g} x the white noise measured on "
+                       f"{' and '.join(cols)} ({measured:.3g} rad, {VANE_NOISE_ORDER}rd differences){degrees}; "
+                       f"the errors-in-variables correction of every coefficient trusts it (more than "
+                       f"{factor:g} x either way is refused: [plausibility] vane_noise_factor)", kind="setting", overridable=False)
+
+
 #: Candidate units by a column's unit suffix, for the raw schema's range check (range_unit_hint).
 SUFFIX_UNITS = (("_rad_s", "rad/s", RATE_UNITS), ("_rad", "rad", {"deg": DEG}), ("_m_s2", "m/s^2", ACCEL_UNITS),
                 ("_m_s", "m/s", SPEED_UNITS), ("_m", "m", ALTITUDE_UNITS))
@@ -357,6 +401,10 @@ def unit_findings(frame: pd.DataFrame, vehicle) -> list[UnitFinding]:
             _lateral_kinematic(lateral)
         if kin is not None:
             found.append(kin)
+    if not found:  # last: a vane in degrees has a noise 57 x too, and its own test names it
+        noise = _vane_noise_finding(frame, vehicle)
+        if noise is not None:
+            found.append(noise)
     return found
 
 
