@@ -83,6 +83,28 @@ def test_diagnosis_finds_the_missing_pitch_damping_and_adding_it_makes_the_error
     assert d2.rank_of("pitch_damping") is None
 
 
+def test_a_vane_noise_left_out_of_the_vehicle_file_is_measured_from_the_vanes(run, flight, vehicle, tmp_path):
+    """A vehicle file written by hand may leave out [air_data] noise_rad: it is then measured on
+    the vanes (their third differences), not taken as 0 -- which switched the errors-in-variables
+    correction off (c182 seed 0: C_m,alpha -10 % instead of -7 %, C_m,q +11 % instead of +7 %)."""
+    import math
+
+    from aerosid.vehicles.vehicle import resolve_vehicle_path
+
+    text = resolve_vehicle_path("c172x").read_text()
+    line = next(ln for ln in text.splitlines() if ln.startswith("noise_rad"))
+    (tmp_path / "v.toml").write_text(text.replace(line + "\n", ""))
+    unstated = load_vehicle(tmp_path / "v.toml")
+    assert math.isnan(unstated.vane_noise_rad) and vehicle.vane_noise_rad == pytest.approx(0.0026)
+    measured = process_telemetry(flight.telemetry, unstated, mach_half_width=None)
+    for c in ("eiv_sigma_alpha_rad", "eiv_sigma_beta_rad"):  # the flight's vanes carry 0.15 deg of noise
+        assert measured.flight_data[c].median() == pytest.approx(vehicle.vane_noise_rad, rel=0.15), c
+    a = run.identification.table().set_index("coefficient")
+    b = measured.identification.table().set_index("coefficient")
+    for name in ("CN_alpha", "Cm_alpha", "Cm_delta_p", "Cm_q", "Cl_p", "Cn_r"):
+        assert abs(b.loc[name, "estimate"] - a.loc[name, "estimate"]) < 0.3 * a.loc[name, "std_error"], name
+
+
 def test_a_lift_slope_or_roll_damping_no_wing_gives_is_reported_loudly(run, vehicle):
     """An aircraft without preflight values: its C_N,alpha and C_l,p are checked against what
     a wing can give.  Nothing on c172x as flown; with every coefficient x1/10.76 -- what a wing

@@ -202,6 +202,9 @@ def diagnose(flight_data: pd.DataFrame, vehicle, models: dict[str, ChannelModel]
     win = _windows_index(n, n_windows)
     if angle_sigma_rad is None and vehicle.air_data_source == "vanes":
         angle_sigma_rad = vehicle.vane_noise_rad
+        if not math.isfinite(angle_sigma_rad):  # not stated: what the flight data measured on the vanes
+            cols = [c for c in ("eiv_sigma_alpha_rad", "eiv_sigma_beta_rad") if c in fd.columns]
+            angle_sigma_rad = float(np.nanmedian(fd[cols].to_numpy(float))) if cols else 0.0
     if angle_sigma_rad is None:
         sig_cn = fd["sigma_CN"].to_numpy(float) if "sigma_CN" in fd else np.array([0.0])
         cn_alpha = abs(float(vehicle.preflight.CN_alpha))

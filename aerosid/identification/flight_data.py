@@ -20,7 +20,7 @@ from aerosid.estimation.findings import DEPARTURE_MIN_S, DEPARTURE_SIGMA, Findin
 from aerosid.identification.band import (accel_at_cg, band_limited_signals, band_noise_gain, bridge_spikes,
                                          finite_runs, low_pass_runs, white_noise_sigma)
 from aerosid.identification.low_qbar import low_qbar_rows
-from aerosid.identification.vanes import MAX_DELAY_S, advance, angles_at_cg, vane_delay
+from aerosid.identification.vanes import MAX_DELAY_S, advance, angles_at_cg, vane_delay, vane_white_noise_rad
 from aerosid.identification.crb import R_COLUMNS
 from aerosid.identification.inversion import invert_alpha_beta, total_angles
 from aerosid.vehicles.vehicle import Vehicle
@@ -188,6 +188,9 @@ def build_flight_data(smoothed: pd.DataFrame, measured: pd.DataFrame, vehicle: V
     # angles (vanes: the vehicle file's vane noise; inverted angles: the accelerometers' noise
     # through the inversion's sensitivity), for the SIMEX correction of aerosid.identification.eiv
     eiv_a = eiv_b = np.full(len(V), vehicle.vane_noise_rad if vanes else 0.0)
+    if vanes and not math.isfinite(vehicle.vane_noise_rad):  # not stated: each vane's own white noise
+        eiv_a, eiv_b = (np.full(len(V), np.nan_to_num(vane_white_noise_rad(measured[f"{c}_clean"].to_numpy(float))))
+                        for c in (vehicle.alpha_column, vehicle.beta_column))
     if not vanes and signals == "band":
         eiv_a, eiv_b = _inversion_noise(fc, delta_p, delta_y, vehicle, db, alpha, beta, bl.accel_noise_m_s2)
     eiv_rates = gyro_eiv_sigma(s, bl.rate_noise_rad_s if signals == "band" else None)

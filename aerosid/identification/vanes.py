@@ -80,7 +80,7 @@ from dataclasses import asdict, dataclass
 import numpy as np
 import scipy.stats
 
-from aerosid.identification.band import finite_runs
+from aerosid.identification.band import finite_runs, white_noise_sigma
 from aerosid.identification.regression import fit_linear
 from aerosid.modelling.flight_path import gravity_alpha_dot, kinematic_alpha_dot_no_gravity
 
@@ -266,3 +266,16 @@ def vane_delay(t_s, alpha_vane_rad, beta_rad, p_rad_s, q_rad_s, r_rad_s, ax_cg_m
     J = np.array([m / g ** 2, -1.0 / g])  # d(-m/g)/d(g, m)
     sigma = float(math.sqrt(max(float(J @ C @ J), 0.0)))
     return VaneDelay(delay_s=float(tau), sigma_s=sigma, gain=g, n=n, sample_s=dt, applied_s=float(applied_s))
+
+
+#: Order of the differences the vanes' white noise is measured with: the angle's own change cancels
+#: (at 100 Hz its third difference is ~1e-6 rad against the JSBSim vanes' 0.15 deg noise).
+VANE_NOISE_ORDER = 3
+
+
+def vane_white_noise_rad(x: np.ndarray) -> float:
+    """1-sigma [rad] of a vane column's white noise (robust: 1.4826 MAD of its third differences
+    over its finite runs, aerosid.identification.band.white_noise_sigma); NaN with too few samples.
+    Vanes low-passed before recording hide part of it (the differences see the high frequencies)."""
+    x = np.asarray(x, float)
+    return white_noise_sigma(x, finite_runs(np.isfinite(x)), VANE_NOISE_ORDER)

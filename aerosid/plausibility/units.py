@@ -70,7 +70,7 @@ class UnitFinding:
         widen = "; if the values are right, widen the vehicle file's [plausibility] table" if self.overridable else ""
         if self.kind == "setting":
             return (f"the vehicle file's {self.declared} contradicts the telemetry: {self.evidence}. Set it to "
-                    f"about {self.likely} (or 0 to take the angles as exact); if the data system low-passes the "
+                    f"about {self.likely}, or leave it out to have it measured so (0 takes the angles as exact); if the data system low-passes the "
                     "vanes before recording (their noise then hides from the differences), keep the sensor's "
                     "noise and widen [plausibility] vane_noise_factor")
         if self.kind == "sign":
@@ -310,25 +310,19 @@ TEMPERATURE_UNITS = (("degC", lambda x: x + 273.15, "add 273.15"),
 #: (default 3) from the white noise measured on the vane columns.  The correction trusts it: on c182
 #: a noise of 0.15 (degrees written for radians) ran to "ok" with C_N,alpha +473 %, C_l,p +489 %;
 #: ten times the true noise +88 %, +50 %.
-#: Order of the differences the vanes' white noise is measured with (the signal's own change
-#: cancels; aerosid.identification.band.white_noise_sigma: robust, 1.4826 MAD).
-VANE_NOISE_ORDER = 3
 
 
 def _vane_noise_finding(frame: pd.DataFrame, vehicle) -> UnitFinding | None:
     """[air_data] noise_rad against the white noise measured on the vane columns ([plausibility]
     vane_noise_factor)."""
-    from aerosid.identification.band import finite_runs, white_noise_sigma
+    from aerosid.identification.vanes import VANE_NOISE_ORDER, vane_white_noise_rad
 
     declared = float(getattr(vehicle, "vane_noise_rad", 0.0))
     if vehicle.air_data_source != "vanes" or not declared > 0:
         return None
     factor = float(vehicle.envelope.vane_noise_factor)
     cols = [c for c in dict.fromkeys((vehicle.alpha_column, vehicle.beta_column)) if c in frame.columns]
-    sig = []
-    for c in cols:
-        x = frame[c].to_numpy(float)
-        sig.append(white_noise_sigma(x, finite_runs(np.isfinite(x)), VANE_NOISE_ORDER))
+    sig = [vane_white_noise_rad(frame[c].to_numpy(float)) for c in cols]
     sig = [v for v in sig if math.isfinite(v) and v > 0]
     outside = [not (1.0 / factor <= declared / v <= factor) for v in sig]
     if not sig or not all(outside) or len({declared > v for v in sig}) > 1:

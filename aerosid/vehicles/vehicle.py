@@ -94,7 +94,7 @@ class Vehicle:
     beta_column: str = "beta_vane_rad"
     alpha_bias_rad: float = 0.0  # vane calibration bias subtracted from the vane reading [rad]
     beta_bias_rad: float = 0.0
-    vane_noise_rad: float = 0.0  # 1-sigma of the vanes' raw noise [rad] (errors-in-variables check)
+    vane_noise_rad: float = 0.0  # 1-sigma of the vanes' raw noise [rad] (errors-in-variables check); NaN: measured
     #: corner of the zero-phase low-pass applied to the vane angles [Hz] (None: unfiltered)
     vane_cutoff_hz: float | None = None
     #: the vanes' delay behind the inertial sensors [s]: the vane angles are read this much
@@ -364,7 +364,8 @@ def load_vehicle(name_or_path: str | Path = "seed-rlv") -> Vehicle:
         beta_column=str(air.get("beta_column", "beta_vane_rad")),
         alpha_bias_rad=float(air.get("alpha_bias_rad", 0.0)),
         beta_bias_rad=float(air.get("beta_bias_rad", 0.0)),
-        vane_noise_rad=float(air.get("noise_rad", 0.0)),
+        # not stated for vanes: NaN, measured from the vanes' own white noise (flight data)
+        vane_noise_rad=float(air.get("noise_rad", math.nan if source == "vanes" else 0.0)),
         vane_cutoff_hz=float(air["cutoff_hz"]) if "cutoff_hz" in air else None,
         vane_delay_s=float(air.get("delay_s", 0.0)),
         vane_position_m=tuple(float(v) for v in air.get("vane_position_m", (0.0, 0.0, 0.0))),
