@@ -122,6 +122,17 @@ DEFAULT_TERMS = {
     "Cn": ["Cn_0 = 1", "Cn_beta = beta", "Cn_delta_y = delta_y/2"],
     "Cl": ["Cl_0 = 1", "Cl_alpha_r = alpha_r", "Cl_cos4phi = cos(4*phi_r)", "Cl_delta_r = delta_r"],
 }
+#: The aircraft class's default models (the textbook linear aircraft model: c172x's vehicle file and
+#: every generated JSBSim vehicle file state them, docs/jsbsim.md), for an aircraft's vehicle file
+#: without a [models] table.  Before, such a file got the finned class's models above: no pitch or
+#: roll damping, C_l in the roll orientation (c182 by hand: C_m,delta -13.9 %, C_N,delta +36 %, "ok").
+AIRCRAFT_TERMS = {
+    "CN": ["CN_0 = 1", "CN_alpha = alpha", "CN_delta_p = delta_p", "CN_q = q_hat"],
+    "Cm": ["Cm_0 = 1", "Cm_alpha = alpha", "Cm_delta_p = delta_p", "pitch_damping", "Cm_alpha_dot = alpha_dot_hat"],
+    "CY": ["CY_0 = 1", "CY_beta = beta", "CY_delta_y = delta_y"],
+    "Cl": ["Cl_0 = 1", "Cl_beta = beta", "Cl_p = p_hat", "Cl_r = r_hat", "Cl_delta_r = delta_r", "Cl_delta_y = delta_y"],
+    "Cn": ["Cn_0 = 1", "Cn_beta = beta", "Cn_p = p_hat", "Cn_r = r_hat", "Cn_delta_r = delta_r", "Cn_delta_y = delta_y"],
+}
 
 
 def parse_term(text: str, channel: str, source: str = "<memory>", mach_reference: float = 12.4) -> Term:
@@ -159,9 +170,10 @@ def parse_term(text: str, channel: str, source: str = "<memory>", mach_reference
 
 
 def default_models(vehicle=None) -> dict[str, ChannelModel]:
-    """The default models: the vehicle file's ``[models]`` table when it has one (an
-    aircraft), else method.md §11 (the finned seed-rlv class)."""
-    table = getattr(vehicle, "default_terms", None) or DEFAULT_TERMS
+    """The default models: the vehicle file's ``[models]`` table when it has one, else the
+    class's: AIRCRAFT_TERMS for an aircraft, method.md §11 for the finned seed-rlv class."""
+    table = getattr(vehicle, "default_terms", None) or (
+        AIRCRAFT_TERMS if getattr(vehicle, "vehicle_class", "finned") == "aircraft" else DEFAULT_TERMS)
     where = f"{vehicle.source} [models]" if getattr(vehicle, "default_terms", None) else "<default>"
     return {ch: ChannelModel(ch, parse_terms(terms, ch, where)) for ch, terms in table.items()}
 

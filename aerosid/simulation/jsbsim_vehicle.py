@@ -5,17 +5,12 @@ from __future__ import annotations
 
 import math
 
+from aerosid.modelling.models import AIRCRAFT_TERMS
 from aerosid.simulation.jsbsim_design import FlightDesign
 
 DEG = math.pi / 180.0
-# the aircraft-class default models (as c172x's vehicle file; docs/jsbsim.md)
-MODELS = {
-    "CN": ["CN_0 = 1", "CN_alpha = alpha", "CN_delta_p = delta_p", "CN_q = q_hat"],
-    "Cm": ["Cm_0 = 1", "Cm_alpha = alpha", "Cm_delta_p = delta_p", "pitch_damping", "Cm_alpha_dot = alpha_dot_hat"],
-    "CY": ["CY_0 = 1", "CY_beta = beta", "CY_delta_y = delta_y"],
-    "Cl": ["Cl_0 = 1", "Cl_beta = beta", "Cl_p = p_hat", "Cl_r = r_hat", "Cl_delta_r = delta_r", "Cl_delta_y = delta_y"],
-    "Cn": ["Cn_0 = 1", "Cn_beta = beta", "Cn_p = p_hat", "Cn_r = r_hat", "Cn_delta_r = delta_r", "Cn_delta_y = delta_y"],
-}
+# the aircraft-class default models (aerosid.modelling.models.AIRCRAFT_TERMS; docs/jsbsim.md), written out
+MODELS = AIRCRAFT_TERMS
 ABS_BETA_SHARE = 0.01  # Cm_abs_beta joins the model when |dCm/d|beta|| * 2 deg > 1 % of the elevator step's Cm
 MACH_SHARE = 0.01      # a Mach term joins CN / Cm when 0.01 of Mach moves it by > 1 % of the manoeuvre's effect
 

@@ -41,3 +41,26 @@ def test_malformed_specs_name_file_channel_and_term(tmp_path, text, fragment):
     with pytest.raises(ModelSpecError) as err:
         load_models(spec)
     assert str(spec) in str(err.value) and fragment in str(err.value)
+
+
+def test_an_aircraft_file_without_models_gets_the_aircraft_models_not_the_finned_ones(tmp_path):
+    """A vehicle file written by hand for an aircraft may leave out [models]: it gets the linear
+    aircraft model (pitch and roll damping, the yaw rate, both lateral controls), not the finned
+    seed's (no damping, C_l in the roll orientation), which ran to "ok" on c182 with C_m,delta
+    -13.9 % and C_N,delta +36 %.  A finned vehicle keeps method.md's."""
+    import re
+
+    from aerosid.modelling.models import AIRCRAFT_TERMS, DEFAULT_TERMS
+    from aerosid.vehicles.vehicle import load_vehicle, resolve_vehicle_path
+
+    text = resolve_vehicle_path("c172x").read_text()
+    cut = re.sub(r"\n\[models\]\n(?:#.*\n|[A-Za-z].*\n|\s+.*\n)*?(?=\n\[)", "\n", text)
+    assert "[models]" in text and "[models]" not in cut and "[limits]" in cut
+    (tmp_path / "v.toml").write_text(cut)
+    models = default_models(load_vehicle(tmp_path / "v.toml"))
+    names = {ch: [t.coefficient for t in m.terms] for ch, m in models.items()}
+    assert {"Cm_q", "Cm_alpha_dot"} <= set(names["Cm"]) and "CN_q" in names["CN"]
+    assert {"Cl_p", "Cl_r", "Cl_beta"} <= set(names["Cl"]) and {"Cn_r", "Cn_p"} <= set(names["Cn"])
+    assert len(names["Cm"]) == len(AIRCRAFT_TERMS["Cm"]) and "Cl_cos4phi" not in names["Cl"]
+    finned = default_models(load_vehicle("seed-rlv"))
+    assert [t.coefficient for t in finned["Cl"].terms] == [t.split(" = ")[0] for t in DEFAULT_TERMS["Cl"]]
