@@ -69,10 +69,7 @@ class UnitFinding:
         cols = ", ".join(self.columns)
         widen = "; if the values are right, widen the vehicle file's [plausibility] table" if self.overridable else ""
         if self.kind == "setting":
-            return (f"the vehicle file's {self.declared} contradicts the telemetry: {self.evidence}. Set it to "
-                    f"about {self.likely}, or leave it out to have it measured so (0 takes the angles as exact); if the data system low-passes the "
-                    "vanes before recording (their noise then hides from the differences), keep the sensor's "
-                    "noise and widen [plausibility] vane_noise_factor")
+            return f"the vehicle file's {self.declared} contradicts the telemetry: {self.evidence}"
         if self.kind == "sign":
             return (f"the sign looks flipped: {self.evidence}. aerosid's convention: {self.declared}. Multiply "
                     f"{'the column' if len(self.columns) == 1 else 'the wrong one of ' + cols} by -1 (an import "
@@ -259,7 +256,8 @@ def _measured_air_findings(frame: pd.DataFrame) -> list[UnitFinding]:
     atmosphere at the record's altitude (MEASURED_AIR_RATIO, TEMPERATURE_RATIO): psf for Pa,
     slug/ft^3 for kg/m^3, hPa, inHg, degR for K ...
     (the schema's range alone passes them: a dynamic pressure of 30 psf is a plausible number of Pa)."""
-    from aerosid.vehicles.atmosphere import CP_AIR_J_KG_K, H_MAX_M, H_MIN_M, density_kg_m3, pressure_pa, temperature_K
+    from aerosid.vehicles.atmosphere import (CP_AIR_J_KG_K, H_MAX_M, H_MIN_M, density_kg_m3, pressure_pa,
+                                             temperature_K)
     from schemas.telemetry import sentinel_mask
 
     present = [c for c in ("rho_kg_m3", "qbar_pa", "p_static_pa", "T_total_K") if c in frame.columns]
@@ -305,16 +303,12 @@ TEMPERATURE_UNITS = (("degC", lambda x: x + 273.15, "add 273.15"),
                      ("degF", lambda x: (x - 32.0) * 5.0 / 9.0 + 273.15, "subtract 32, multiply by 5/9, add 273.15"))
 
 
-#: The vehicle file's vane noise ([air_data] noise_rad, the errors-in-variables correction's sigma of
-#: the vane angles) is refused when it is more than the vehicle's [plausibility] vane_noise_factor
-#: (default 3) from the white noise measured on the vane columns.  The correction trusts it: on c182
-#: a noise of 0.15 (degrees written for radians) ran to "ok" with C_N,alpha +473 %, C_l,p +489 %;
-#: ten times the true noise +88 %, +50 %.
-
-
 def _vane_noise_finding(frame: pd.DataFrame, vehicle) -> UnitFinding | None:
-    """[air_data] noise_rad against the white noise measured on the vane columns ([plausibility]
-    vane_noise_factor)."""
+    """The vehicle file's vane noise ([air_data] noise_rad, the errors-in-variables correction's
+    sigma of the vane angles) more than the vehicle's [plausibility] vane_noise_factor (default 3)
+    from the white noise measured on both vane columns, the same way.  The correction trusts it:
+    on c182 a noise of 0.15 (degrees written for radians) ran to "ok" with C_N,alpha +473 %,
+    C_l,p +489 %; ten times the true noise +88 %, +50 %."""
     from aerosid.identification.vanes import VANE_NOISE_ORDER, vane_white_noise_rad
 
     declared = float(getattr(vehicle, "vane_noise_rad", 0.0))
@@ -334,7 +328,11 @@ def _vane_noise_finding(frame: pd.DataFrame, vehicle) -> UnitFinding | None:
                        f"noise_rad = {declared:.4g} rad is {ratio:.3g} x the white noise measured on "
                        f"{' and '.join(cols)} ({measured:.3g} rad, {VANE_NOISE_ORDER}rd differences){degrees}; "
                        f"the errors-in-variables correction of every coefficient trusts it (more than "
-                       f"{factor:g} x either way is refused: [plausibility] vane_noise_factor)", kind="setting", overridable=False)
+                       f"{factor:g} x either way is refused: [plausibility] vane_noise_factor). Set it to about "
+                       f"{measured:.2g} rad, or leave it out to have it measured so (0 takes the angles as exact); "
+                       "if the data system low-passes the vanes before recording (their noise then hides from the "
+                       "differences), keep the sensor's noise and widen [plausibility] vane_noise_factor",
+                       kind="setting", overridable=False)
 
 
 #: Candidate units by a column's unit suffix, for the raw schema's range check (range_unit_hint).

@@ -158,7 +158,8 @@ TABLES: dict[str, dict[str, Key] | None] = {
         "cn_alpha_per_rad": rng(-1e9, 1e9, "range of the estimated normal-force slope C_N,alpha [1/rad]"),
         "cl_p_per_rad": rng(-1e9, 1e9, "range of the estimated roll damping C_l,p [1/rad]"),
         "vane_noise_factor": Key("number", 1.0, 1e9, positive=True,
-                                 doc="[air_data] noise_rad may differ from the vanes' measured white noise by this factor"),
+                                 doc="[air_data] noise_rad may differ from the vanes' measured white noise by "
+                                     "this factor"),
         "preflight_factor": Key("number", 1.0, 1e6, positive=True,
                                 doc="warn when an estimate differs from its preflight value by more than this factor"),
     },
