@@ -19,6 +19,8 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
+
 #: An estimate is reported only when |estimate - preflight| exceeds this many standard errors.
 SIGNIFICANCE = 3.0
 
@@ -77,8 +79,6 @@ def implausible_estimate_findings(table, t_s) -> list[dict]:
     for the coefficients table's rows that carry a ``preflight_warning`` (a preflight departure
     or an aircraft's physical range): such a run is not "ok".  t_s: the regressed flight data's
     times [s], for the span."""
-    import numpy as np
-
     t = np.asarray(t_s, float)
     t = t[np.isfinite(t)]
     t0, t1 = (float(t.min()), float(t.max())) if t.size else (math.nan, math.nan)
