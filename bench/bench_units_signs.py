@@ -8,7 +8,7 @@ vehicle file) and NASA's Twin Otter as ``aerosid import sidpac`` writes it: the 
 flight must raise nothing (a false alarm refuses a good flight), and each mistake below,
 made on one channel at a time, must be named -- the right column first (a pair where the
 kinematics cannot tell which: counted apart), never another one.  The measured air data's
-mistakes are made on the flight with a density, a dynamic and a static pressure added where it
+mistakes are made on the flight with a density, dynamic and static pressure and total temperature added where it
 has none (the Twin Otter keeps its own); the vane-noise rows change the vehicle file's
 [air_data] noise_rad, and "named" means the finding names that key.  The 737 and 787-8 stay
 out (reserved for independent checks).
@@ -44,34 +44,18 @@ MISTAKES = {
     "alpha vane in deg": ("alpha_vane_rad", DEG, "alpha_vane_rad"),
     "beta vane in deg": ("beta_vane_rad", DEG, "beta_vane_rad"),
     "theta in deg": ("theta_rad", DEG, "theta_rad"),
-    # measured air data (each flight given a density, a dynamic and a static pressure where it has
-    # none: with_measured_air_data), written in another unit
+    # measured air data (each flight given a density, dynamic and static pressure and total temperature
+    # where it has none: aerosid.simulation.sensors.with_measured_air_data), written in another unit
     "qbar in psf": ("qbar_pa", 1 / 47.880259, "qbar_pa"),
     "qbar in kPa": ("qbar_pa", 1e-3, "qbar_pa"),
     "rho in slug/ft^3": ("rho_kg_m3", 1 / 515.378818, "rho_kg_m3"),
     "p_static in hPa": ("p_static_pa", 1e-2, "p_static_pa"),
     "p_static in inHg": ("p_static_pa", 1 / 3386.389, "p_static_pa"),
+    "T_total in degR": ("T_total_K", 1.8, "T_total_K"),
 }
-AIR_COLUMNS = ("rho_kg_m3", "qbar_pa", "p_static_pa")
+AIR_COLUMNS = ("rho_kg_m3", "qbar_pa", "p_static_pa", "T_total_K")
 #: label -> factor on the vehicle file's [air_data] noise_rad (the finding must name that key)
 SETTINGS = {"vane noise_rad in deg": 1 / DEG, "vane noise_rad x10": 10.0, "vane noise_rad x0.1": 0.1}
-
-
-def with_measured_air_data(frame):
-    """The flight with measured density, dynamic and static pressure where it has none: the
-    US-1976 values at its altitude on a day 8 % denser (a real day is not the standard one)."""
-    import numpy as np
-    from ambiance import Atmosphere
-
-    out = frame.copy()
-    atm = Atmosphere(np.clip(np.nan_to_num(out["h_m"].to_numpy(float), nan=0.0), -5000.0, 81000.0))
-    if "rho_kg_m3" not in out:
-        out["rho_kg_m3"] = 1.08 * atm.density
-    if "qbar_pa" not in out:
-        out["qbar_pa"] = 0.5 * out["rho_kg_m3"] * out["V_m_s"] ** 2
-    if "p_static_pa" not in out:
-        out["p_static_pa"] = atm.pressure
-    return out
 
 
 TURBULENT = ["c182", "c310", "pa28", "J3Cub", "A4", "f15"]
@@ -120,6 +104,7 @@ def tally(cases) -> dict:
     """Per mistake: named (the column alone), pair, wrong (another column), missed, n; and the
     false alarms and wrong columns by flight."""
     from aerosid.plausibility.units import unit_findings
+    from aerosid.simulation.sensors import with_measured_air_data
 
     import dataclasses
 
@@ -166,7 +151,7 @@ def tally(cases) -> dict:
 
 def table(result: dict, title: str) -> list[str]:
     lines = [f"## {title}", "", f"Flights: {result['n']}. False alarms on the recorded flights (each also checked with measured air "
-             f"data added, US-1976 on a day 8 % denser): "
+             f"data added, US-1976 on a day 8 % denser and 12 K warmer): "
              f"**{len(result['false'])}**.", "",
              "| mistake | flights | named (the column alone) | a pair holding it | another column | missed |",
              "|---|---|---|---|---|---|"]

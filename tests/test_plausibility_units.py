@@ -16,6 +16,7 @@ from aerosid.plausibility import kinematics as K
 from aerosid.plausibility.units import check_units, unit_findings
 from aerosid.preprocess import TelemetryError
 from aerosid.simulation import load_case, simulate
+from aerosid.simulation.sensors import with_measured_air_data
 from aerosid.vehicles.vehicle import load_vehicle
 from tests import twin_otter
 
@@ -91,32 +92,13 @@ AIR_DATA_MISTAKES = [("qbar_pa", 1 / 47.880259, "psf"), ("qbar_pa", 1e-3, "kPa")
                      ("T_total_K", 1.8, "degR")]
 
 
-def _with_measured_air_data(frame: pd.DataFrame) -> pd.DataFrame:
-    """The flight with measured density, dynamic and static pressure where it has none: the
-    US-1976 values at its altitude on a day 8 % denser (a real day is not the standard one)."""
-    from ambiance import Atmosphere
-
-    out = frame.copy()
-    h = np.clip(np.nan_to_num(out["h_m"].to_numpy(float), nan=0.0), -5000.0, 81000.0)
-    atm = Atmosphere(h)
-    if "rho_kg_m3" not in out:
-        out["rho_kg_m3"] = 1.08 * atm.density
-    if "qbar_pa" not in out:
-        out["qbar_pa"] = 0.5 * out["rho_kg_m3"] * out["V_m_s"] ** 2
-    if "p_static_pa" not in out:
-        out["p_static_pa"] = atm.pressure
-    if "T_total_K" not in out:  # 12 K warmer than the standard day
-        out["T_total_K"] = atm.temperature + 12.0 + out["V_m_s"] ** 2 / 2009.0
-    return out
-
-
 def test_measured_air_data_in_other_units_are_found_naming_column_and_unit(flights):
     """Dynamic pressure in psf or kPa, density in slug/ft^3 or lb/ft^3, static pressure in hPa,
     inHg or psi, total temperature in degR: each passes the schema's range (30 psf is a plausible number of Pa) and, before
     the check, ran to "ok" with every coefficient x47 (c182, qbar_pa in psf) or x515 (rho_kg_m3
     in slug/ft^3).  Measured in SI, nothing is found."""
     for label, frame, veh in flights:
-        measured = _with_measured_air_data(frame)
+        measured = with_measured_air_data(frame)
         assert unit_findings(measured, veh) == [], label
         for col, factor, unit in AIR_DATA_MISTAKES:
             found = unit_findings(with_factor(measured, [col], factor), veh)

@@ -39,32 +39,31 @@ def _check_altitude(h_m: np.ndarray) -> None:
         raise ValueError(f"altitude outside the US-1976 model's {H_MIN_M:g}..{H_MAX_M:g} m at rows {rows}")
 
 
-def density_kg_m3(h_m):
-    """Air density [kg/m^3] at geometric altitude h_m [m]."""
+def _us1976(h_m, quantity: str) -> np.ndarray:
+    """One US-1976 quantity (ambiance's attribute name) at geometric altitudes h_m [m], shaped as h_m."""
     h = np.asarray(h_m, dtype=float)
     _check_altitude(h)
-    return Atmosphere(h).density.reshape(h.shape)
+    return getattr(Atmosphere(h), quantity).reshape(h.shape)
+
+
+def density_kg_m3(h_m):
+    """Air density [kg/m^3] at geometric altitude h_m [m]."""
+    return _us1976(h_m, "density")
 
 
 def pressure_pa(h_m):
     """Static pressure [Pa] at geometric altitude h_m [m]."""
-    h = np.asarray(h_m, dtype=float)
-    _check_altitude(h)
-    return Atmosphere(h).pressure.reshape(h.shape)
+    return _us1976(h_m, "pressure")
 
 
 def temperature_K(h_m):
     """Static temperature [K] at geometric altitude h_m [m]."""
-    h = np.asarray(h_m, dtype=float)
-    _check_altitude(h)
-    return Atmosphere(h).temperature.reshape(h.shape)
+    return _us1976(h_m, "temperature")
 
 
 def speed_of_sound_m_s(h_m):
     """Speed of sound [m/s] at geometric altitude h_m [m]."""
-    h = np.asarray(h_m, dtype=float)
-    _check_altitude(h)
-    return Atmosphere(h).speed_of_sound.reshape(h.shape)
+    return _us1976(h_m, "speed_of_sound")
 
 
 def gravity_m_s2(h_m):
