@@ -312,7 +312,10 @@ def load_vehicle(name_or_path: str | Path = "seed-rlv") -> Vehicle:
         if any(b <= a for a, b in zip(bp, bp[1:])):
             raise VehicleError(src, "aero.preflight.mach_breakpoints", f"must increase strictly, got {list(bp)}")
     limit_key = "fin_limit_rad" if "fin_limit_rad" in doc["controls"] else "surface_limit_rad"
-    if limit_key not in doc["controls"]:
+    # the built-in (finned) simulator's fin limit; an aircraft's identification never reads it, so a
+    # file written by hand need not state it (the experiment design has its own default, design/limits)
+    unstated_limit = limit_key not in doc["controls"]
+    if unstated_limit and vclass != "aircraft":
         raise VehicleError(src, "controls.fin_limit_rad", "value missing (or surface_limit_rad)")
     surfaces = doc["controls"].get("surfaces", ["fin 1", "fin 2", "fin 3", "fin 4"])
     if len(surfaces) != 4:
@@ -346,7 +349,7 @@ def load_vehicle(name_or_path: str | Path = "seed-rlv") -> Vehicle:
         x_cg_m=float(ref["x_cg_m"]),
         accel_offset_m=tuple(float(v) for v in offset),
         mixing=tuple(tuple(float(v) for v in row) for row in mixing),
-        fin_limit_rad=positive("controls", limit_key),
+        fin_limit_rad=math.pi / 2 if unstated_limit else positive("controls", limit_key),
         mach_reference=float(doc["aero"]["mach_reference"]),
         database_path=database_path,
         preflight=preflight,

@@ -65,3 +65,27 @@ def test_inertias_may_cross_the_triangle_inequality_by_an_estimates_error_only(t
     else:
         with pytest.raises(VehicleError, match=r"Iyy exceeds the sum of the other two by 3\.0 %"):
             load_vehicle(path)
+
+
+def test_an_aircraft_file_need_not_state_a_surface_limit_a_finned_one_must(tmp_path):
+    """The surface limit serves only the built-in finned simulator: an aircraft's vehicle file
+    written by hand may leave it out (before: refused, `[controls.fin_limit_rad] value missing`);
+    a finned vehicle's file still must state it."""
+    import math
+    import re
+
+    from aerosid.vehicles.vehicle import VehicleError, load_vehicle, resolve_vehicle_path
+
+    for name, must in (("c172x", False), ("seed-rlv", True)):
+        text = resolve_vehicle_path(name).read_text()
+        cut = re.sub(r"\n(fin|surface)_limits?_rad = .*", "", text)
+        assert cut != text, name
+        # the finned file names its database relative to its folder: point it at the built-in one
+        cut = cut.replace('database = "aerodb.csv"', f'database = "{resolve_vehicle_path(name).parent / "aerodb.csv"}"')
+        path = tmp_path / f"{name}.toml"
+        path.write_text(cut)
+        if must:
+            with pytest.raises(VehicleError, match="fin_limit_rad"):
+                load_vehicle(path)
+        else:
+            assert load_vehicle(path).fin_limit_rad == pytest.approx(math.pi / 2)
