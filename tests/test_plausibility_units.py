@@ -122,7 +122,7 @@ def test_a_vane_noise_the_telemetry_contradicts_is_refused(flights):
             wrong = dataclasses.replace(veh, vane_noise_rad=veh.vane_noise_rad * factor)
             found = unit_findings(frame, wrong)
             assert found and found[0].kind == "setting" and found[0].declared == "[air_data] noise_rad", (label, factor)
-            assert found[0].factor == pytest.approx(1 / factor, rel=2.0)  # the measured noise, about the declared
+            assert found[0].factor == pytest.approx(1 / factor, rel=0.3)  # the measured noise, about the declared
             with pytest.raises(TelemetryError) as ei:
                 check_units(frame, wrong, "flight.parquet")
             assert "[air_data] noise_rad contradicts the telemetry" in str(ei.value)
