@@ -83,6 +83,31 @@ def test_diagnosis_finds_the_missing_pitch_damping_and_adding_it_makes_the_error
     assert d2.rank_of("pitch_damping") is None
 
 
+def test_the_diagnosis_names_a_missing_sideslip_pitching_moment_and_a_spec_can_add_it(tmp_path):
+    """An aircraft's layout term the default model leaves out: c182's drag acts below its
+    aerodynamic reference point's height off the CG, so C_m grows with |beta| (its generated
+    vehicle file carries Cm_abs_beta).  The same flight analysed with the aircraft default models
+    (a vehicle file written by hand) gets cm_abs_beta recommended, and a model spec adds it by that
+    name; a finned vehicle is not offered it."""
+    import re
+
+    from aerosid.diagnosis.candidates import default_candidates
+    from aerosid.simulation.jsbsim_aircraft import simulate_aircraft
+
+    fl = simulate_aircraft("c182", 0)
+    text = fl.files["vehicle.toml"]
+    assert "Cm_abs_beta = abs(beta)" in text
+    (tmp_path / "v.toml").write_text(re.sub(r"\n\[models\]\n(?:.*\n)*?(?=\n\[|\Z)", "\n", text + "\n"))
+    by_hand = load_vehicle(tmp_path / "v.toml")
+    assert "Cm_abs_beta" not in default_models(by_hand)["Cm"].names
+    run = process_telemetry(fl.telemetry, by_hand)
+    d = diagnose(run.flight_data, by_hand, localisation=False)
+    assert d.recommended == "cm_abs_beta", d.summary()
+    term = parse_term("cm_abs_beta", "Cm")
+    assert (term.coefficient, term.expression) == ("Cm_abs_beta", "abs(beta)")
+    assert "cm_abs_beta" not in {c.name for c in default_candidates(12.4, "finned")}
+
+
 def test_a_vane_noise_left_out_of_the_vehicle_file_is_measured_from_the_vanes(run, flight, vehicle, tmp_path):
     """A vehicle file written by hand may leave out [air_data] noise_rad: it is then measured on
     the vanes (their third differences), not taken as 0 -- which switched the errors-in-variables

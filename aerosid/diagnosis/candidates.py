@@ -92,13 +92,25 @@ def extra_candidates(mach_reference: float = 12.4) -> tuple[Candidate, ...]:
     )
 
 
+def aircraft_candidates() -> tuple[Candidate, ...]:
+    """Effects of an aircraft's layout that its default model leaves out (docs/real-flight.md,
+    "Writing the file by hand")."""
+    return (
+        Candidate("cm_abs_beta", "Cm", "Cm_abs_beta", "abs(beta)",
+                  "pitching moment from sideslip: the drag grows with |beta| and acts above or below the CG "
+                  "(an aerodynamic reference point off the CG's height; c182, c172x)"),
+    )
+
+
 #: name -> (channel, coefficient) of the extra candidates: a model spec accepts them by name
-_EXTRA_NAMES = {c.name: (c.channel, c.coefficient) for c in extra_candidates()}
+_EXTRA_NAMES = {c.name: (c.channel, c.coefficient) for c in extra_candidates() + aircraft_candidates()}
 
 
 def default_candidates(mach_reference: float = 12.4, vehicle_class: str = "finned") -> tuple[Candidate, ...]:
-    """The catalogue (same names as ``aerosid simulate --effect``) followed by the extras."""
-    return catalogue_candidates(mach_reference, vehicle_class) + extra_candidates(mach_reference)
+    """The catalogue (same names as ``aerosid simulate --effect``) followed by the extras, and
+    for an aircraft its layout's (aircraft_candidates)."""
+    return (catalogue_candidates(mach_reference, vehicle_class) + extra_candidates(mach_reference)
+            + (aircraft_candidates() if vehicle_class == "aircraft" else ()))
 
 
 def derived_signals(signals: dict[str, np.ndarray], d_m: float, lateral_m: float | None = None
