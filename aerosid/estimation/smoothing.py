@@ -7,7 +7,7 @@ quality flags) and ``aerosid.estimation.smooth_flight``; it builds the
 from __future__ import annotations
 
 import json
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import pandas as pd
@@ -91,6 +91,17 @@ def smoothing_options(vehicle: Vehicle, overrides: dict | None = None) -> EBMOpt
     return EBMOptions(**{k: (tuple(v) if isinstance(v, list) else v) for k, v in merged.items()})
 
 
+def _with_stated_chain_scale(findings: list, settings: dict) -> list:
+    """A mean-NIS finding names a stated ``q_chain_scale`` (a vehicle file's [estimation] or the
+    caller's): a per-vehicle constant copied from another vehicle's file (the first 737 check
+    copied c172x's 1e3) sets the chains' process noise the flight would otherwise choose."""
+    if "q_chain_scale" not in settings:
+        return findings
+    hint = (f"; the chains' process noise is scaled by the stated [estimation] q_chain_scale = "
+            f"{list(settings['q_chain_scale'])}: leave it out to have the flight choose it")
+    return [replace(f, detail=f.detail + hint) if f.kind == "nis_mean" else f for f in findings]
+
+
 def smooth_segment_frame(rows: pd.DataFrame, vehicle: Vehicle, options: dict | None = None,
                          segment_id: str = "seg00") -> SmoothedSegmentResult:
     """Run the EKF + MBF smoother over one segment of a preprocessed frame;
@@ -136,6 +147,7 @@ def smooth_segment_frame(rows: pd.DataFrame, vehicle: Vehicle, options: dict | N
                                           dict(zip(res.meas_names, map(float, res.chan_nis_filter))),
                                           dict(zip(res.meas_names, map(float, res.whiteness()))),
                                           opts.f_max_hz)
+    findings = _with_stated_chain_scale(findings, {**vehicle.estimation, **(options or {})})
     data["suspect"] = suspect
     frame = pd.DataFrame(data)
     frame["segment"] = frame["segment"].astype(str)

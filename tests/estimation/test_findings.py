@@ -52,6 +52,25 @@ def test_without_the_channel_facts_the_message_is_the_plain_one():
                         "the smoother's sigma are not to be trusted")
 
 
+def test_a_mean_nis_finding_names_a_stated_chain_scale():
+    """A q_chain_scale copied into a vehicle file (c172x's old 1e3, as the first 737 check did) sets
+    the chains' process noise: the mean-NIS finding says so and how to undo it; without one, or on
+    another kind of finding, nothing is added."""
+    from aerosid.estimation.smoothing import _with_stated_chain_scale
+
+    t = np.arange(400) * 0.02
+    none = {m: np.zeros(t.size, bool) for m in NAMES}
+    gated = {**none, "q": np.r_[np.zeros(100, bool), np.ones(50, bool), np.zeros(250, bool)]}
+    found = smoother_findings(t, gated, np.zeros(t.size, bool), 3.4, (5.66, 6.34), "seg00")[0]
+    assert {f.kind for f in found} == {"gated", "nis_mean"}
+    stated = _with_stated_chain_scale(found, {"q_chain_scale": (1e3,) * 6})
+    nis = next(f for f in stated if f.kind == "nis_mean")
+    assert nis.detail.endswith("q_chain_scale = [1000.0, 1000.0, 1000.0, 1000.0, 1000.0, 1000.0]: leave it out "
+                               "to have the flight choose it")
+    assert [f for f in stated if f.kind == "gated"] == [f for f in found if f.kind == "gated"]
+    assert _with_stated_chain_scale(found, {"band_hz": 2.0}) == found
+
+
 def test_inside_the_band_there_is_no_finding_and_no_channel_no_cause():
     assert _mean_nis_finding(6.0, (0.07,) * 6, (30,) * 6) == []
     assert nis_mean_cause("below", {"q": 0.9}, {"q": 30.0}, 4.0) == ""
