@@ -59,7 +59,7 @@ from aerosid.diagnosis.candidates import Candidate, default_candidates, derived_
 from aerosid.diagnosis.lookalikes import heldout_sse as _heldout_sse, scaled_lstsq as _scaled_lstsq
 from aerosid.diagnosis.lookalikes import windows_index as _windows_index
 from aerosid.modelling.expressions import evaluate
-from aerosid.identification.eiv_fit import angle_cutoff_hz
+from aerosid.identification.eiv_fit import angle_cutoff_hz, angle_eiv_sigma
 from aerosid.identification.identify import identity_channels, mach_window_mask
 from aerosid.identification.band import segment_keys
 from aerosid.identification.eiv import simex_frames
@@ -203,8 +203,8 @@ def diagnose(flight_data: pd.DataFrame, vehicle, models: dict[str, ChannelModel]
     if angle_sigma_rad is None and vehicle.air_data_source == "vanes":
         angle_sigma_rad = vehicle.vane_noise_rad
         if not math.isfinite(angle_sigma_rad):  # not stated: what the flight data measured on the vanes
-            cols = [c for c in ("eiv_sigma_alpha_rad", "eiv_sigma_beta_rad") if c in fd.columns]
-            angle_sigma_rad = float(np.nanmedian(fd[cols].to_numpy(float))) if cols else 0.0
+            measured = angle_eiv_sigma(fd, vehicle)
+            angle_sigma_rad = float(np.median(np.concatenate(measured))) if measured is not None else 0.0
     if angle_sigma_rad is None:
         sig_cn = fd["sigma_CN"].to_numpy(float) if "sigma_CN" in fd else np.array([0.0])
         cn_alpha = abs(float(vehicle.preflight.CN_alpha))

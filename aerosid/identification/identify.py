@@ -37,8 +37,6 @@ class Identification:
     mach_window: tuple[float, float]
     #: channels whose fit is an identity by construction (alpha, beta inverted from them)
     identities: tuple[str, ...] = ()
-    #: estimates beyond preflight x/÷ this factor are reported (vehicle [plausibility])
-    preflight_factor: float = 3.0
     #: coefficient -> Cramér-Rao bound on its std (aerosid.identification.crb), NaN where none
     crb_std: dict = field(default_factory=dict)
     #: coefficient -> its t before the model-structure mixture, for the damping terms whose whole 95 %
@@ -46,9 +44,14 @@ class Identification:
     wrong_sign: dict = field(default_factory=dict)
     #: +/- pairs of the estimator-bias check counted in the sigma (aerosid.identification.bias_check); 0: none
     bias_pairs: int = 0
-    #: the vehicle's [plausibility] envelope: an aircraft's lift slope and roll damping are checked against
-    #: its ranges where no preflight value says more (aerosid.plausibility.estimates); None: no check
+    #: the vehicle's [plausibility] envelope: its preflight_factor (estimates beyond preflight x/÷ it are
+    #: reported) and, for an aircraft, the ranges its lift slope and roll damping are checked against where
+    #: no preflight value says more (aerosid.plausibility.estimates); None: the factor 3, no ranges
     envelope: object = None
+
+    @property
+    def preflight_factor(self) -> float:
+        return 3.0 if self.envelope is None else float(self.envelope.preflight_factor)
 
     def table(self, alpha: float = 0.05) -> pd.DataFrame:
         """The coefficients.parquet rows.  A channel in ``identities`` is reported without
@@ -265,8 +268,8 @@ def identify(flight_data: pd.DataFrame, vehicle: Vehicle, models: dict[str, Chan
     refs = AeroModel.preflight(vehicle).linear_truth() if vehicle.preflight is not None else {}
     window = (float(fd["mach"].min()), float(fd["mach"].max()))
     crb = identification_bounds(fd, vehicle, models, fits, identities)
-    return Identification(fits, dict(models), refs, len(fd), window, identities, vehicle.envelope.preflight_factor,
-                          crb.std, wrong_sign, bias_pairs, vehicle.envelope)
+    return Identification(fits, dict(models), refs, len(fd), window, identities, crb_std=crb.std,
+                          wrong_sign=wrong_sign, bias_pairs=bias_pairs, envelope=vehicle.envelope)
 
 
 def _band_limited(fd: pd.DataFrame) -> bool:

@@ -112,15 +112,18 @@ def _mach(V: np.ndarray, h: np.ndarray) -> np.ndarray:
     return V / speed_of_sound_m_s(np.clip(h, H_MIN_M, H_MAX_M))
 
 
-def _air_rows(frame: pd.DataFrame, n_max: int = 2000) -> tuple[np.ndarray, np.ndarray]:
-    """V and h on rows where both are usable, thinned to at most n_max rows."""
+def _air_rows(frame: pd.DataFrame, n_max: int = 2000, column: str | None = None, h_bounds=(-math.inf, math.inf)
+              ) -> tuple[np.ndarray, ...]:
+    """V and h (and `column`, positive) on rows where all are usable and h lies within h_bounds,
+    thinned to at most n_max rows."""
     from schemas.telemetry import sentinel_mask
 
-    V, h = frame["V_m_s"].to_numpy(float), frame["h_m"].to_numpy(float)
-    ok = np.isfinite(V) & np.isfinite(h) & ~sentinel_mask(V) & ~sentinel_mask(h) & (V > 0)
-    V, h = V[ok], h[ok]
-    step = max(1, len(V) // n_max)
-    return V[::step], h[::step]
+    arrays = [frame[c].to_numpy(float) for c in ("V_m_s", "h_m", *((column,) if column else ()))]
+    V, h = arrays[:2]
+    ok = np.logical_and.reduce([np.isfinite(a) & ~sentinel_mask(a) for a in arrays])
+    ok &= (V > 0) & (h >= h_bounds[0]) & (h <= h_bounds[1]) & (arrays[-1] > 0 if column else True)
+    step = max(1, int(ok.sum()) // n_max)
+    return tuple(a[ok][::step] for a in arrays)
 
 
 # --------------------------------------------------------------------------- magnitude
@@ -258,34 +261,23 @@ def _measured_air_findings(frame: pd.DataFrame) -> list[UnitFinding]:
     (the schema's range alone passes them: a dynamic pressure of 30 psf is a plausible number of Pa)."""
     from aerosid.vehicles.atmosphere import (CP_AIR_J_KG_K, H_MAX_M, H_MIN_M, density_kg_m3, pressure_pa,
                                              temperature_K)
-    from schemas.telemetry import sentinel_mask
 
-    present = [c for c in ("rho_kg_m3", "qbar_pa", "p_static_pa", "T_total_K") if c in frame.columns]
-    if not present:
-        return []
-    V, h = frame["V_m_s"].to_numpy(float), frame["h_m"].to_numpy(float)
-    base = np.isfinite(V) & np.isfinite(h) & ~sentinel_mask(V) & ~sentinel_mask(h) & (V > 0) & \
-        (h >= H_MIN_M) & (h <= H_MAX_M)
     out = []
-    for col in present:
-        x = frame[col].to_numpy(float)
-        ok = base & np.isfinite(x) & ~sentinel_mask(x) & (x > 0)
-        if ok.sum() < 10:
+    for col in (c for c in ("rho_kg_m3", "qbar_pa", "p_static_pa", "T_total_K") if c in frame.columns):
+        V, h, x = _air_rows(frame, column=col, h_bounds=(H_MIN_M, H_MAX_M))
+        if len(x) < 10:
             continue
-        step = max(1, int(ok.sum()) // 2000)
-        rows = np.flatnonzero(ok)[::step]
         bounds = MEASURED_AIR_RATIO
         if col == "T_total_K":
-            ref = temperature_K(h[rows]) + V[rows] ** 2 / (2.0 * CP_AIR_J_KG_K)
+            ref = temperature_K(h) + V ** 2 / (2.0 * CP_AIR_J_KG_K)
             what, units, declared, bounds = "US-1976 total temperature", {"degR": 5.0 / 9.0}, "K", TEMPERATURE_RATIO
         elif col == "p_static_pa":
-            ref, what, units, declared = pressure_pa(h[rows]), "US-1976 static pressure", PRESSURE_UNITS, "Pa"
+            ref, what, units, declared = pressure_pa(h), "US-1976 static pressure", PRESSURE_UNITS, "Pa"
         elif col == "rho_kg_m3":
-            ref, what, units, declared = density_kg_m3(h[rows]), "US-1976 density", DENSITY_UNITS, "kg/m^3"
+            ref, what, units, declared = density_kg_m3(h), "US-1976 density", DENSITY_UNITS, "kg/m^3"
         else:
-            ref, what, units, declared = _qbar_pa(V[rows], h[rows]), "0.5 rho V^2 (US-1976 density at h_m)", \
-                PRESSURE_UNITS, "Pa"
-        ratio = float(np.median(x[rows] / ref))
+            ref, what, units, declared = _qbar_pa(V, h), "0.5 rho V^2 (US-1976 density at h_m)", PRESSURE_UNITS, "Pa"
+        ratio = float(np.median(x / ref))
         if _inside(ratio, bounds):
             continue
         fits = sorted((abs(math.log(ratio * k)), unit, k) for unit, k in units.items() if _inside(ratio * k, bounds))
@@ -311,7 +303,7 @@ def _vane_noise_finding(frame: pd.DataFrame, vehicle) -> UnitFinding | None:
     C_l,p +489 %; ten times the true noise +88 %, +50 %."""
     from aerosid.identification.vanes import VANE_NOISE_ORDER, vane_white_noise_rad
 
-    declared = float(getattr(vehicle, "vane_noise_rad", 0.0))
+    declared = float(vehicle.vane_noise_rad)
     if vehicle.air_data_source != "vanes" or not declared > 0:
         return None
     factor = float(vehicle.envelope.vane_noise_factor)
