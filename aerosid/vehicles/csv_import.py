@@ -13,12 +13,16 @@ The map (TOML)::
     [columns]                     # raw column = { column = CSV header, unit = its unit [, sign = -1] }
     t_s = { column = "time", unit = "s" }
     q_rad_s = { column = "q", unit = "deg/s" }
+    V_m_s = { column = "KCAS", unit = "kt", airspeed = "calibrated" }   # converted to the true airspeed
     ...
 
 Every raw contract column (schemas/telemetry.py RAW_COLUMNS) must be mapped; the
 vanes, measured air data and attitude columns (aerosid.vehicles.units.TARGET_UNITS)
 may be.  Units are read by pint (``g`` is standard gravity); each conversion is
-recorded in the Parquet metadata.  An example: aerosid/data/examples/twin-otter-018.map.toml.
+recorded in the Parquet metadata.  V_m_s's ``airspeed`` (aerosid.vehicles.airspeed.AIRSPEED_KINDS,
+default "true") converts a calibrated, indicated or equivalent airspeed to the true one with
+h_m (and the measured p_static_pa, T_total_K when mapped); a V_m_s whose CSV header reads as
+one of those (KIAS, cas_kt, "calibrated airspeed") must state it.  An example: aerosid/data/examples/twin-otter-018.map.toml.
 """
 from __future__ import annotations
 
@@ -33,7 +37,12 @@ import pandas as pd
 from aerosid.vehicles.importers import ImportDataError, ImportedFlight, check_time
 from aerosid.vehicles.units import TARGET_UNITS, Conversion, UnitError, conversion
 
-_ENTRY_KEYS = {"column", "unit", "sign"}
+_ENTRY_KEYS = {"column", "unit", "sign", "airspeed"}
+#: CSV headers that read as an airspeed other than the true one (tokens, lower case) ...
+_NOT_TRUE_AIRSPEED_TOKENS = {"ias", "kias", "cas", "kcas", "eas", "keas", "vias", "vcas", "veas", "vi", "vc", "ve",
+                             "vind", "vcal", "veq"}
+#: ... or that hold one of these words anywhere.
+_NOT_TRUE_AIRSPEED_WORDS = ("indicated", "calibrated", "equivalent")
 _CSV_KEYS = {"delimiter", "comment", "decimal", "time_from_zero"}
 
 
@@ -45,6 +54,7 @@ class ColumnMap:
     column: str
     unit: str
     sign: float = 1.0
+    airspeed: str = "true"  # V_m_s only: the kind of airspeed the column holds (converted to the true one)
 
 
 @dataclass(frozen=True)
@@ -62,7 +72,8 @@ class CsvMap:
 
     def summary(self) -> str:
         rows = [f"map {self.path}: vehicle from {self.vehicle_origin}"]
-        rows += [f"  {c.target} <- {'-' if c.sign < 0 else ''}{c.column!r} [{c.unit}]" for c in self.columns]
+        rows += [f"  {c.target} <- {'-' if c.sign < 0 else ''}{c.column!r} [{c.unit}"
+                 f"{'' if c.airspeed == 'true' else ', ' + c.airspeed + ' airspeed'}]" for c in self.columns]
         return "\n".join(rows)
 
 
@@ -107,11 +118,40 @@ def load_csv_map(path: str | Path) -> CsvMap:
             conversion(target, str(entry["unit"]), where=src)
         except UnitError as exc:
             raise ImportDataError(path, str(exc).removeprefix(f"{src}: "), column=target) from None
-        entries.append(ColumnMap(target, str(entry["column"]), str(entry["unit"]), float(sign)))
+        entries.append(ColumnMap(target, str(entry["column"]), str(entry["unit"]), float(sign),
+                                 _airspeed_kind(path, target, entry)))
     text, origin = _vehicle_text(doc.get("vehicle"), path)
     return CsvMap(path=src, columns=tuple(entries), vehicle_toml=text, vehicle_origin=origin,
                   delimiter=str(opts.get("delimiter", ",")), comment=opts.get("comment"),
                   time_from_zero=bool(opts.get("time_from_zero", False)), decimal=_decimal(opts, path))
+
+
+def _airspeed_kind(path: Path, target: str, entry: dict) -> str:
+    """The map entry's ``airspeed`` (V_m_s only); a V_m_s header that reads as an indicated,
+    calibrated or equivalent airspeed must state it: taken for the true airspeed, such a column
+    makes q-bar low by about rho / rho_0 (every coefficient x1.16 at 1500 m, x1.8 at 6 km)."""
+    from aerosid.vehicles.airspeed import AIRSPEED_KINDS
+
+    kind = entry.get("airspeed")
+    if target != "V_m_s":
+        if kind is not None:
+            raise ImportDataError(path, f"[columns] {target}: airspeed is a key of V_m_s only", column=target)
+        return "true"
+    if kind is None:
+        header = str(entry["column"]).lower()
+        tokens = set(re.split(r"[^a-z0-9]+", header))
+        if tokens & _NOT_TRUE_AIRSPEED_TOKENS or any(w in header for w in _NOT_TRUE_AIRSPEED_WORDS):
+            raise ImportDataError(path, f"[columns] V_m_s: the CSV column {entry['column']!r} reads as an indicated, "
+                                  "calibrated or equivalent airspeed, and aerosid needs the true airspeed (taken for "
+                                  "it, such a column makes the dynamic pressure low by about rho/rho_0: every "
+                                  "coefficient x1.16 at 1500 m, x1.8 at 6 km). State what it holds: airspeed = "
+                                  "\"calibrated\" (or \"indicated\", \"equivalent\"; converted with h_m and the "
+                                  "mapped p_static_pa, T_total_K) or airspeed = \"true\"", column="V_m_s")
+        return "true"
+    if kind not in AIRSPEED_KINDS:
+        raise ImportDataError(path, f"[columns] V_m_s: airspeed must be one of {', '.join(AIRSPEED_KINDS)}, got "
+                              f"{kind!r}", column="V_m_s")
+    return str(kind)
 
 
 def _decimal(opts: dict, path: Path) -> str:
@@ -199,14 +239,36 @@ def import_csv(csv_path: str | Path, map_path: str | Path) -> ImportedFlight:
                                source=f"{conv.source} minus its first value")
         convs.append(conv)
         data[entry.target] = conv.apply(values)
+    notes = (f"vehicle file from {cmap.vehicle_origin}",) + _to_true_airspeed(data, cmap)
     telemetry = pd.DataFrame(data)
     vehicle_name = str(tomllib.loads(cmap.vehicle_toml).get("name", "vehicle"))
-    notes = (f"vehicle file from {cmap.vehicle_origin}",)
     from aerosid.provenance import sha256_file
 
     return ImportedFlight(importer="csv", source=str(csv_path), telemetry=telemetry, vehicle_toml=cmap.vehicle_toml,
                           vehicle_name=vehicle_name, conversions=tuple(convs), notes=notes,
                           extra_metadata={"aerosid.map": cmap.path, "aerosid.map_sha256": sha256_file(cmap.path)})
+
+
+def _to_true_airspeed(data: dict[str, np.ndarray], cmap: CsvMap) -> tuple[str, ...]:
+    """Convert data["V_m_s"] in place when the map says it is not a true airspeed; the note
+    the import records."""
+    from aerosid.vehicles.airspeed import true_airspeed_m_s
+    from aerosid.vehicles.atmosphere import H_MAX_M, H_MIN_M
+
+    kind = next(c.airspeed for c in cmap.columns if c.target == "V_m_s")
+    if kind == "true":
+        return ()
+    V, h = data["V_m_s"], data["h_m"]
+    ok = np.isfinite(V) & np.isfinite(h) & (h >= H_MIN_M) & (h <= H_MAX_M)
+    measured = [c for c in ("p_static_pa", "T_total_K") if c in data]
+    if measured:
+        ok &= np.logical_and.reduce([np.isfinite(data[c]) & (data[c] > 0) for c in measured])
+    out = np.full_like(V, np.nan)
+    out[ok] = true_airspeed_m_s(V[ok], h[ok], kind, **{c: data[c][ok] for c in measured})
+    data["V_m_s"] = out
+    with_what = ", ".join(["h_m (US-1976)" if not measured else "h_m", *measured])
+    return (f"V_m_s: the map's {kind} airspeed converted to the true airspeed with {with_what} "
+            f"(aerosid.vehicles.airspeed.true_airspeed_m_s); {int((~ok).sum())} row(s) without them left empty",)
 
 
 def _column_values(column: pd.Series, entry, csv_path: Path, decimal: str) -> np.ndarray:
