@@ -260,3 +260,57 @@ def test_in_turbulence_the_sideslip_fit_names_no_wrong_column(tmp_path):
     for col in ("beta_vane_rad", "r_rad_s", "p_rad_s", "phi_rad"):
         found = unit_findings(with_factor(frame, [col], -1.0), veh)
         assert not found or col in found[0].columns, (col, found[0].columns)
+
+
+def _jsbsim_flight(tmp_path, aircraft: str, seed: int, **kwargs):
+    try:
+        from aerosid.simulation.jsbsim_aircraft import simulate_aircraft
+        fl = simulate_aircraft(aircraft, seed, **kwargs)
+    except ImportError as exc:  # jsbsim is an optional extra
+        pytest.skip(f"jsbsim: {exc}")
+    path = tmp_path / f"{aircraft}.toml"
+    path.write_text(fl.files["vehicle.toml"])
+    return load_vehicle(path), fl.telemetry
+
+
+def _as_calibrated(frame: pd.DataFrame) -> pd.DataFrame:
+    from aerosid.vehicles.airspeed import calibrated_from_true_m_s
+
+    out = frame.copy()
+    ok = out["V_m_s"].notna() & out["h_m"].notna()
+    out.loc[ok, "V_m_s"] = calibrated_from_true_m_s(out.loc[ok, "V_m_s"].to_numpy(), out.loc[ok, "h_m"].to_numpy())
+    return out
+
+
+def test_a_calibrated_airspeed_taken_for_the_true_one_is_refused_at_altitude(tmp_path):
+    """A4 at 6 km: a calibrated airspeed in V_m_s (0.75 x the true one) made every coefficient x1.8
+    with no finding. The pitch kinematics put the column at the calibrated airspeed's share of the
+    true one; the true airspeed passes, and the real Twin Otter's true airspeeds pass."""
+    veh, frame = _jsbsim_flight(tmp_path, "A4", 0)
+    rows = K._pitch_inputs(frame, veh)
+    s_true, se = K._airspeed_scale(*rows)
+    assert abs(s_true - 1.0) < 0.06 and se < 0.02
+    assert unit_findings(frame, veh) == []
+    cas = _as_calibrated(frame)
+    found = unit_findings(cas, veh)
+    assert len(found) == 1 and found[0].columns == ("V_m_s",) and found[0].kind == "airspeed"
+    s_cas, _ = K._airspeed_scale(*K._pitch_inputs(cas, veh))
+    share = float(np.nanmedian(cas["V_m_s"] / frame["V_m_s"]))
+    assert abs(s_cas / s_true - share) < 0.02  # the scale reads the column's share of the true airspeed
+    with pytest.raises(TelemetryError, match=r"calibrated .*V_m_s at 0\.7\d"):
+        check_units(cas, veh, "a4.parquet")
+    wide = dataclasses.replace(veh, plausibility=dataclasses.replace(veh.envelope, airspeed_scale_min=0.5))
+    assert unit_findings(cas, wide) == []  # [plausibility] airspeed_scale_min accepts it
+    if twin_otter.available():
+        to_veh = load_vehicle(twin_otter.vehicle_file(tmp_path))
+        for n in twin_otter.FLIGHTS:
+            s, _ = K._airspeed_scale(*K._pitch_inputs(twin_otter.telemetry(n), to_veh))
+            assert 0.93 < s < 1.03, (n, s)
+
+
+def test_in_turbulence_the_airspeed_scale_gives_no_verdict(tmp_path):
+    """Moderate turbulence: the vane reads gusts the kinematics do not (true airspeeds' scale
+    0.14-0.68 on T37, c182, global5000): the residual's correlation withholds the verdict."""
+    veh, frame = _jsbsim_flight(tmp_path, "global5000", 3, turbulence="moderate")
+    assert math.isnan(K._airspeed_scale(*K._pitch_inputs(frame, veh))[0])
+    assert unit_findings(frame, veh) == []

@@ -26,6 +26,7 @@ class Plausibility:
     cl_p_per_rad: tuple[float, float] = (-1e9, 1e9)  # the estimated roll damping C_l,p [1/rad]
     vane_noise_factor: float = 3.0  # [air_data] noise_rad within this factor of the vanes' measured white noise
     preflight_factor: float = 3.0  # an estimate beyond preflight x/÷ this factor is reported
+    airspeed_scale_min: float = 0.88  # V_m_s over the true airspeed the pitch kinematics imply (vanes)
 
     def summary(self) -> str:
         return ", ".join(f"{f.name} {getattr(self, f.name)}" for f in fields(self))

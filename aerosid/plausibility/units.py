@@ -62,12 +62,17 @@ class UnitFinding:
     factor: float  # SI value = factor x value as written
     evidence: str
     kind: str = "unit"  # "unit"; "sign": declared is then aerosid's sign convention, factor -1; "setting":
-    # a vehicle-file value (declared: its key) the telemetry contradicts, likely: the value it measures
+    # a vehicle-file value (declared: its key) the telemetry contradicts, likely: the value it measures;
+    # "airspeed": V_m_s is not a true airspeed (factor: about, the conversion depends on the altitude)
     overridable: bool = True  # a vehicle file's [plausibility] range can accept the values
 
     def message(self) -> str:
         cols = ", ".join(self.columns)
         widen = "; if the values are right, widen the vehicle file's [plausibility] table" if self.overridable else ""
+        if self.kind == "airspeed":
+            return (f"values look like {self.likely}, not the {self.declared}: {self.evidence}. Convert the column "
+                    f"with the altitude (an import map's airspeed = \"calibrated\", docs/real-flight.md; "
+                    f"aerosid.vehicles.airspeed.true_airspeed_m_s): here about x{self.factor:.3g}{widen}")
         if self.kind == "setting":
             return f"the vehicle file's {self.declared} contradicts the telemetry: {self.evidence}"
         if self.kind == "sign":
@@ -359,7 +364,8 @@ def unit_findings(frame: pd.DataFrame, vehicle) -> list[UnitFinding]:
     """Every unit or sign mistake found in a raw telemetry frame (RawTelemetry columns), most
     basic first: the accelerometers (the kinematic tests use az), rates, air data, vanes,
     then the kinematic tests (aerosid.plausibility.kinematics) of the channels that passed."""
-    from aerosid.plausibility.kinematics import (_altitude_kinematic, _attitude_kinematic, _bank_sign,
+    from aerosid.plausibility.kinematics import (_airspeed_kind_finding, _altitude_kinematic, _attitude_kinematic,
+                                                 _bank_sign,
                                                  _lateral_fit, _lateral_kinematic, _pitch_rate_kinematic,
                                                  _vane_confirms_q)
 
@@ -372,7 +378,7 @@ def unit_findings(frame: pd.DataFrame, vehicle) -> list[UnitFinding]:
         found += _measured_air_findings(frame)
     flagged = {c for f in found for c in f.columns}
     if not flagged & {"q_rad_s", "V_m_s", vehicle.alpha_column}:
-        kin = _pitch_rate_kinematic(frame, vehicle)
+        kin = _pitch_rate_kinematic(frame, vehicle) or _airspeed_kind_finding(frame, vehicle)
         if kin is not None:
             found.append(kin)
     if "h_m" not in flagged:
