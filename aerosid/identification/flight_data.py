@@ -20,7 +20,8 @@ from aerosid.estimation.findings import DEPARTURE_MIN_S, DEPARTURE_SIGMA, Findin
 from aerosid.identification.band import (accel_at_cg, band_limited_signals, band_noise_gain, bridge_spikes,
                                          finite_runs, low_pass_runs, white_noise_sigma)
 from aerosid.identification.low_qbar import low_qbar_rows
-from aerosid.identification.vanes import MAX_DELAY_S, advance, angles_at_cg, vane_delay, vane_white_noise_rad
+from aerosid.identification.vane_timing import vane_timing_findings
+from aerosid.identification.vanes import advance, angles_at_cg, vane_white_noise_rad
 from aerosid.identification.crb import R_COLUMNS
 from aerosid.identification.inversion import invert_alpha_beta, total_angles
 from aerosid.vehicles.vehicle import Vehicle
@@ -110,7 +111,8 @@ def build_flight_data(smoothed: pd.DataFrame, measured: pd.DataFrame, vehicle: V
     segment = str(smoothed["segment"].iloc[0]) if len(smoothed) else "?"
     vanes = vehicle.air_data_source == "vanes"
     airdata = measured_air_data_columns(measured.columns)
-    cols = (*FIN_COLUMNS, "V_m_s", "h_m", *airdata) + ((vehicle.alpha_column, vehicle.beta_column) if vanes else ())
+    cols = (*FIN_COLUMNS, "V_m_s", "h_m", *airdata) + ((vehicle.alpha_column, vehicle.beta_column, "q_rad_s", "az_m_s2")
+                                                        if vanes else ())
     missing = [c for c in cols if f"{c}_clean" not in measured]
     if missing:
         raise ValueError(f"segment {segment}: the preprocessed telemetry has no column(s) "
@@ -163,7 +165,7 @@ def build_flight_data(smoothed: pd.DataFrame, measured: pd.DataFrame, vehicle: V
         beta = clean[vehicle.beta_column][ok] - vehicle.beta_bias_rad
         alpha_r, phi_r = total_angles(alpha, beta)
         inv_J = np.zeros(len(alpha))
-        found, timing = _vane_timing(t, ok, clean, bl, vehicle, segment)
+        found, timing = vane_timing_findings(t, ok, clean, bl, vehicle, segment)
         findings += found
     elif vanes:
         alpha, beta, alpha_r, phi_r = _vane_angles_low_passed(clean, ok, vehicle, t)
@@ -222,46 +224,6 @@ def build_flight_data(smoothed: pd.DataFrame, measured: pd.DataFrame, vehicle: V
     frame.attrs["findings"] = [f.as_dict() for f in findings]
     frame.attrs["vane_timing"] = [timing] if timing else []
     return frame
-
-
-def _vane_timing(t, ok, clean: dict, bl, vehicle: Vehicle, segment: str) -> tuple[list[Finding], dict | None]:
-    """The vanes' delay behind the IMU (aerosid.identification.vanes) on the band path's
-    signals: (a reported finding when it is detected, else none; the estimate as a record for
-    the run's audit trail, None when there is none).  The smoother path applies the vehicle
-    file's delay_s but estimates none."""
-    def grid(x):
-        return np.where(ok, x, np.nan)
-
-    vd = vane_delay(t, grid(clean[vehicle.alpha_column] - vehicle.alpha_bias_rad),
-                    grid(clean[vehicle.beta_column] - vehicle.beta_bias_rad),
-                    *(grid(bl.rates_rad_s[:, j]) for j in range(3)), *(grid(bl.accel_cg_m_s2[:, j]) for j in range(3)),
-                    grid(clean["V_m_s"]), applied_s=vehicle.vane_delay_s)
-    if vd is None:
-        return [], None
-    record = {"segment": segment, **{k: (v if not isinstance(v, float) or math.isfinite(v) else None)
-                                     for k, v in vd.as_dict().items()}}
-    if not vd.follows and not vehicle.turbulent_air:  # in turbulence the vane reads the gusts' angle too
-        ts = t[ok]
-        lost = "" if math.isfinite(vd.delay_s) else f", and no delay within {MAX_DELAY_S:g} s fits"
-        return [Finding("vane_mismatch", segment, vehicle.alpha_column, float(ts[0]), float(ts[-1]), vd.n, False,
-                        f"the vane alpha does not follow the IMU's kinematic alpha (gain {vd.gain:.3g} per rad, "
-                        f"about 1 expected{lost}): a dead, floating or miscalibrated vane, the wrong column, an "
-                        "airspeed V_m_s in other units (the kinematic alpha reads V: knots turned c182's gain to "
-                        "0.17), or turbulence (the vane reads the air's angle, the kinematics the body's: then set "
-                        "[estimation] turbulent_air = true in the vehicle file). Every coefficient read through "
-                        "alpha (C_N,alpha, C_m,alpha, the alpha-dot damping) is then suspect: check the vane and "
-                        "its calibration before using them")], record
-    if not vd.detected:
-        return [], record
-    total = vd.delay_s + vd.applied_s
-    ts = t[ok]
-    return [Finding("airdata_delay", segment, vehicle.alpha_column, float(ts[0]), float(ts[-1]), vd.n, False,
-                    f"{vd.summary()}; equation error pairs each coefficient with the angle read at the same time "
-                    f"stamp, so a late vane biases C_N,delta, C_m,alpha and C_m,q. If the air-data system has this "
-                    f"delay, set `delay_s = {total:.3f}` in the vehicle file's [air_data] table (both vanes are "
-                    f"then advanced by it) and run again; a vane ahead of the CG whose angle was not moved to the "
-                    f"CG (it reads alpha - x q / V) looks alike, and a time shift is not its cure: give its "
-                    f"position as [air_data] vane_position_m instead")], record
 
 
 def gyro_eiv_sigma(smoothed: pd.DataFrame, band_white_rad_s) -> dict[str, np.ndarray]:

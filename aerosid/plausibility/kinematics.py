@@ -254,6 +254,16 @@ def _gusty(triples, b: np.ndarray, t: np.ndarray) -> bool:
     return bool(corr) and float(np.median(corr)) > GUST_AUTOCORRELATION
 
 
+def airspeed_scale(frame: pd.DataFrame, vehicle) -> tuple[float, float]:
+    """(s, se): V_m_s over the true airspeed the pitch kinematics imply (_airspeed_scale) on a
+    frame with t_s, q_rad_s, az_m_s2, V_m_s and the vehicle's alpha vane; NaN without vanes, in
+    gusts or where the fit does not determine it."""
+    inputs = _pitch_inputs(frame, vehicle)
+    if inputs is None or inputs[1] is None:
+        return math.nan, math.nan
+    return _airspeed_scale(*inputs)
+
+
 def _airspeed_kind_finding(frame: pd.DataFrame, vehicle) -> UnitFinding | None:
     """V_m_s holding a calibrated (indicated, equivalent) airspeed instead of the true one: the
     pitch kinematics put V_m_s below the true airspeed by the factor a calibrated airspeed has at
@@ -263,11 +273,8 @@ def _airspeed_kind_finding(frame: pd.DataFrame, vehicle) -> UnitFinding | None:
     from aerosid.vehicles.airspeed import true_airspeed_m_s
     from aerosid.vehicles.atmosphere import H_MAX_M, H_MIN_M
 
-    inputs = _pitch_inputs(frame, vehicle)
-    if inputs is None or inputs[1] is None:
-        return None
-    rows, vane, t, q, gdot = inputs
-    s, se = _airspeed_scale(rows, vane, t, q, gdot)
+    s, se = airspeed_scale(frame, vehicle)
+    vane = vehicle.alpha_column
     floor = float(vehicle.envelope.airspeed_scale_min)
     if not (math.isfinite(s) and s + 3.0 * se < floor):
         return None

@@ -1,0 +1,89 @@
+"""The vanes' timing against the IMU as a run's findings: the delay aerosid.identification.vanes
+estimates becomes an ``airdata_delay`` finding (reported, with the value to set), a vane that
+does not follow the kinematics a ``vane_mismatch`` one; the delay's record goes to the run's
+audit trail.  Split from aerosid.identification.flight_data, which calls it per segment."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from aerosid.estimation.findings import Finding
+from aerosid.identification.vanes import MAX_DELAY_S, vane_delay
+from aerosid.vehicles.vehicle import Vehicle
+
+
+def vane_timing_findings(t, ok, clean: dict, bl, vehicle: Vehicle, segment: str) -> tuple[list[Finding], dict | None]:
+    """The vanes' delay behind the IMU (aerosid.identification.vanes) on the band path's
+    signals: (a reported finding when it is detected, else none; the estimate as a record for
+    the run's audit trail, None when there is none).  The smoother path applies the vehicle
+    file's delay_s but estimates none."""
+    def grid(x):
+        return np.where(ok, x, np.nan)
+
+    vd = vane_delay(t, grid(clean[vehicle.alpha_column] - vehicle.alpha_bias_rad),
+                    grid(clean[vehicle.beta_column] - vehicle.beta_bias_rad),
+                    *(grid(bl.rates_rad_s[:, j]) for j in range(3)), *(grid(bl.accel_cg_m_s2[:, j]) for j in range(3)),
+                    grid(clean["V_m_s"]), applied_s=vehicle.vane_delay_s)
+    if vd is None:
+        return [], None
+    record = {"segment": segment, **{k: (v if not isinstance(v, float) or math.isfinite(v) else None)
+                                     for k, v in vd.as_dict().items()}}
+    if not vd.follows and not vehicle.turbulent_air:  # in turbulence the vane reads the gusts' angle too
+        ts = t[ok]
+        lost = "" if math.isfinite(vd.delay_s) else f", and no delay within {MAX_DELAY_S:g} s fits"
+        return [Finding("vane_mismatch", segment, vehicle.alpha_column, float(ts[0]), float(ts[-1]), vd.n, False,
+                        f"the vane alpha does not follow the IMU's kinematic alpha (gain {vd.gain:.3g} per rad, "
+                        f"about 1 expected{lost}): a dead, floating or miscalibrated vane, the wrong column, an "
+                        "airspeed V_m_s in other units (the kinematic alpha reads V: knots turned c182's gain to "
+                        "0.17), or turbulence (the vane reads the air's angle, the kinematics the body's: then set "
+                        "[estimation] turbulent_air = true in the vehicle file). Every coefficient read through "
+                        "alpha (C_N,alpha, C_m,alpha, the alpha-dot damping) is then suspect: check the vane and "
+                        "its calibration before using them")], record
+    if not vd.detected:
+        return [], record
+    total = vd.delay_s + vd.applied_s
+    ts = t[ok]
+    return [Finding("airdata_delay", segment, vehicle.alpha_column, float(ts[0]), float(ts[-1]), vd.n, False,
+                    f"{vd.summary()}; equation error pairs each coefficient with the angle read at the same time "
+                    f"stamp, so a late vane biases C_N,delta, C_m,alpha and C_m,q. If the air-data system has this "
+                    f"delay, set `delay_s = {total:.3f}` in the vehicle file's [air_data] table (both vanes are "
+                    f"then advanced by it) and run again; a vane ahead of the CG whose angle was not moved to the "
+                    f"CG (it reads alpha - x q / V) looks alike, and a time shift is not its cure: give its "
+                    f"position as [air_data] vane_position_m instead"
+                    f"{_calibrated_airspeed_hint(t[ok], clean, ok, vehicle)}")], record
+
+
+#: The airdata_delay finding names a calibrated airspeed as a look-alike where, at the flight's
+#: altitude, one is below this share of the true airspeed (about 600 m and up).
+CAS_HINT_SHARE_MAX = 0.97
+
+
+def _calibrated_airspeed_hint(t: np.ndarray, clean: dict, ok: np.ndarray, vehicle: Vehicle) -> str:
+    """A clause for the airdata_delay finding: a V_m_s holding a calibrated airspeed makes the
+    kinematic alpha's flight-path part too large, and the timing fit reads that as a lag (c182,
+    J3Cub, pa28, OV10 at 1100-1450 m: 27.7, 17.4, 12.2, 50.6 ms reported, gains 0.91-1.02, as
+    healthy vanes' gains spread: the gain does not tell it).  Below about 3 km the unit check
+    cannot tell it either (aerosid.plausibility.kinematics), so the finding names it, unless the
+    pitch kinematics' airspeed scale lies above a calibrated airspeed's share by 3 sigma (the real
+    Twin Otter's 0.965 +- 0.004 against 0.898: its lag is the vane's)."""
+    import pandas as pd
+
+    from aerosid.plausibility.kinematics import airspeed_scale
+    from aerosid.vehicles.airspeed import true_airspeed_m_s
+
+    V, h = clean["V_m_s"][ok], clean["h_m"][ok]
+    good = np.isfinite(V) & np.isfinite(h) & (V > 0)
+    if good.sum() < 10:
+        return ""
+    share = float(np.median(V[good] / true_airspeed_m_s(V[good], h[good], "calibrated")))
+    if share >= CAS_HINT_SHARE_MAX:
+        return ""
+    cols = ("q_rad_s", "az_m_s2", "V_m_s", vehicle.alpha_column)
+    s, se = airspeed_scale(pd.DataFrame({"t_s": t, **{c: clean[c][ok] for c in cols}}), vehicle)
+    if s - 3.0 * se > share:
+        return ""
+    return (f"; a V_m_s holding a calibrated (or indicated) airspeed looks alike too (at this flight's altitude, "
+            f"median h_m {np.median(h[good]):.0f} m, one is {share:.3g} of the true airspeed: q-bar then reads low "
+            f"and every coefficient high by {1.0 / share**2:.2f}), and a delay_s is not its cure: check that the "
+            f"airspeed column is the true airspeed (aerosid import csv's airspeed key converts it)")
