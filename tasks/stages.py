@@ -18,6 +18,7 @@ from aerosid.identification.flight_data import (build_flight_data_segments, buil
 from aerosid.identification.identify import default_bias_pairs, identify
 from aerosid.modelling.models import default_models, load_models
 from aerosid.plausibility.estimates import implausible_estimate_findings
+from aerosid.plausibility.geometry import geometry_findings
 from aerosid.plausibility.units import check_units
 from aerosid.preprocess import PreprocessParams, preprocess
 from aerosid.preprocess.segments import plan_segments
@@ -196,7 +197,7 @@ def regression_task(flight_data_paths: list[str], run_dir: str, ctx: StageContex
             if model_spec else None
         ident = identify(fd, veh, models, mach_half_width, bias_pairs=pairs)
         table = ident.table()
-        findings_seen.extend(implausible_estimate_findings(table, fd["t_s"]))
+        findings_seen.extend(implausible_estimate_findings(table, fd["t_s"]) + geometry_findings(veh, fd["t_s"]))
         return Produced(table, {"aerosid.summary": ident.summary(), "aerosid.findings": json.dumps(findings_seen)},
                         rows_in=len(fd), note=ident.summary())
 

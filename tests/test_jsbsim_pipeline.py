@@ -172,7 +172,7 @@ def test_c172x_runs_through_the_same_cli_and_flow(tmp_path):
     assert {"Cm_alpha", "Cm_delta_p", "Cm_q", "Cl_p", "Cn_r"} <= set(coef.index)
     assert np.isfinite(coef.loc["Cm_q", "estimate"]) and coef.loc["Cm_q", "estimate"] < 0
     assert (tmp_path / "run" / "report.html").is_file() and (tmp_path / "run" / "diagnosis.json").is_file()
-    assert not any(f["kind"] == "implausible_estimate" for f in run_doc["findings"])
+    assert not any(f["kind"] in ("implausible_estimate", "vehicle_geometry") for f in run_doc["findings"])
     # the same flight with the vehicle file's wing area written in ft^2: the run says so, not "ok"
     from aerosid.vehicles.vehicle import resolve_vehicle_path
 
@@ -185,6 +185,7 @@ def test_c172x_runs_through_the_same_cli_and_flow(tmp_path):
     doc = json.loads((tmp_path / "run_ft2" / "run.json").read_text())
     assert doc["status"] == "ok with findings"
     assert {f["channel"] for f in doc["findings"] if f["kind"] == "implausible_estimate"} == {"CN", "Cl"}
+    assert any(f["kind"] == "vehicle_geometry" and "S_m2 in ft^2" in f["detail"] for f in doc["findings"])
     assert "regression CN: implausible_estimate" in res.output and "!! WARNING CN_alpha" in res.output
 
 

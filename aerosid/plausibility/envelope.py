@@ -27,6 +27,7 @@ class Plausibility:
     vane_noise_factor: float = 3.0  # [air_data] noise_rad within this factor of the vanes' measured white noise
     preflight_factor: float = 3.0  # an estimate beyond preflight x/÷ this factor is reported
     airspeed_scale_min: float = 0.82  # V_m_s over the true airspeed the pitch kinematics imply (vanes)
+    chord_ratio: tuple[float, float] = (0.0, 1e6)  # chord_m / (S_m2 / span_m) (aerosid.plausibility.geometry)
 
     def summary(self) -> str:
         return ", ".join(f"{f.name} {getattr(self, f.name)}" for f in fields(self))
@@ -45,10 +46,14 @@ class Plausibility:
 #: airspeed_scale_min: the pitch kinematics' V_m_s / true airspeed (aerosid.plausibility.kinematics)
 #: on 130 calm JSBSim flights of 13 aircraft with true airspeeds, 0.855-1.11 (pa28 seeds 3 and 4;
 #: most 0.93-1.03, sigma 0.007-0.023); a calibrated airspeed at 6 km reads 0.55-0.76.
+#: An aircraft's chord_m / (S_m2 / span_m) within 0.4-2.5: a mean aerodynamic chord is 1.0-1.33 x S/b,
+#: JSBSim's aircraft 0.75-1.31, delta wings and lifting bodies up to 2.2; a chord or span in ft reads
+#: x3.28, a wing area in ft^2 x0.093 (aerosid.plausibility.geometry).
 CLASS_DEFAULTS: dict[str, Plausibility] = {
     "aircraft": Plausibility(rate_rad_s=2.0, specific_force_m_s2=(2.5, 50.0), V_m_s=(10.0, 1000.0),
                              h_m=(-500.0, 25000.0), qbar_pa=(20.0, 150000.0), alpha_rad=(-0.35, 0.7),
-                             az_m_s2=(-50.0, 0.0), cn_alpha_per_rad=(1.0, 12.0), cl_p_per_rad=(-1.5, -0.1)),
+                             az_m_s2=(-50.0, 0.0), cn_alpha_per_rad=(1.0, 12.0), cl_p_per_rad=(-1.5, -0.1),
+                             chord_ratio=(0.4, 2.5)),
     "finned": Plausibility(rate_rad_s=2.0, specific_force_m_s2=(2.0, 1000.0), V_m_s=(30.0, 8000.0),
                            h_m=(-500.0, 100000.0), qbar_pa=(10.0, 500000.0), alpha_rad=(-0.6, 0.6)),
 }

@@ -162,6 +162,8 @@ TABLES: dict[str, dict[str, Key] | None] = {
                                      "this factor"),
         "preflight_factor": Key("number", 1.0, 1e6, positive=True,
                                 doc="warn when an estimate differs from its preflight value by more than this factor"),
+        "chord_ratio": rng(0.0, 1e6, "range of chord_m / (S_m2 / span_m), the chord over the mean chord the "
+                           "wing area and span give [-]"),
         "airspeed_scale_min": Key("number", 0.0, 1.0, doc="refuse V_m_s as a calibrated airspeed when the pitch "
                                   "kinematics put it below this share of the true airspeed [-]"),
     },
