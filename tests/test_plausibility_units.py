@@ -301,6 +301,10 @@ def test_a_calibrated_airspeed_taken_for_the_true_one_is_refused_at_altitude(tmp
         check_units(cas, veh, "a4.parquet")
     wide = dataclasses.replace(veh, plausibility=dataclasses.replace(veh.envelope, airspeed_scale_min=0.5))
     assert unit_findings(cas, wide) == []  # [plausibility] airspeed_scale_min accepts it
+    # the same scale names an airspeed in knots or ft/s, which the magnitude alone cannot tell
+    for factor, unit in ((1 / 0.514444, "kt"), (1 / 0.3048, "ft/s")):
+        (found,) = unit_findings(with_factor(frame, ["V_m_s"], factor), veh)
+        assert found.columns == ("V_m_s",) and found.likely == unit and found.kind == "unit", (unit, found)
     if twin_otter.available():
         to_veh = load_vehicle(twin_otter.vehicle_file(tmp_path))
         for n in twin_otter.FLIGHTS:

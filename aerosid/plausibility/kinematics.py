@@ -210,8 +210,10 @@ def _pitch_rate_kinematic(frame: pd.DataFrame, vehicle) -> UnitFinding | None:
 
 #: Windows [s] of the airspeed-scale fit (the Twin Otter's manoeuvre 017 lasts 6 s).
 AIRSPEED_WINDOW_S = 4.0
-#: A calibrated-airspeed hypothesis fits when the scale is within this factor of it.
+#: A calibrated-airspeed or unit hypothesis fits when the scale is within this factor of it.
 AIRSPEED_HYPOTHESIS_TOLERANCE = 1.1
+#: An airspeed unit is looked for only above this scale (kt reads 1.94; true airspeeds 0.855-1.11).
+AIRSPEED_UNIT_SCALE_MIN = 1.5
 
 
 def _airspeed_scale(rows: pd.DataFrame, vane: str, t: np.ndarray, q: np.ndarray, gdot: np.ndarray):
@@ -264,17 +266,42 @@ def airspeed_scale(frame: pd.DataFrame, vehicle) -> tuple[float, float]:
     return _airspeed_scale(*inputs)
 
 
+def _airspeed_unit_finding(s: float, se: float, said: str) -> UnitFinding | None:
+    """V_m_s in kt, ft/s, mph or km/h: the pitch kinematics put it at 1.9-3.6 x the true airspeed
+    (the magnitude test cannot tell an aircraft's 95 kt from 95 m/s); the closest unit, and the
+    others within AIRSPEED_HYPOTHESIS_TOLERANCE (the kinematics' spread is about 10 %)."""
+    from aerosid.plausibility.units import SPEED_UNITS
+
+    if not (math.isfinite(s) and s - 3.0 * se > AIRSPEED_UNIT_SCALE_MIN):
+        return None
+    fits = sorted((abs(math.log(s * f)), unit, f) for unit, f in SPEED_UNITS.items()
+                  if abs(math.log(s * f)) < math.log(AIRSPEED_HYPOTHESIS_TOLERANCE))
+    if not fits:
+        return None
+    _, unit, f = fits[0]
+    others = f" (or {', '.join(u for _, u, _ in fits[1:])})" if len(fits) > 1 else ""
+    return UnitFinding(("V_m_s",), "m/s", unit + others, f,
+                       f"{said} x the true airspeed (1 for m/s, {1 / f:.3g} for {unit}); the magnitude alone "
+                       "cannot tell an aircraft's speed in one from the other")
+
+
 def _airspeed_kind_finding(frame: pd.DataFrame, vehicle) -> UnitFinding | None:
-    """V_m_s holding a calibrated (indicated, equivalent) airspeed instead of the true one: the
-    pitch kinematics put V_m_s below the true airspeed by the factor a calibrated airspeed has at
-    the flight's altitude (0.73 at 6 km), beyond [plausibility] airspeed_scale_min (3 sigma).
-    Below about 4 km a calibrated airspeed is within 18 % of the true one, as close as the
-    kinematics' own spread over flights (0.855-1.11): it is not told apart there."""
+    """V_m_s in another unit (_airspeed_unit_finding), or holding a calibrated (indicated,
+    equivalent) airspeed instead of the true one: the pitch kinematics put V_m_s below the true
+    airspeed by the factor a calibrated airspeed has at the flight's altitude (0.73 at 6 km),
+    beyond [plausibility] airspeed_scale_min (3 sigma).  Below about 4 km a calibrated airspeed
+    is within 18 % of the true one, as close as the kinematics' own spread over flights
+    (0.855-1.11): it is not told apart there."""
     from aerosid.vehicles.airspeed import true_airspeed_m_s
     from aerosid.vehicles.atmosphere import H_MAX_M, H_MIN_M
 
     s, se = airspeed_scale(frame, vehicle)
     vane = vehicle.alpha_column
+    said = (f"the pitch kinematics (the vane {vane} against the integrated pitch rate and the flight path's "
+            f"change from az_m_s2 and V_m_s) put V_m_s at {s:.3g} +/- {se:.2g}")
+    unit = _airspeed_unit_finding(s, se, said)
+    if unit is not None:
+        return unit
     floor = float(vehicle.envelope.airspeed_scale_min)
     if not (math.isfinite(s) and s + 3.0 * se < floor):
         return None
@@ -285,9 +312,8 @@ def _airspeed_kind_finding(frame: pd.DataFrame, vehicle) -> UnitFinding | None:
     if abs(math.log(s / cas)) >= math.log(AIRSPEED_HYPOTHESIS_TOLERANCE):
         return None
     return UnitFinding(("V_m_s",), "true airspeed", "a calibrated (or indicated, or equivalent) airspeed", 1.0 / cas,
-                       f"the pitch kinematics (the vane {vane} against the integrated pitch rate and the flight "
-                       f"path's change from az_m_s2 and V_m_s) put V_m_s at {s:.3g} +/- {se:.2g} x the true "
-                       f"airspeed ({floor:g} or more expected, [plausibility] airspeed_scale_min); a calibrated "
+                       f"{said} x the true airspeed ({floor:g} or more expected, [plausibility] "
+                       f"airspeed_scale_min); a calibrated "
                        f"airspeed at the flight's altitude (median h_m {np.median(h):.0f} m) is {cas:.3g} x "
                        f"the true one: q-bar would be low by {cas**2:.2f} and every coefficient high by "
                        f"{1.0 / cas**2:.2f}", kind="airspeed")
