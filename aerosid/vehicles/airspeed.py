@@ -66,11 +66,14 @@ def calibrated_from_true_m_s(V_m_s, h_m, p_static_pa=None, T_static_K=None) -> n
     return A0_M_S * _mach_from_qc_over_p(qc / P0_PA)
 
 
-def true_airspeed_m_s(V_m_s, h_m, kind: str = "calibrated", p_static_pa=None, T_total_K=None) -> np.ndarray:
+def true_airspeed_m_s(V_m_s, h_m, kind: str = "calibrated", p_static_pa=None, T_total_K=None,
+                      rho_kg_m3=None) -> np.ndarray:
     """The true airspeed [m/s] of an airspeed V_m_s [m/s] of `kind` (AIRSPEED_KINDS; indicated
     is taken as calibrated: the position error is the data system's) at geometric altitude h_m
     [m].  p_static_pa [Pa] and T_total_K [K], when measured, replace the US-1976 static pressure
-    and temperature (the static temperature then follows from the Mach number)."""
+    and temperature (the static temperature then follows from the Mach number); a measured
+    density rho_kg_m3 [kg/m^3] gives the static temperature by the gas law where no total
+    temperature is measured (and the equivalent airspeed's density directly)."""
     if kind not in AIRSPEED_KINDS:
         raise ValueError(f"airspeed kind {kind!r}: expected one of {', '.join(AIRSPEED_KINDS)}")
     V = np.asarray(V_m_s, dtype=float)
@@ -78,6 +81,8 @@ def true_airspeed_m_s(V_m_s, h_m, kind: str = "calibrated", p_static_pa=None, T_
         return V.copy()
     h = np.broadcast_to(np.asarray(h_m, dtype=float), V.shape)
     p = pressure_pa(h) if p_static_pa is None else np.broadcast_to(np.asarray(p_static_pa, dtype=float), V.shape)
+    if kind == "equivalent" and rho_kg_m3 is not None:
+        return V * np.sqrt(RHO0_KG_M3 / np.asarray(rho_kg_m3, dtype=float))
     if kind == "equivalent":
         if T_total_K is None and p_static_pa is None:
             rho = density_kg_m3(h)
@@ -90,5 +95,10 @@ def true_airspeed_m_s(V_m_s, h_m, kind: str = "calibrated", p_static_pa=None, T_
         return V * np.sqrt(RHO0_KG_M3 / rho)
     qc = P0_PA * _qc_over_p(V / A0_M_S)
     mach = _mach_from_qc_over_p(qc / p)
-    T = temperature_K(h) if T_total_K is None else np.asarray(T_total_K, dtype=float) / (1.0 + 0.2 * mach**2)
+    if T_total_K is not None:
+        T = np.asarray(T_total_K, dtype=float) / (1.0 + 0.2 * mach**2)
+    elif rho_kg_m3 is not None:
+        T = p / (R_AIR_J_KG_K * np.asarray(rho_kg_m3, dtype=float))
+    else:
+        T = temperature_K(h)
     return mach * np.sqrt(GAMMA_AIR * R_AIR_J_KG_K * T)

@@ -21,7 +21,7 @@ vanes, measured air data and attitude columns (aerosid.vehicles.units.TARGET_UNI
 may be.  Units are read by pint (``g`` is standard gravity); each conversion is
 recorded in the Parquet metadata.  V_m_s's ``airspeed`` (aerosid.vehicles.airspeed.AIRSPEED_KINDS,
 default "true") converts a calibrated, indicated or equivalent airspeed to the true one with
-h_m (and the measured p_static_pa, T_total_K when mapped); a V_m_s whose CSV header reads as
+h_m (and the measured p_static_pa, T_total_K, rho_kg_m3 when mapped); a V_m_s whose CSV header reads as
 one of those (KIAS, cas_kt, "calibrated airspeed") must state it.  An example: aerosid/data/examples/twin-otter-018.map.toml.
 """
 from __future__ import annotations
@@ -146,7 +146,7 @@ def _airspeed_kind(path: Path, target: str, entry: dict) -> str:
                                   "it, such a column makes the dynamic pressure low by about rho/rho_0: every "
                                   "coefficient x1.16 at 1500 m, x1.8 at 6 km). State what it holds: airspeed = "
                                   "\"calibrated\" (or \"indicated\", \"equivalent\"; converted with h_m and the "
-                                  "mapped p_static_pa, T_total_K) or airspeed = \"true\"", column="V_m_s")
+                                  "mapped p_static_pa, T_total_K, rho_kg_m3) or airspeed = \"true\"", column="V_m_s")
         return "true"
     if kind not in AIRSPEED_KINDS:
         raise ImportDataError(path, f"[columns] V_m_s: airspeed must be one of {', '.join(AIRSPEED_KINDS)}, got "
@@ -260,7 +260,7 @@ def _to_true_airspeed(data: dict[str, np.ndarray], cmap: CsvMap) -> tuple[str, .
         return ()
     V, h = data["V_m_s"], data["h_m"]
     ok = np.isfinite(V) & np.isfinite(h) & (h >= H_MIN_M) & (h <= H_MAX_M)
-    measured = [c for c in ("p_static_pa", "T_total_K") if c in data]
+    measured = [c for c in ("p_static_pa", "T_total_K", "rho_kg_m3") if c in data]
     if measured:
         ok &= np.logical_and.reduce([np.isfinite(data[c]) & (data[c] > 0) for c in measured])
     out = np.full_like(V, np.nan)

@@ -68,3 +68,16 @@ def test_the_textbook_value():
     kt = 1852.0 / 3600.0
     assert true_airspeed_m_s(250 * kt, 3048.0) / kt == pytest.approx(288.7, abs=0.5)
     assert A0_M_S / kt == pytest.approx(661.47, abs=0.05)
+
+
+def test_a_measured_density_gives_the_temperature_and_the_equivalent_airspeeds_density():
+    """A day 8 % less dense than the standard at 2200 m (the Twin Otter's was 4 %): the measured
+    density makes the conversion exact where the US-1976 one is off by about half of it."""
+    h, V = 2200.0, np.array([70.0, 150.0])
+    rho = 0.92 * density_kg_m3(h)
+    T = pressure_pa(h) / (287.05287 * rho)  # the standard pressure, a warmer day
+    cas = calibrated_from_true_m_s(V, h, T_static_K=np.full(2, T))
+    np.testing.assert_allclose(true_airspeed_m_s(cas, h, rho_kg_m3=np.full(2, rho)), V, rtol=1e-6)
+    assert abs(true_airspeed_m_s(cas, h)[0] / V[0] - 1.0) > 0.03  # what the standard day would have said
+    eas = V * np.sqrt(rho / density_kg_m3(0.0))
+    np.testing.assert_allclose(true_airspeed_m_s(eas, h, "equivalent", rho_kg_m3=rho), V, rtol=1e-9)

@@ -364,15 +364,19 @@ def test_a_parquet_table_with_its_own_names_units_and_timestamps_reads_as_the_sa
 
 def test_a_calibrated_airspeed_column_is_converted_or_must_say_what_it_holds(to18, tmp_path):
     """A data system's KCAS mapped to V_m_s: with airspeed = "calibrated" the import gives the true
-    airspeed (the SIDPAC import's, to 1e-6); without the key a header that reads as a calibrated or
-    indicated airspeed is refused (taken for the true one it made every coefficient x1.2 at the
-    Twin Otter's 2200 m); the key is V_m_s's only and its kinds are named."""
+    airspeed (the SIDPAC import's, to 1e-6, the day's temperature from the measured density);
+    without the key a header that reads as a calibrated or indicated airspeed is refused (taken for
+    the true one it made every coefficient x1.2 at the Twin Otter's 2200 m); the key is V_m_s's
+    only and its kinds are named."""
     from aerosid.vehicles.airspeed import calibrated_from_true_m_s
+    from aerosid.vehicles.atmosphere import R_AIR_J_KG_K, pressure_pa
 
     csv = write_twin_otter_csv(F018, tmp_path / "to18.csv")
     frame = pd.read_csv(csv)
     h_m = frame["alt_ft"].to_numpy() * 0.3048
-    frame["KCAS"] = calibrated_from_true_m_s(frame["tas_kt"].to_numpy() * 1852 / 3600, h_m) / (1852 / 3600)
+    T_day = pressure_pa(h_m) / (R_AIR_J_KG_K * frame["rho_slug_ft3"].to_numpy() * 515.378818)
+    frame["KCAS"] = calibrated_from_true_m_s(frame["tas_kt"].to_numpy() * 1852 / 3600, h_m,
+                                             T_static_K=T_day) / (1852 / 3600)
     frame.drop(columns=["tas_kt"]).to_csv(tmp_path / "cas.csv", index=False)
     plain = _map_text(replace=('{ column = "tas_kt", unit = "kt" }', '{ column = "KCAS", unit = "kt" }'))
     (tmp_path / "plain.toml").write_text(plain)
@@ -382,8 +386,8 @@ def test_a_calibrated_airspeed_column_is_converted_or_must_say_what_it_holds(to1
     (tmp_path / "cas.toml").write_text(plain.replace('unit = "kt" }', 'unit = "kt", airspeed = "calibrated" }', 1))
     imp = import_csv(tmp_path / "cas.csv", tmp_path / "cas.toml")
     np.testing.assert_allclose(imp.telemetry["V_m_s"], to18.telemetry["V_m_s"], rtol=1e-6)
-    assert any("calibrated airspeed converted" in n for n in imp.notes)
-    assert float(np.median(frame["KCAS"] / frame["tas_kt"])) < 0.91  # the difference the key makes
+    assert any("calibrated airspeed converted" in n and "rho_kg_m3" in n for n in imp.notes)
+    assert float(np.median(frame["KCAS"] / frame["tas_kt"])) < 0.92  # the difference the key makes
     (tmp_path / "bad.toml").write_text(plain.replace('unit = "kt" }', 'unit = "kt", airspeed = "knots" }', 1))
     with pytest.raises(ImportDataError, match="airspeed must be one of true, calibrated, indicated, equivalent, "
                                               "got 'knots'"):
