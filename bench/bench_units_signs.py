@@ -47,6 +47,8 @@ MISTAKES = {
     "alpha vane in deg": ("alpha_vane_rad", DEG, "alpha_vane_rad"),
     "beta vane in deg": ("beta_vane_rad", DEG, "beta_vane_rad"),
     "theta in deg": ("theta_rad", DEG, "theta_rad"),
+    "V in kt": ("V_m_s", 1 / 0.514444, "V_m_s"),
+    "V in ft/s": ("V_m_s", 1 / 0.3048, "V_m_s"),
     # measured air data (each flight given a density, dynamic and static pressure and total temperature
     # where it has none: aerosid.simulation.sensors.with_measured_air_data), written in another unit
     "qbar in psf": ("qbar_pa", 1 / 47.880259, "qbar_pa"),
