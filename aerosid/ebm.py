@@ -10,6 +10,7 @@ from dataclasses import dataclass
 
 import pandas as pd
 
+from aerosid.vehicles.airspeed import as_true_airspeed
 from aerosid.estimation.findings import Finding
 from aerosid.identification.flight_data import build_flight_data_segments, build_pooled_flight_data, load_database
 from aerosid.identification.identify import Identification, identify
@@ -69,6 +70,7 @@ def preprocess_and_plan(raw: pd.DataFrame, vehicle: Vehicle, *, windows=None, pr
     params = merge_settings(vehicle.preprocess, preprocess_params or {})
     if min_segment_s is None:
         min_segment_s = vehicle.min_segment_s if vehicle.min_segment_s is not None else DEFAULT_MIN_SEGMENT_S
+    raw = as_true_airspeed(raw, vehicle.airspeed_kind)[0]  # the vehicle file's [air_data] airspeed
     pre = preprocess(raw, PreprocessParams.from_dict(params), source=source)
     plan = plan_segments(pre.frame["t_s"].to_numpy(), list(pre.long_gaps), windows, min_segment_s,
                          pre.params.max_interp_gap_s)

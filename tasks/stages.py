@@ -18,6 +18,7 @@ from aerosid.identification.flight_data import (build_flight_data_segments, buil
 from aerosid.identification.identify import default_bias_pairs, identify
 from aerosid.modelling.models import default_models, load_models
 from aerosid.plausibility.estimates import implausible_estimate_findings
+from aerosid.vehicles.airspeed import as_true_airspeed
 from aerosid.plausibility.geometry import geometry_findings
 from aerosid.plausibility.units import check_units
 from aerosid.preprocess import PreprocessParams, preprocess
@@ -61,12 +62,16 @@ def preprocess_task(raw_path: str, run_dir: str, ctx: StageContext, params: dict
 
     def produce() -> Produced:
         raw = read_validated(raw_path, RawTelemetry)
+        converted = ""
         if vehicle is not None:
-            check_units(raw, load_vehicle(vehicle), raw_path)
+            veh = load_vehicle(vehicle)
+            raw, converted = as_true_airspeed(raw, veh.airspeed_kind)
+            check_units(raw, veh, raw_path)
         result = preprocess(raw, PreprocessParams.from_dict(params), source=raw_path)
         flagged = int((result.frame["flags"] != 0).sum())
-        return Produced(result.frame, result.metadata(), rows_in=len(raw), flagged_rows=flagged,
-                        note=result.summary())
+        meta = {**result.metadata(), **({"aerosid.airspeed": converted} if converted else {})}
+        return Produced(result.frame, meta, rows_in=len(raw), flagged_rows=flagged,
+                        note="\n".join(filter(None, (result.summary(), converted))))
 
     done = execute("preprocess", ctx, [raw_path], out, params, PreprocessedTelemetry, produce)
     from aerosid.io import read_parquet_metadata

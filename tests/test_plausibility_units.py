@@ -320,3 +320,33 @@ def test_in_turbulence_the_airspeed_scale_gives_no_verdict(tmp_path):
         veh, frame = _jsbsim_flight(tmp_path, aircraft, 3 if level == "moderate" else 0, turbulence=level)
         assert math.isnan(K.airspeed_scale(frame, veh)[0]), aircraft
         assert unit_findings(frame, veh) == []
+
+
+def test_a_vehicle_file_that_states_a_calibrated_airspeed_has_it_converted(tmp_path):
+    """[air_data] airspeed = "calibrated": the check reads V_m_s as the preprocessing will (the
+    true airspeed: nothing refused) and the preprocessing's V_m_s is the true airspeed again."""
+    from aerosid.cli.run import _preflight
+    from aerosid.ebm import preprocess_and_plan
+    from aerosid.vehicles.airspeed import as_true_airspeed
+
+    veh, frame = _jsbsim_flight(tmp_path, "A4", 0)
+    cas = _as_calibrated(frame)
+    text = (tmp_path / "A4.toml").read_text()
+    assert text.count('source = "vanes"') == 1
+    (tmp_path / "cas.toml").write_text(text.replace('source = "vanes"', 'source = "vanes"\nairspeed = "calibrated"'))
+    stated = load_vehicle(tmp_path / "cas.toml")
+    assert stated.airspeed_kind == "calibrated"
+    back, note = as_true_airspeed(cas, stated.airspeed_kind)
+    ok = frame["V_m_s"].notna() & frame["h_m"].notna()
+    np.testing.assert_allclose(back.loc[ok, "V_m_s"], frame.loc[ok, "V_m_s"], rtol=1e-6)
+    assert "calibrated" in note and as_true_airspeed(frame, "true") == (frame, "")
+    assert unit_findings(back, stated) == []
+    path = tmp_path / "cas.parquet"
+    cas.to_parquet(path)
+    _preflight(path, str(tmp_path / "cas.toml"), None)  # raises on anything aerosid run would refuse
+    with pytest.raises(TelemetryError, match=r'\[air_data\] airspeed = "calibrated"'):
+        _preflight(path, str(tmp_path / "A4.toml"), None)
+    pre, _ = preprocess_and_plan(cas, stated)
+    true = frame.dropna(subset=["t_s", "V_m_s"])
+    V_true = np.interp(pre.frame["t_s"], true["t_s"], true["V_m_s"])
+    assert np.nanmedian(pre.frame["V_m_s_clean"] / V_true) == pytest.approx(1.0, abs=1e-3)

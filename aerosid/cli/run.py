@@ -372,7 +372,9 @@ def _preflight(telemetry: Path, vehicle: str | None, model_spec: str | None, pre
                              f"segment length min_segment_s = {shortest:g} s (set it with --min-segment-s or the "
                              "vehicle file's [preprocess] min_segment_s)", file=str(telemetry), column="t_s",
                              rows=range(len(frame)))
-    check_units(frame, veh, str(telemetry))
+    from aerosid.vehicles.airspeed import as_true_airspeed
+
+    check_units(as_true_airspeed(frame, veh.airspeed_kind)[0], veh, str(telemetry))  # as the preprocessing reads it
     _check_noise_band(t, veh, pre_params, str(telemetry))
     if veh.air_data_source == "vanes":
         for c in (veh.alpha_column, veh.beta_column):

@@ -310,6 +310,7 @@ def estimate_manoeuvre(run_dir, telemetry, model: IdentifiedModel, veh: Vehicle,
     from aerosid.ebm import estimate_flight_data
     from aerosid.plausibility.units import check_units
     from aerosid.preprocess.io import read_raw_parquet
+    from aerosid.vehicles.airspeed import as_true_airspeed
 
     job = read_run_json(run_dir).get("job") or {}
     raw = read_raw_parquet(telemetry)
@@ -317,7 +318,7 @@ def estimate_manoeuvre(run_dir, telemetry, model: IdentifiedModel, veh: Vehicle,
             and needs_attitude == "required":
         raise ValueError(f"{telemetry}: no {' / '.join(ATTITUDE_COLUMNS)} columns: the simulation needs the "
                          "attitude for gravity; add the measured roll and pitch attitude [rad] to the telemetry")
-    check_units(raw, veh, str(telemetry))  # the other manoeuvre's units and signs, as `aerosid run` checks its own
+    check_units(as_true_airspeed(raw, veh.airspeed_kind)[0], veh, str(telemetry))  # as `aerosid run` checks its own
     est = estimate_flight_data(raw, veh, flight=Path(telemetry).stem, windows=windows,
                                preprocess_params=job.get("preprocess_params") or None,
                                smoothing_options=job.get("smoothing_options") or None,

@@ -70,9 +70,10 @@ class UnitFinding:
         cols = ", ".join(self.columns)
         widen = "; if the values are right, widen the vehicle file's [plausibility] table" if self.overridable else ""
         if self.kind == "airspeed":
-            return (f"values look like {self.likely}, not the {self.declared}: {self.evidence}. Convert the column "
-                    f"with the altitude (an import map's airspeed = \"calibrated\", docs/real-flight.md; "
-                    f"aerosid.vehicles.airspeed.true_airspeed_m_s): here about x{self.factor:.3g}{widen}")
+            return (f"values look like {self.likely}, not the {self.declared}: {self.evidence}. State it in the "
+                    f"vehicle file, [air_data] airspeed = \"calibrated\" (or \"indicated\", \"equivalent\"), "
+                    f"and the preprocessing converts it with the altitude (here about x{self.factor:.3g}); an import "
+                    f"map's airspeed key does the same (docs/real-flight.md){widen}")
         if self.kind == "setting":
             return f"the vehicle file's {self.declared} contradicts the telemetry: {self.evidence}"
         if self.kind == "sign":

@@ -102,3 +102,41 @@ def true_airspeed_m_s(V_m_s, h_m, kind: str = "calibrated", p_static_pa=None, T_
     else:
         T = temperature_K(h)
     return mach * np.sqrt(GAMMA_AIR * R_AIR_J_KG_K * T)
+
+
+#: Measured air-data columns the conversion reads when the telemetry has them (true_airspeed_m_s).
+MEASURED_FOR_AIRSPEED = ("p_static_pa", "T_total_K", "rho_kg_m3")
+
+
+def true_airspeed_where_known(V_m_s, h_m, kind: str, measured: dict) -> tuple[np.ndarray, int]:
+    """(true airspeed [m/s], rows emptied): true_airspeed_m_s on the rows whose V_m_s, h_m and
+    measured columns (a dict of MEASURED_FOR_AIRSPEED arrays) are finite and positive (h within
+    the US-1976 model); an airspeed whose row lacks the others becomes NaN (a dropout the
+    preprocessing fills), a missing or non-positive airspeed (a dropout, a sentinel the
+    preprocessing flags) stays as recorded."""
+    from aerosid.vehicles.atmosphere import H_MAX_M, H_MIN_M
+
+    V, h = np.asarray(V_m_s, dtype=float), np.asarray(h_m, dtype=float)
+    have_V = np.isfinite(V) & (V > 0)
+    ok = have_V & np.isfinite(h) & (h >= H_MIN_M) & (h <= H_MAX_M)
+    for x in measured.values():
+        ok &= np.isfinite(x) & (np.asarray(x, dtype=float) > 0)
+    out = V.copy()
+    out[ok] = true_airspeed_m_s(V[ok], h[ok], kind, **{c: np.asarray(x, dtype=float)[ok] for c, x in measured.items()})
+    out[have_V & ~ok] = np.nan
+    return out, int((have_V & ~ok).sum())
+
+
+def as_true_airspeed(frame, kind: str):
+    """(frame, note): a raw telemetry frame whose V_m_s holds an airspeed of `kind` (the vehicle
+    file's [air_data] airspeed) with V_m_s converted to the true airspeed (a copy; the frame itself
+    when kind is "true", with an empty note)."""
+    if kind == "true" or "V_m_s" not in frame.columns or "h_m" not in frame.columns:
+        return frame, ""
+    measured = {c: frame[c].to_numpy(float) for c in MEASURED_FOR_AIRSPEED if c in frame.columns}
+    V, kept = true_airspeed_where_known(frame["V_m_s"].to_numpy(float), frame["h_m"].to_numpy(float), kind, measured)
+    out = frame.copy()
+    out["V_m_s"] = V
+    with_what = ", ".join(["h_m" + ("" if measured else " (US-1976)"), *measured])
+    return out, (f"V_m_s: the vehicle file's [air_data] airspeed = \"{kind}\" converted to the true airspeed with "
+                 f"{with_what} (aerosid.vehicles.airspeed); {kept} row(s) without them left empty")

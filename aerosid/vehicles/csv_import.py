@@ -252,23 +252,16 @@ def import_csv(csv_path: str | Path, map_path: str | Path) -> ImportedFlight:
 def _to_true_airspeed(data: dict[str, np.ndarray], cmap: CsvMap) -> tuple[str, ...]:
     """Convert data["V_m_s"] in place when the map says it is not a true airspeed; the note
     the import records."""
-    from aerosid.vehicles.airspeed import true_airspeed_m_s
-    from aerosid.vehicles.atmosphere import H_MAX_M, H_MIN_M
+    from aerosid.vehicles.airspeed import MEASURED_FOR_AIRSPEED, true_airspeed_where_known
 
     kind = next(c.airspeed for c in cmap.columns if c.target == "V_m_s")
     if kind == "true":
         return ()
-    V, h = data["V_m_s"], data["h_m"]
-    ok = np.isfinite(V) & np.isfinite(h) & (h >= H_MIN_M) & (h <= H_MAX_M)
-    measured = [c for c in ("p_static_pa", "T_total_K", "rho_kg_m3") if c in data]
-    if measured:
-        ok &= np.logical_and.reduce([np.isfinite(data[c]) & (data[c] > 0) for c in measured])
-    out = np.full_like(V, np.nan)
-    out[ok] = true_airspeed_m_s(V[ok], h[ok], kind, **{c: data[c][ok] for c in measured})
-    data["V_m_s"] = out
-    with_what = ", ".join(["h_m (US-1976)" if not measured else "h_m", *measured])
+    measured = {c: data[c] for c in MEASURED_FOR_AIRSPEED if c in data}
+    data["V_m_s"], kept = true_airspeed_where_known(data["V_m_s"], data["h_m"], kind, measured)
+    with_what = ", ".join(["h_m" + ("" if measured else " (US-1976)"), *measured])
     return (f"V_m_s: the map's {kind} airspeed converted to the true airspeed with {with_what} "
-            f"(aerosid.vehicles.airspeed.true_airspeed_m_s); {int((~ok).sum())} row(s) without them left empty",)
+            f"(aerosid.vehicles.airspeed.true_airspeed_m_s); {kept} row(s) without them left empty",)
 
 
 def _column_values(column: pd.Series, entry, csv_path: Path, decimal: str) -> np.ndarray:

@@ -116,6 +116,8 @@ TABLES: dict[str, dict[str, Key] | None] = {
         "cutoff_hz": pos(1e4), "derivative_half_window_s": pos(60.0),
         "delay_s": num(-0.5, 0.5, doc="the vanes' delay behind the IMU [s]: the vane angles are advanced by it"),
         "vane_position_m": vec(3, -100.0, 100.0, doc="the vanes' position from the CG, body axes [m]"),
+        "airspeed": Key("choice", choices=("true", "calibrated", "indicated", "equivalent"),
+                        doc="what the telemetry's V_m_s holds; not true: converted at preprocessing"),
     },
     "aero": {
         "database": Key("path", doc="the aerodynamic database, a file in the vehicle's folder"),

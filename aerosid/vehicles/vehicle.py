@@ -100,6 +100,9 @@ class Vehicle:
     #: the vanes' delay behind the inertial sensors [s]: the vane angles are read this much
     #: later (advanced) before anything uses them (aerosid.identification.vanes)
     vane_delay_s: float = 0.0
+    #: what V_m_s holds ([air_data] airspeed, aerosid.vehicles.airspeed.AIRSPEED_KINDS): anything but
+    #: "true" is converted to the true airspeed before the preprocessing (as_true_airspeed)
+    airspeed_kind: str = "true"
     #: the vanes' position from the CG, body axes [m]: their angles are moved to the CG with the
     #: gyros before anything uses them ((0, 0, 0): at the CG, or already corrected)
     vane_position_m: tuple[float, float, float] = (0.0, 0.0, 0.0)
@@ -371,6 +374,7 @@ def load_vehicle(name_or_path: str | Path = "seed-rlv") -> Vehicle:
         vane_noise_rad=float(air.get("noise_rad", math.nan if source == "vanes" else 0.0)),
         vane_cutoff_hz=float(air["cutoff_hz"]) if "cutoff_hz" in air else None,
         vane_delay_s=float(air.get("delay_s", 0.0)),
+        airspeed_kind=str(air.get("airspeed", "true")),
         vane_position_m=tuple(float(v) for v in air.get("vane_position_m", (0.0, 0.0, 0.0))),
         derivative_half_window_s=float(air.get("derivative_half_window_s", 0.25)),
         surfaces=tuple(str(x) for x in surfaces),
