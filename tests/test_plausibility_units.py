@@ -13,6 +13,7 @@ import pytest
 
 from aerosid.modelling.effects import parse_effect_spec
 from aerosid.plausibility import kinematics as K
+from aerosid.plausibility.airspeed_scale import airspeed_scale
 from aerosid.plausibility.units import check_units, unit_findings
 from aerosid.preprocess import TelemetryError
 from aerosid.simulation import load_case, simulate
@@ -287,14 +288,13 @@ def test_a_calibrated_airspeed_taken_for_the_true_one_is_refused_at_altitude(tmp
     with no finding. The pitch kinematics put the column at the calibrated airspeed's share of the
     true one; the true airspeed passes, and the real Twin Otter's true airspeeds pass."""
     veh, frame = _jsbsim_flight(tmp_path, "A4", 0)
-    rows = K._pitch_inputs(frame, veh)
-    s_true, se = K._airspeed_scale(*rows)
+    s_true, se = airspeed_scale(frame, veh)
     assert abs(s_true - 1.0) < 0.06 and se < 0.02
     assert unit_findings(frame, veh) == []
     cas = _as_calibrated(frame)
     found = unit_findings(cas, veh)
     assert len(found) == 1 and found[0].columns == ("V_m_s",) and found[0].kind == "airspeed"
-    s_cas, _ = K._airspeed_scale(*K._pitch_inputs(cas, veh))
+    s_cas, _ = airspeed_scale(cas, veh)
     share = float(np.nanmedian(cas["V_m_s"] / frame["V_m_s"]))
     assert abs(s_cas / s_true - share) < 0.02  # the scale reads the column's share of the true airspeed
     with pytest.raises(TelemetryError, match=r"calibrated .*V_m_s at 0\.7\d"):
@@ -308,7 +308,7 @@ def test_a_calibrated_airspeed_taken_for_the_true_one_is_refused_at_altitude(tmp
     if twin_otter.available():
         to_veh = load_vehicle(twin_otter.vehicle_file(tmp_path))
         for n in twin_otter.FLIGHTS:
-            s, _ = K._airspeed_scale(*K._pitch_inputs(twin_otter.telemetry(n), to_veh))
+            s, _ = airspeed_scale(twin_otter.telemetry(n), to_veh)
             assert 0.93 < s < 1.03, (n, s)
 
 
@@ -318,7 +318,7 @@ def test_in_turbulence_the_airspeed_scale_gives_no_verdict(tmp_path):
     low-passed residual, large against the fitted part, withholds the verdict."""
     for aircraft, level in (("global5000", "moderate"), ("c182", "light")):
         veh, frame = _jsbsim_flight(tmp_path, aircraft, 3 if level == "moderate" else 0, turbulence=level)
-        assert math.isnan(K.airspeed_scale(frame, veh)[0]), aircraft
+        assert math.isnan(airspeed_scale(frame, veh)[0]), aircraft
         assert unit_findings(frame, veh) == []
 
 

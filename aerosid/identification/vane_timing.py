@@ -63,13 +63,13 @@ def _calibrated_airspeed_hint(t: np.ndarray, clean: dict, ok: np.ndarray, vehicl
     """A clause for the airdata_delay finding: a V_m_s holding a calibrated airspeed makes the
     kinematic alpha's flight-path part too large, and the timing fit reads that as a lag (c182,
     J3Cub, pa28, OV10 at 1100-1450 m: 27.7, 17.4, 12.2, 50.6 ms reported, gains 0.91-1.02, as
-    healthy vanes' gains spread: the gain does not tell it).  Below about 3 km the unit check
-    cannot tell it either (aerosid.plausibility.kinematics), so the finding names it, unless the
+    healthy vanes' gains spread: the gain does not tell it).  Below about 4 km the unit check
+    cannot tell it either (aerosid.plausibility.airspeed_scale), so the finding names it, unless the
     pitch kinematics' airspeed scale lies above a calibrated airspeed's share by 3 sigma (the real
     Twin Otter's 0.965 +- 0.004 against 0.898: its lag is the vane's)."""
     import pandas as pd
 
-    from aerosid.plausibility.kinematics import airspeed_scale
+    from aerosid.plausibility.airspeed_scale import airspeed_scale
     from aerosid.vehicles.airspeed import true_airspeed_m_s
 
     V, h = clean["V_m_s"][ok], clean["h_m"][ok]
@@ -86,4 +86,5 @@ def _calibrated_airspeed_hint(t: np.ndarray, clean: dict, ok: np.ndarray, vehicl
     return (f"; a V_m_s holding a calibrated (or indicated) airspeed looks alike too (at this flight's altitude, "
             f"median h_m {np.median(h[good]):.0f} m, one is {share:.3g} of the true airspeed: q-bar then reads low "
             f"and every coefficient high by {1.0 / share**2:.2f}), and a delay_s is not its cure: check that the "
-            f"airspeed column is the true airspeed (aerosid import csv's airspeed key converts it)")
+            f"airspeed column is the true airspeed (if it is not, the vehicle file's [air_data] airspeed = "
+            f"\"calibrated\" converts it)")

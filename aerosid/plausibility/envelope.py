@@ -43,7 +43,7 @@ class Plausibility:
 #: Otter 6.6) and roll damping C_l,p within -1.5..-0.1 /rad (strip theory: -C_L,alpha/12 x
 #: (1 + 3 taper)/(1 + taper); the same aircraft -0.75..-0.38): a wing area in ft^2, a span in ft,
 #: a dynamic pressure in psf put them 10-50 x off (aerosid.plausibility.estimates).
-#: airspeed_scale_min: the pitch kinematics' V_m_s / true airspeed (aerosid.plausibility.kinematics)
+#: airspeed_scale_min: the pitch kinematics' V_m_s / true airspeed (aerosid.plausibility.airspeed_scale)
 #: on 130 calm JSBSim flights of 13 aircraft with true airspeeds, 0.855-1.11 (pa28 seeds 3 and 4;
 #: most 0.93-1.03, sigma 0.007-0.023); a calibrated airspeed at 6 km reads 0.55-0.76.
 #: An aircraft's chord_m / (S_m2 / span_m) within 0.4-2.5: a mean aerodynamic chord is 1.0-1.33 x S/b,

@@ -365,8 +365,8 @@ def unit_findings(frame: pd.DataFrame, vehicle) -> list[UnitFinding]:
     """Every unit or sign mistake found in a raw telemetry frame (RawTelemetry columns), most
     basic first: the accelerometers (the kinematic tests use az), rates, air data, vanes,
     then the kinematic tests (aerosid.plausibility.kinematics) of the channels that passed."""
-    from aerosid.plausibility.kinematics import (_airspeed_kind_finding, _altitude_kinematic, _attitude_kinematic,
-                                                 _bank_sign,
+    from aerosid.plausibility.airspeed_scale import airspeed_finding
+    from aerosid.plausibility.kinematics import (_altitude_kinematic, _attitude_kinematic, _bank_sign,
                                                  _lateral_fit, _lateral_kinematic, _pitch_rate_kinematic,
                                                  _vane_confirms_q)
 
@@ -379,7 +379,7 @@ def unit_findings(frame: pd.DataFrame, vehicle) -> list[UnitFinding]:
         found += _measured_air_findings(frame)
     flagged = {c for f in found for c in f.columns}
     if not flagged & {"q_rad_s", "V_m_s", vehicle.alpha_column}:
-        kin = _pitch_rate_kinematic(frame, vehicle) or _airspeed_kind_finding(frame, vehicle)
+        kin = _pitch_rate_kinematic(frame, vehicle) or airspeed_finding(frame, vehicle)
         if kin is not None:
             found.append(kin)
     if "h_m" not in flagged:
