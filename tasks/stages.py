@@ -135,7 +135,8 @@ def flight_data_task(pre_path: str, smoothed_paths: list[str], run_dir: str, ctx
         frame = build_flight_data_segments(pre, smoothed, veh, db, ctx.flight)
         findings_seen.extend(frame.attrs.get("findings", []))
         timing_seen.extend(frame.attrs.get("vane_timing", []))
-        return Produced(frame, {"aerosid.air_data": {ctx.flight: flight_air_data_sources(pre.columns)},
+        sources = {ctx.flight: flight_air_data_sources(pre.columns, veh.airspeed_kind)}
+        return Produced(frame, {"aerosid.air_data": sources,
                                 "aerosid.findings": json.dumps(list(findings_seen)),
                                 "aerosid.vane_timing": json.dumps(list(timing_seen))},
                         rows_in=sum(len(sm) for sm in smoothed))
@@ -169,7 +170,7 @@ def pooled_flight_data_task(flights: list[dict], run_dir: str, ctx: StageContext
         for f in flights:
             pre = read_validated(f["preprocessed"], PreprocessedTelemetry)
             pooled.append((f["flight"], pre, [read_validated(p, SmoothedSegment) for p in f["smoothed"]]))
-            sources[f["flight"]] = flight_air_data_sources(pre.columns)
+            sources[f["flight"]] = flight_air_data_sources(pre.columns, veh.airspeed_kind)
         frame = build_pooled_flight_data(pooled, veh, load_database(veh))
         findings_seen.extend(frame.attrs.get("findings", []))
         timing_seen.extend(frame.attrs.get("vane_timing", []))

@@ -80,10 +80,14 @@ def measured_air_data_columns(columns) -> tuple[str, ...]:
     return tuple(c for c in MEASURED if f"{c}_clean" in have)
 
 
-def flight_air_data_sources(columns) -> dict[str, str]:
+def flight_air_data_sources(columns, airspeed_kind: str = "true") -> dict[str, str]:
     """Where the flight data of a preprocessed frame with these columns takes its
-    density, static temperature, Mach and dynamic pressure from."""
-    return air_data_sources(measured_air_data_columns(columns))
+    density, static temperature, Mach and dynamic pressure from, and what its airspeed is
+    (airspeed_kind: the vehicle file's [air_data] airspeed, aerosid.vehicles.airspeed)."""
+    airspeed = ("the telemetry, taken as the true airspeed ([air_data] airspeed)" if airspeed_kind == "true" else
+                f"the telemetry's {airspeed_kind} airspeed, converted to the true one at preprocessing "
+                "([air_data] airspeed)")
+    return {**air_data_sources(measured_air_data_columns(columns)), "V_m_s": airspeed}
 
 
 def _span(t: np.ndarray) -> str:

@@ -22,7 +22,8 @@ may be.  Units are read by pint (``g`` is standard gravity); each conversion is
 recorded in the Parquet metadata.  V_m_s's ``airspeed`` (aerosid.vehicles.airspeed.AIRSPEED_KINDS,
 default "true") converts a calibrated, indicated or equivalent airspeed to the true one with
 h_m (and the measured p_static_pa, T_total_K, rho_kg_m3 when mapped); a V_m_s whose CSV header reads as
-one of those (KIAS, cas_kt, "calibrated airspeed") must state it.  An example: aerosid/data/examples/twin-otter-018.map.toml.
+one of those (KIAS, cas_kt, "calibrated airspeed") must state it.  An example:
+aerosid/data/examples/twin-otter-018.map.toml.
 """
 from __future__ import annotations
 

@@ -154,6 +154,9 @@ def test_measured_density_scales_every_flight_coefficient_by_exactly_one_over_it
         np.testing.assert_allclose(fd[c] / std[c], 1 / 0.958, rtol=1e-12, err_msg=c)
     assert flight_air_data_sources(frame.columns)["rho_kg_m3"] == "measured: rho_kg_m3"
     assert flight_air_data_sources(ref.preprocessed.frame.columns)["rho_kg_m3"] == US1976
+    # the airspeed's kind is said too: the run prints it with the air data's sources
+    assert "taken as the true airspeed" in flight_air_data_sources(frame.columns)["V_m_s"]
+    assert "calibrated airspeed, converted" in flight_air_data_sources(frame.columns, "calibrated")["V_m_s"]
 
 
 def test_a_measured_value_missing_in_a_gap_drops_those_rows_only(low_density):
