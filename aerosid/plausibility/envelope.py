@@ -44,8 +44,8 @@ class Plausibility:
 #: (1 + 3 taper)/(1 + taper); the same aircraft -0.75..-0.38): a wing area in ft^2, a span in ft,
 #: a dynamic pressure in psf put them 10-50 x off (aerosid.plausibility.estimates).
 #: airspeed_scale_min: the pitch kinematics' V_m_s / true airspeed (aerosid.plausibility.airspeed_scale)
-#: on 130 calm JSBSim flights of 13 aircraft with true airspeeds, 0.855-1.11 (pa28 seeds 3 and 4;
-#: most 0.93-1.03, sigma 0.007-0.023); a calibrated airspeed at 6 km reads 0.55-0.76.
+#: on 130 calm JSBSim flights of 13 aircraft (seeds 0-9) with true airspeeds, 0.908-1.058 (2 without
+#: a verdict; sigma 0.007-0.023); a calibrated airspeed at 6 km reads 0.55-0.76.
 #: An aircraft's chord_m / (S_m2 / span_m) within 0.4-2.5: a mean aerodynamic chord is 1.0-1.33 x S/b,
 #: JSBSim's aircraft 0.75-1.31, delta wings and lifting bodies up to 2.2; a chord or span in ft reads
 #: x3.28, a wing area in ft^2 x0.093 (aerosid.plausibility.geometry).
