@@ -152,31 +152,25 @@ def tally(cases) -> dict:
             else:
                 c["wrong"] += 1
                 wrong.append(f"{label}, {m}: named {found[0].columns}")
-        for m, factor in SETTINGS.items():
-            if veh.air_data_source != "vanes" or not veh.vane_noise_rad > 0:
-                continue
-            found = unit_findings(frame, dataclasses.replace(veh, vane_noise_rad=veh.vane_noise_rad * factor))
+        def count_kind(m: str, found: list, kind: str) -> None:
+            """A mistake whose finding is named by its kind (a vehicle-file setting, the airspeed's)."""
             c = counts[m]
             c["n"] += 1
             if not found:
                 c["missed"] += 1
-            elif found[0].kind == "setting":
+            elif found[0].kind == kind:
                 c["named"] += 1
             else:
                 c["wrong"] += 1
                 wrong.append(f"{label}, {m}: named {found[0].columns}")
+
+        for m, factor in SETTINGS.items():
+            if veh.air_data_source == "vanes" and veh.vane_noise_rad > 0:
+                count_kind(m, unit_findings(frame, dataclasses.replace(veh, vane_noise_rad=veh.vane_noise_rad * factor)),
+                           "setting")
         h = float(frame["h_m"].median())
-        m = next(b for b, (lo, hi) in AIRSPEED_BANDS.items() if lo <= h < hi)
-        found = unit_findings(as_calibrated(frame), veh)
-        c = counts[m]
-        c["n"] += 1
-        if not found:
-            c["missed"] += 1
-        elif found[0].kind == "airspeed":
-            c["named"] += 1
-        else:
-            c["wrong"] += 1
-            wrong.append(f"{label}, {m}: named {found[0].columns}")
+        band = next(b for b, (lo, hi) in AIRSPEED_BANDS.items() if lo <= h < hi)
+        count_kind(band, unit_findings(as_calibrated(frame), veh), "airspeed")
     return {"counts": counts, "false": false, "wrong": wrong, "n": n}
 
 
