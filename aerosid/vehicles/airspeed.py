@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from aerosid.vehicles.atmosphere import GAMMA_AIR, R_AIR_J_KG_K, density_kg_m3, pressure_pa, temperature_K
+from aerosid.vehicles.atmosphere import GAMMA_AIR, R_AIR_J_KG_K, pressure_pa, temperature_K
 
 #: What an airspeed column may hold (an import map's ``airspeed`` key).
 AIRSPEED_KINDS = ("true", "calibrated", "indicated", "equivalent")
@@ -81,18 +81,14 @@ def true_airspeed_m_s(V_m_s, h_m, kind: str = "calibrated", p_static_pa=None, T_
         return V.copy()
     h = np.broadcast_to(np.asarray(h_m, dtype=float), V.shape)
     p = pressure_pa(h) if p_static_pa is None else np.broadcast_to(np.asarray(p_static_pa, dtype=float), V.shape)
-    if kind == "equivalent" and rho_kg_m3 is not None:
-        return V * np.sqrt(RHO0_KG_M3 / np.asarray(rho_kg_m3, dtype=float))
     if kind == "equivalent":
-        if T_total_K is None and p_static_pa is None:
-            rho = density_kg_m3(h)
-        else:  # the gas law on what is measured; a total temperature is corrected with the Mach number
-            T = temperature_K(h)
-            for _ in range(3 if T_total_K is not None else 0):
-                mach = V * np.sqrt(RHO0_KG_M3 / (p / (R_AIR_J_KG_K * T))) / np.sqrt(GAMMA_AIR * R_AIR_J_KG_K * T)
-                T = np.asarray(T_total_K, dtype=float) / (1.0 + 0.2 * mach**2)
-            rho = p / (R_AIR_J_KG_K * T)
-        return V * np.sqrt(RHO0_KG_M3 / rho)
+        if rho_kg_m3 is not None:
+            return V * np.sqrt(RHO0_KG_M3 / np.asarray(rho_kg_m3, dtype=float))
+        T = temperature_K(h)  # the gas law on what is measured; a total temperature needs the Mach number
+        for _ in range(3 if T_total_K is not None else 0):
+            mach = V * np.sqrt(RHO0_KG_M3 * R_AIR_J_KG_K * T / p) / np.sqrt(GAMMA_AIR * R_AIR_J_KG_K * T)
+            T = np.asarray(T_total_K, dtype=float) / (1.0 + 0.2 * mach**2)
+        return V * np.sqrt(RHO0_KG_M3 * R_AIR_J_KG_K * T / p)
     qc = P0_PA * _qc_over_p(V / A0_M_S)
     mach = _mach_from_qc_over_p(qc / p)
     if T_total_K is not None:
@@ -112,12 +108,13 @@ def true_airspeed_where_known(V_m_s, h_m, kind: str, measured: dict) -> tuple[np
     """(true airspeed [m/s], rows emptied): true_airspeed_m_s on the rows whose V_m_s, h_m and
     measured columns (a dict of MEASURED_FOR_AIRSPEED arrays) are finite and positive (h within
     the US-1976 model); an airspeed whose row lacks the others becomes NaN (a dropout the
-    preprocessing fills), a missing or non-positive airspeed (a dropout, a sentinel the
+    preprocessing fills), a missing or non-positive airspeed or a sentinel value (which the
     preprocessing flags) stays as recorded."""
     from aerosid.vehicles.atmosphere import H_MAX_M, H_MIN_M
+    from schemas.telemetry import sentinel_mask
 
     V, h = np.asarray(V_m_s, dtype=float), np.asarray(h_m, dtype=float)
-    have_V = np.isfinite(V) & (V > 0)
+    have_V = np.isfinite(V) & (V > 0) & ~sentinel_mask(V)
     ok = have_V & np.isfinite(h) & (h >= H_MIN_M) & (h <= H_MAX_M)
     for x in measured.values():
         ok &= np.isfinite(x) & (np.asarray(x, dtype=float) > 0)

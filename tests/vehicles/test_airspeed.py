@@ -81,3 +81,17 @@ def test_a_measured_density_gives_the_temperature_and_the_equivalent_airspeeds_d
     assert abs(true_airspeed_m_s(cas, h)[0] / V[0] - 1.0) > 0.03  # what the standard day would have said
     eas = V * np.sqrt(rho / density_kg_m3(0.0))
     np.testing.assert_allclose(true_airspeed_m_s(eas, h, "equivalent", rho_kg_m3=rho), V, rtol=1e-9)
+
+
+def test_rows_without_an_altitude_are_emptied_and_sentinels_kept():
+    """A telemetry's calibrated airspeed converted row by row: a row without an altitude cannot be
+    converted (NaN: a dropout the preprocessing fills), a sentinel stays what it is (the
+    preprocessing flags it), a missing airspeed stays missing."""
+    from aerosid.vehicles.airspeed import true_airspeed_where_known
+    from schemas.telemetry import DEFAULT_SENTINELS
+
+    sentinel = float(next(s for s in DEFAULT_SENTINELS if s > 0))
+    V = np.array([100.0, sentinel, np.nan, 120.0])
+    out, emptied = true_airspeed_where_known(V, np.array([3000.0, 3000.0, 3000.0, np.nan]), "calibrated", {})
+    assert out[0] == pytest.approx(true_airspeed_m_s(100.0, 3000.0)) and out[1] == sentinel
+    assert np.isnan(out[2]) and np.isnan(out[3]) and emptied == 1
