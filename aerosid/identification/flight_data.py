@@ -20,7 +20,7 @@ from aerosid.estimation.findings import DEPARTURE_MIN_S, DEPARTURE_SIGMA, Findin
 from aerosid.identification.band import (accel_at_cg, band_limited_signals, band_noise_gain, bridge_spikes,
                                          finite_runs, low_pass_runs, white_noise_sigma)
 from aerosid.identification.low_qbar import low_qbar_rows
-from aerosid.identification.vane_timing import vane_timing_findings
+from aerosid.identification.airdata_findings import airdata_findings
 from aerosid.identification.vanes import advance, angles_at_cg, vane_white_noise_rad
 from aerosid.identification.crb import R_COLUMNS
 from aerosid.identification.inversion import invert_alpha_beta, total_angles
@@ -169,7 +169,7 @@ def build_flight_data(smoothed: pd.DataFrame, measured: pd.DataFrame, vehicle: V
         beta = clean[vehicle.beta_column][ok] - vehicle.beta_bias_rad
         alpha_r, phi_r = total_angles(alpha, beta)
         inv_J = np.zeros(len(alpha))
-        found, timing = vane_timing_findings(t, ok, clean, bl, vehicle, segment)
+        found, timing = airdata_findings(t, ok, clean, bl, vehicle, segment)
         findings += found
     elif vanes:
         alpha, beta, alpha_r, phi_r = _vane_angles_low_passed(clean, ok, vehicle, t)

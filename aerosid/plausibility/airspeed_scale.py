@@ -8,7 +8,7 @@ the true one at the flight's altitude is a calibrated (indicated, equivalent) ai
 the true one (aerosid.vehicles.airspeed converts it).  In gusts the vane reads the air's angle
 and the kinematics the body's: no verdict.  Called by aerosid.plausibility.units after the pitch
 kinematics (aerosid.plausibility.kinematics), whose helpers it shares, and by the vane timing's
-airdata_delay finding (aerosid.identification.vane_timing).
+airdata_delay finding and the run's airspeed_scale finding (aerosid.identification.airdata_findings).
 """
 from __future__ import annotations
 

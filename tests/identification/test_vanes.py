@@ -269,7 +269,7 @@ def test_a_delay_finding_names_a_calibrated_airspeed_where_the_kinematics_cannot
     """A calibrated airspeed at 1100-1450 m made the timing fit report a lag (c182 27.7 ms, OV10
     50.6 ms) whose cure, a delay_s, is the wrong one: the finding names the look-alike there, and
     not where the pitch kinematics put V at the true airspeed (the real Twin Otter)."""
-    from aerosid.identification.vane_timing import _calibrated_airspeed_hint
+    from aerosid.identification.airdata_findings import _airspeed_scale, _calibrated_airspeed_hint
     from aerosid.vehicles.airspeed import calibrated_from_true_m_s
     try:
         from aerosid.simulation.jsbsim_aircraft import simulate_aircraft
@@ -283,7 +283,7 @@ def test_a_delay_finding_names_a_calibrated_airspeed_where_the_kinematics_cannot
     clean = {c: frame[c].to_numpy(float) for c in cols}
     t = frame["t_s"].to_numpy(float)[ok]
     clean["V_m_s"] = calibrated_from_true_m_s(clean["V_m_s"], np.nan_to_num(clean["h_m"]))
-    hint = _calibrated_airspeed_hint(t, clean, ok, vehicle)
+    hint = _calibrated_airspeed_hint(_airspeed_scale(t, clean, ok, vehicle), clean, ok)
     assert "calibrated (or indicated) airspeed looks alike" in hint and "high by 1.14" in hint, hint
     if F018.is_file():
         from aerosid.vehicles.sidpac import import_sidpac
@@ -293,4 +293,31 @@ def test_a_delay_finding_names_a_calibrated_airspeed_where_the_kinematics_cannot
         to_vehicle = _vehicle_from_text(flight.vehicle_toml, tmp_path)
         ok = np.isfinite(to[list(cols)].to_numpy(float)).all(axis=1)
         clean = {c: to[c].to_numpy(float) for c in cols}
-        assert _calibrated_airspeed_hint(to["t_s"].to_numpy(float)[ok], clean, ok, to_vehicle) == ""
+        scale = _airspeed_scale(to["t_s"].to_numpy(float)[ok], clean, ok, to_vehicle)
+        assert _calibrated_airspeed_hint(scale, clean, ok) == ""
+
+
+def test_an_airspeed_the_kinematics_put_far_from_the_true_one_is_reported():
+    """A ground speed with a 15 m/s tailwind on a 60 m/s aircraft (V_m_s x1.25) is no unit and no
+    calibrated airspeed: the pre-flight has nothing to refuse, and the run reports it
+    (airspeed_scale) with what it does to every coefficient; the true airspeed gives nothing."""
+    from aerosid.identification.airdata_findings import _airspeed_finding, _airspeed_scale
+    try:
+        from aerosid.simulation.jsbsim_aircraft import simulate_aircraft
+        fl = simulate_aircraft("c182", 0)
+    except ImportError as exc:  # jsbsim is an optional extra
+        pytest.skip(f"jsbsim: {exc}")
+    import tempfile
+
+    with tempfile.TemporaryDirectory() as d:
+        vehicle = _vehicle_from_text(fl.files["vehicle.toml"], Path(d))
+    cols = ("q_rad_s", "az_m_s2", "V_m_s", "h_m", vehicle.alpha_column)
+    frame = fl.telemetry
+    ok = np.isfinite(frame[list(cols)].to_numpy(float)).all(axis=1)
+    t = frame["t_s"].to_numpy(float)[ok]
+    clean = {c: frame[c].to_numpy(float) for c in cols}
+    assert _airspeed_finding(_airspeed_scale(t, clean, ok, vehicle), t, vehicle, "seg00") is None
+    fast = {**clean, "V_m_s": clean["V_m_s"] * 1.25}
+    found = _airspeed_finding(_airspeed_scale(t, fast, ok, vehicle), t, vehicle, "seg00")
+    assert found is not None and found.kind == "airspeed_scale" and found.channel == "V_m_s"
+    assert "ground speed" in found.detail and "every coefficient 0.6" in found.detail, found.detail
