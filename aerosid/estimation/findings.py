@@ -27,7 +27,8 @@ regression (with a margin) and the rest of the segment is kept:
   clamped there: the angle would be made up), or Mach outside it -- cut.
 
 The flight data add ``airdata_delay`` (reported): the vane alpha lags the IMU's kinematics
-by a sample or more (aerosid.identification.vanes).
+by a sample or more (aerosid.identification.vanes); ``airspeed_scale`` (reported): the pitch
+kinematics put V_m_s beyond what a true airspeed gives (aerosid.identification.airdata_findings).
 
 The preprocessing adds ``time_jitter``, ``frozen``, ``sentinel`` and ``out_of_range`` (segment
 "preprocess"): timestamps off the grid and sensor faults, whose samples it treats as missing
