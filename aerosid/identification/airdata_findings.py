@@ -47,8 +47,8 @@ def airdata_findings(t, ok, clean: dict, bl, vehicle: Vehicle, segment: str) -> 
     if vd is None:
         return found, None
     record = {"segment": segment, **{k: (v if not isinstance(v, float) or math.isfinite(v) else None)
-                                     for k, v in {**vd.as_dict(), "airspeed_scale": scale[0],
-                                                  "airspeed_scale_sigma": scale[1]}.items()}}
+                                     for k, v in {**vd.as_dict(), "airspeed_scale": float(scale[0]),
+                                                  "airspeed_scale_sigma": float(scale[1])}.items()}}
     ts = t[ok]
     if not vd.follows and not vehicle.turbulent_air:  # in turbulence the vane reads the gusts' angle too
         lost = "" if math.isfinite(vd.delay_s) else f", and no delay within {MAX_DELAY_S:g} s fits"
