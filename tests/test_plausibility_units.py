@@ -350,3 +350,15 @@ def test_a_vehicle_file_that_states_a_calibrated_airspeed_has_it_converted(tmp_p
     true = frame.dropna(subset=["t_s", "V_m_s"])
     V_true = np.interp(pre.frame["t_s"], true["t_s"], true["V_m_s"])
     assert np.nanmedian(pre.frame["V_m_s_clean"] / V_true) == pytest.approx(1.0, abs=1e-3)
+    # the flows' preprocess stage: converted, and the preprocessed file says so
+    from aerosid.io import read_parquet_metadata
+    from tasks.runner import StageContext
+    from tasks.stages import preprocess_task
+
+    run_dir = tmp_path / "run"
+    done = preprocess_task.fn(str(path), str(run_dir), StageContext(str(run_dir / "ledger.jsonl"), "local", "f"), {},
+                              str(tmp_path / "cas.toml"))
+    staged = pd.read_parquet(done["path"])
+    assert np.nanmedian(staged["V_m_s_clean"] / np.interp(staged["t_s"], true["t_s"], true["V_m_s"])) == \
+        pytest.approx(1.0, abs=1e-3)
+    assert "calibrated" in read_parquet_metadata(done["path"])["aerosid.airspeed"]
