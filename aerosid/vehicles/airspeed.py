@@ -137,3 +137,13 @@ def as_true_airspeed(frame, kind: str):
     with_what = ", ".join(["h_m" + ("" if measured else " (US-1976)"), *measured])
     return out, (f"V_m_s: the vehicle file's [air_data] airspeed = \"{kind}\" converted to the true airspeed with "
                  f"{with_what} (aerosid.vehicles.airspeed); {kept} row(s) without them left empty")
+
+
+def dynamic_from_impact_pressure_pa(qc_pa, p_static_pa) -> np.ndarray:
+    """The dynamic pressure 0.5 rho V^2 = (gamma / 2) p M^2 [Pa] of an impact pressure q_c = p_t - p
+    [Pa] (what a pitot-static system measures) at static pressure p_static_pa [Pa]: the Mach number
+    from q_c / p (isentropic below Mach 1, Rayleigh's pitot formula above).  q_c exceeds the dynamic
+    pressure by about 1 + M^2/4: 1.17 at Mach 0.8, 1.28 at Mach 1."""
+    p = np.asarray(p_static_pa, dtype=float)
+    mach = _mach_from_qc_over_p(np.asarray(qc_pa, dtype=float) / p)
+    return 0.5 * GAMMA_AIR * p * mach**2

@@ -38,12 +38,17 @@ import pandas as pd
 from aerosid.vehicles.importers import ImportDataError, ImportedFlight, check_time
 from aerosid.vehicles.units import TARGET_UNITS, Conversion, UnitError, conversion
 
-_ENTRY_KEYS = {"column", "unit", "sign", "airspeed"}
+_ENTRY_KEYS = {"column", "unit", "sign", "airspeed", "pressure"}
 #: CSV headers that read as an airspeed other than the true one (tokens, lower case) ...
 _NOT_TRUE_AIRSPEED_TOKENS = {"ias", "kias", "cas", "kcas", "eas", "keas", "vias", "vcas", "veas", "vi", "vc", "ve",
                              "vind", "vcal", "veq"}
 #: ... or that hold one of these words anywhere.
 _NOT_TRUE_AIRSPEED_WORDS = ("indicated", "calibrated", "equivalent")
+#: qbar_pa headers that read as an impact pressure q_c = p_t - p (tokens; words anywhere).
+_IMPACT_PRESSURE_TOKENS = {"qc", "qci", "qcic", "ptps"}
+_IMPACT_PRESSURE_WORDS = ("impact",)
+#: What a qbar_pa column may hold (an import map's ``pressure`` key).
+PRESSURE_KINDS = ("dynamic", "impact")
 _CSV_KEYS = {"delimiter", "comment", "decimal", "time_from_zero"}
 
 
@@ -56,6 +61,7 @@ class ColumnMap:
     unit: str
     sign: float = 1.0
     airspeed: str = "true"  # V_m_s only: the kind of airspeed the column holds (converted to the true one)
+    pressure: str = "dynamic"  # qbar_pa only: "impact" (q_c, converted to the dynamic pressure)
 
 
 @dataclass(frozen=True)
@@ -120,7 +126,7 @@ def load_csv_map(path: str | Path) -> CsvMap:
         except UnitError as exc:
             raise ImportDataError(path, str(exc).removeprefix(f"{src}: "), column=target) from None
         entries.append(ColumnMap(target, str(entry["column"]), str(entry["unit"]), float(sign),
-                                 _airspeed_kind(path, target, entry)))
+                                 _airspeed_kind(path, target, entry), _pressure_kind(path, target, entry)))
     text, origin = _vehicle_text(doc.get("vehicle"), path)
     return CsvMap(path=src, columns=tuple(entries), vehicle_toml=text, vehicle_origin=origin,
                   delimiter=str(opts.get("delimiter", ",")), comment=opts.get("comment"),
@@ -152,6 +158,31 @@ def _airspeed_kind(path: Path, target: str, entry: dict) -> str:
     if kind not in AIRSPEED_KINDS:
         raise ImportDataError(path, f"[columns] V_m_s: airspeed must be one of {', '.join(AIRSPEED_KINDS)}, got "
                               f"{kind!r}", column="V_m_s")
+    return str(kind)
+
+
+def _pressure_kind(path: Path, target: str, entry: dict) -> str:
+    """The map entry's ``pressure`` (qbar_pa only); a qbar_pa header that reads as an impact
+    pressure (q_c, what a pitot-static system measures) must state it: taken for the dynamic
+    pressure, it makes every coefficient low by 1 / (1 + M^2/4) (x0.85 at Mach 0.8)."""
+    kind = entry.get("pressure")
+    if target != "qbar_pa":
+        if kind is not None:
+            raise ImportDataError(path, f"[columns] {target}: pressure is a key of qbar_pa only", column=target)
+        return "dynamic"
+    if kind is None:
+        header = str(entry["column"]).lower()
+        if set(re.split(r"[^a-z0-9]+", header)) & _IMPACT_PRESSURE_TOKENS or \
+                any(w in header for w in _IMPACT_PRESSURE_WORDS):
+            raise ImportDataError(path, f"[columns] qbar_pa: the CSV column {entry['column']!r} reads as an impact "
+                                  "pressure q_c = p_t - p, and qbar_pa is the dynamic pressure 0.5 rho V^2 (q_c "
+                                  "exceeds it by about 1 + M^2/4: every coefficient x0.85 at Mach 0.8). State what it "
+                                  "holds: pressure = \"impact\" (converted with the mapped p_static_pa, else the "
+                                  "US-1976 pressure at h_m) or pressure = \"dynamic\"", column="qbar_pa")
+        return "dynamic"
+    if kind not in PRESSURE_KINDS:
+        raise ImportDataError(path, f"[columns] qbar_pa: pressure must be one of {', '.join(PRESSURE_KINDS)}, got "
+                              f"{kind!r}", column="qbar_pa")
     return str(kind)
 
 
@@ -240,7 +271,8 @@ def import_csv(csv_path: str | Path, map_path: str | Path) -> ImportedFlight:
                                source=f"{conv.source} minus its first value")
         convs.append(conv)
         data[entry.target] = conv.apply(values)
-    notes = (f"vehicle file from {cmap.vehicle_origin}",) + _to_true_airspeed(data, cmap)
+    notes = (f"vehicle file from {cmap.vehicle_origin}", *_to_true_airspeed(data, cmap),
+             *_to_dynamic_pressure(data, cmap))
     telemetry = pd.DataFrame(data)
     vehicle_name = str(tomllib.loads(cmap.vehicle_toml).get("name", "vehicle"))
     from aerosid.provenance import sha256_file
@@ -263,6 +295,30 @@ def _to_true_airspeed(data: dict[str, np.ndarray], cmap: CsvMap) -> tuple[str, .
     with_what = ", ".join(["h_m" + ("" if measured else " (US-1976)"), *measured])
     return (f"V_m_s: the map's {kind} airspeed converted to the true airspeed with {with_what} "
             f"(aerosid.vehicles.airspeed.true_airspeed_m_s); {kept} row(s) without them left empty",)
+
+
+def _to_dynamic_pressure(data: dict[str, np.ndarray], cmap: CsvMap) -> tuple[str, ...]:
+    """Convert data["qbar_pa"] in place when the map says it is an impact pressure; the note."""
+    from aerosid.vehicles.airspeed import dynamic_from_impact_pressure_pa
+    from aerosid.vehicles.atmosphere import H_MAX_M, H_MIN_M, pressure_pa
+
+    if next((c.pressure for c in cmap.columns if c.target == "qbar_pa"), "dynamic") == "dynamic":
+        return ()
+    qc = data["qbar_pa"]
+    if "p_static_pa" in data:
+        p, source = data["p_static_pa"], "the mapped p_static_pa"
+    else:
+        h = data["h_m"]
+        inside = np.isfinite(h) & (h >= H_MIN_M) & (h <= H_MAX_M)
+        p, source = np.full_like(h, np.nan), "the US-1976 pressure at h_m"
+        p[inside] = pressure_pa(h[inside])
+    ok = np.isfinite(qc) & (qc > 0) & np.isfinite(p) & (p > 0)
+    out = np.where(np.isfinite(qc) & (qc > 0), np.nan, qc)  # a measured value that cannot be converted: empty
+    out[ok] = dynamic_from_impact_pressure_pa(qc[ok], p[ok])
+    data["qbar_pa"] = out
+    return (f"qbar_pa: the map's impact pressure converted to the dynamic pressure with {source} "
+            f"(aerosid.vehicles.airspeed.dynamic_from_impact_pressure_pa); {int((~ok & np.isfinite(qc)).sum())} "
+            "row(s) without it left empty",)
 
 
 def _column_values(column: pd.Series, entry, csv_path: Path, decimal: str) -> np.ndarray:

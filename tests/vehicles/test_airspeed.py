@@ -95,3 +95,17 @@ def test_rows_without_an_altitude_are_emptied_and_sentinels_kept():
     out, emptied = true_airspeed_where_known(V, np.array([3000.0, 3000.0, 3000.0, np.nan]), "calibrated", {})
     assert out[0] == pytest.approx(true_airspeed_m_s(100.0, 3000.0)) and out[1] == sentinel
     assert np.isnan(out[2]) and np.isnan(out[3]) and emptied == 1
+
+
+def test_an_impact_pressure_gives_the_dynamic_pressure():
+    """q_c = p [(1 + 0.2 M^2)^3.5 - 1] (subsonic) or Rayleigh's (supersonic) against q-bar = 0.7 p M^2:
+    at low Mach they agree, at Mach 0.8 q_c is 1.17 x q-bar."""
+    from aerosid.vehicles.airspeed import dynamic_from_impact_pressure_pa
+
+    p = 40000.0
+    mach = np.array([0.05, 0.5, 0.8, 1.0, 1.6, 2.5])
+    qbar = 0.7 * p * mach**2
+    qc = p * _qc_over_p(mach)
+    np.testing.assert_allclose(dynamic_from_impact_pressure_pa(qc, p), qbar, rtol=1e-7)
+    assert qc[0] / qbar[0] == pytest.approx(1.0 + 0.05**2 / 4, rel=1e-4)
+    assert qc[2] / qbar[2] == pytest.approx(1.17, abs=0.01)

@@ -396,3 +396,34 @@ def test_a_calibrated_airspeed_column_is_converted_or_must_say_what_it_holds(to1
                                                         '{ column = "q_dps", unit = "deg/s", airspeed = "true" }')))
     with pytest.raises(ImportDataError, match="q_rad_s: airspeed is a key of V_m_s only"):
         load_csv_map(tmp_path / "q.toml")
+
+
+def test_an_impact_pressure_column_is_converted_or_must_say_what_it_holds(to18, tmp_path):
+    """A pitot-static system's impact pressure q_c mapped to qbar_pa: with pressure = "impact" the
+    import gives the dynamic pressure (the SIDPAC file's, to 1e-6, through the US-1976 pressure at
+    its altitude); a header that reads as one (qc_psf) is refused without the key."""
+    from aerosid.vehicles.airspeed import _qc_over_p
+    from aerosid.vehicles.atmosphere import pressure_pa
+
+    csv = write_twin_otter_csv(F018, tmp_path / "to18.csv")
+    frame = pd.read_csv(csv)
+    p = pressure_pa(frame["alt_ft"].to_numpy() * 0.3048) / 47.880259  # psf
+    mach = np.sqrt(frame["qbar_psf"].to_numpy() / (0.7 * p))
+    frame["qc_psf"] = p * _qc_over_p(mach)
+    frame.drop(columns=["qbar_psf"]).to_csv(tmp_path / "qc.csv", index=False)
+    plain = _map_text(replace=('{ column = "qbar_psf"', '{ column = "qc_psf"'))
+    (tmp_path / "plain.toml").write_text(plain)
+    with pytest.raises(ImportDataError) as err:
+        load_csv_map(tmp_path / "plain.toml")
+    assert all(w in str(err.value) for w in ("qbar_pa", "'qc_psf'", 'pressure = "impact"')), err.value
+    text = plain.replace('{ column = "qc_psf", unit = "lbf/ft^2" }', '{ column = "qc_psf", unit = "lbf/ft^2", '
+                                                                    'pressure = "impact" }')
+    assert text != plain
+    (tmp_path / "qc.toml").write_text(text)
+    imp = import_csv(tmp_path / "qc.csv", tmp_path / "qc.toml")
+    np.testing.assert_allclose(imp.telemetry["qbar_pa"], to18.telemetry["qbar_pa"], rtol=1e-6)
+    assert any("impact pressure converted" in n for n in imp.notes)
+    (tmp_path / "q.toml").write_text(_map_text(replace=('{ column = "q_dps", unit = "deg/s" }',
+                                                        '{ column = "q_dps", unit = "deg/s", pressure = "impact" }')))
+    with pytest.raises(ImportDataError, match="q_rad_s: pressure is a key of qbar_pa only"):
+        load_csv_map(tmp_path / "q.toml")
