@@ -362,3 +362,29 @@ def test_a_vehicle_file_that_states_a_calibrated_airspeed_has_it_converted(tmp_p
     assert np.nanmedian(staged["V_m_s_clean"] / np.interp(staged["t_s"], true["t_s"], true["V_m_s"])) == \
         pytest.approx(1.0, abs=1e-3)
     assert "calibrated" in read_parquet_metadata(done["path"])["aerosid.airspeed"]
+
+
+def test_an_impact_pressure_in_qbar_pa_is_refused_where_the_air_is_measured(tmp_path):
+    """A pitot-static system's q_c recorded as qbar_pa: at Mach 0.62 (global5000) and 1.59 (F4N)
+    it is 1.10 and 1.7 x the dynamic pressure the measured density gives, and every coefficient
+    would be low by that; the dynamic pressure itself passes, and so does a real day's."""
+    from aerosid.vehicles.airspeed import _qc_over_p
+    from aerosid.vehicles.atmosphere import CP_AIR_J_KG_K, density_kg_m3, pressure_pa, speed_of_sound_m_s, temperature_K
+
+    for aircraft in ("global5000", "F4N"):
+        veh, frame = _jsbsim_flight(tmp_path, aircraft, 0)
+        h, V = frame["h_m"].to_numpy(float), frame["V_m_s"].to_numpy(float)
+        air = frame.assign(rho_kg_m3=density_kg_m3(np.nan_to_num(h, nan=6000.0)),
+                           p_static_pa=pressure_pa(np.nan_to_num(h, nan=6000.0)))
+        air["T_total_K"] = temperature_K(np.nan_to_num(h, nan=6000.0)) + V**2 / (2.0 * CP_AIR_J_KG_K)
+        air["qbar_pa"] = 0.5 * air["rho_kg_m3"] * V**2
+        assert unit_findings(air, veh) == [], aircraft
+        mach = V / speed_of_sound_m_s(np.nan_to_num(h, nan=6000.0))
+        qc = air.assign(qbar_pa=air["p_static_pa"] * _qc_over_p(mach))
+        (found,) = unit_findings(qc, veh)
+        assert found.columns == ("qbar_pa",) and found.kind == "pressure", found
+        assert "impact pressure" in found.message() and "dynamic_from_impact_pressure_pa" in found.message()
+        # without the density, the static pressure and total temperature tell it too
+        (found,) = unit_findings(qc.drop(columns=["rho_kg_m3"]), veh)
+        assert found.kind == "pressure"
+    assert unit_findings(with_measured_air_data(frame), veh) == []  # a cold high-pressure day

@@ -63,7 +63,8 @@ class UnitFinding:
     evidence: str
     kind: str = "unit"  # "unit"; "sign": declared is then aerosid's sign convention, factor -1; "setting":
     # a vehicle-file value (declared: its key) the telemetry contradicts, likely: the value it measures;
-    # "airspeed": V_m_s is not a true airspeed (factor: about, the conversion depends on the altitude)
+    # "airspeed": V_m_s is not a true airspeed (factor: about, the conversion depends on the altitude);
+    # "pressure": qbar_pa is an impact pressure (factor: about, the conversion depends on the Mach number)
     overridable: bool = True  # a vehicle file's [plausibility] range can accept the values
 
     def message(self) -> str:
@@ -74,6 +75,11 @@ class UnitFinding:
                     f"vehicle file, [air_data] airspeed = \"calibrated\" (or \"indicated\", \"equivalent\"), "
                     f"and the preprocessing converts it with the altitude (here about x{self.factor:.3g}); an import "
                     f"map's airspeed key does the same (docs/real-flight.md){widen}")
+        if self.kind == "pressure":
+            return (f"values look like {self.likely}, not the {self.declared}: {self.evidence}. Convert the column "
+                    f"(aerosid.vehicles.airspeed.dynamic_from_impact_pressure_pa; an import map's pressure = "
+                    f"\"impact\", docs/real-flight.md), or leave it out: the dynamic pressure then comes from V_m_s "
+                    f"and the density")
         if self.kind == "setting":
             return f"the vehicle file's {self.declared} contradicts the telemetry: {self.evidence}"
         if self.kind == "sign":
@@ -292,7 +298,50 @@ def _measured_air_findings(frame: pd.DataFrame) -> list[UnitFinding]:
             out.append(UnitFinding((col,), declared, unit, k,
                                    f"its median is {ratio:.3g} x the {what}, outside {bounds[0]:.2g}.."
                                    f"{bounds[1]:.3g} x; as {unit} it is {ratio * k:.3g} x", overridable=False))
-    return out
+    impact = _impact_pressure_finding(frame) if not out else None
+    return out + ([impact] if impact is not None else [])
+
+
+#: An impact pressure in qbar_pa is told from the dynamic pressure at this Mach and above (q_c / q-bar
+#: 1.09) where the air's state is measured (the density, or the static pressure and total temperature:
+#: q-bar then needs no weather), when the measured ratio lies within IMPACT_TOLERANCE of q_c / q-bar
+#: and beyond halfway to it.
+IMPACT_MACH_MIN = 0.6
+IMPACT_TOLERANCE = 0.03
+
+
+def _impact_pressure_finding(frame: pd.DataFrame) -> UnitFinding | None:
+    """qbar_pa holding the impact pressure q_c = p_t - p a pitot-static system measures, not the
+    dynamic pressure 0.5 rho V^2: q_c exceeds it by about 1 + M^2/4 (every coefficient x0.85 at
+    Mach 0.8), and nothing else in the run sees it.  The dynamic pressure to compare with: 0.5 rho
+    V^2 with the measured density, else 0.7 p M^2 with the measured static pressure and total
+    temperature; the Mach number from the total temperature, else US-1976's at h_m (q_c / q-bar
+    moves by 0.35 per unit Mach at Mach 0.7: a weather's temperature hardly matters)."""
+    from aerosid.vehicles.airspeed import _qc_over_p
+    from aerosid.vehicles.atmosphere import CP_AIR_J_KG_K, GAMMA_AIR, H_MAX_M, H_MIN_M, R_AIR_J_KG_K, temperature_K
+
+    have = set(frame.columns)
+    if "qbar_pa" not in have or not ("rho_kg_m3" in have or {"p_static_pa", "T_total_K"} <= have):
+        return None
+    cols = ["V_m_s", "h_m", "qbar_pa", *(c for c in ("rho_kg_m3", "p_static_pa", "T_total_K") if c in have)]
+    x = frame[cols].to_numpy(float)
+    x = x[np.all(np.isfinite(x) & (x > 0), axis=1) & (x[:, 1] >= H_MIN_M) & (x[:, 1] <= H_MAX_M)]
+    if len(x) < 10:
+        return None
+    col = {c: x[:, i] for i, c in enumerate(cols)}
+    V = col["V_m_s"]
+    T = col["T_total_K"] - V**2 / (2.0 * CP_AIR_J_KG_K) if "T_total_K" in col else temperature_K(col["h_m"])
+    mach = V / np.sqrt(GAMMA_AIR * R_AIR_J_KG_K * T)
+    dynamic = 0.5 * col["rho_kg_m3"] * V**2 if "rho_kg_m3" in col else 0.5 * GAMMA_AIR * col["p_static_pa"] * mach**2
+    ratio, expected = float(np.median(col["qbar_pa"] / dynamic)), float(np.median(_qc_over_p(mach) / (0.7 * mach**2)))
+    if not (np.median(mach) >= IMPACT_MACH_MIN and abs(ratio / expected - 1.0) < IMPACT_TOLERANCE
+            and ratio > 0.5 * (1.0 + expected)):
+        return None
+    source = "rho_kg_m3" if "rho_kg_m3" in col else "p_static_pa and T_total_K"
+    return UnitFinding(("qbar_pa",), "dynamic pressure 0.5 rho V^2", "an impact pressure q_c = p_t - p", 1.0 / ratio,
+                       f"its median is {ratio:.3g} x the dynamic pressure that V_m_s and {source} give (median "
+                       f"Mach {np.median(mach):.2f}), and an impact pressure is {expected:.3g} x; every coefficient "
+                       "would be low by that much", kind="pressure", overridable=False)
 
 
 #: Temperatures in another unit: (unit, to kelvin, how to convert) -- the raw schema refuses a total
