@@ -35,6 +35,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from aerosid.vehicles.airspeed import AIRSPEED_KINDS
 from aerosid.vehicles.importers import ImportDataError, ImportedFlight, check_time
 from aerosid.vehicles.units import TARGET_UNITS, Conversion, UnitError, conversion
 
@@ -126,63 +127,66 @@ def load_csv_map(path: str | Path) -> CsvMap:
         except UnitError as exc:
             raise ImportDataError(path, str(exc).removeprefix(f"{src}: "), column=target) from None
         entries.append(ColumnMap(target, str(entry["column"]), str(entry["unit"]), float(sign),
-                                 _airspeed_kind(path, target, entry), _pressure_kind(path, target, entry)))
+                                 _stated_kind(path, target, entry, "airspeed"),
+                                 _stated_kind(path, target, entry, "pressure")))
     text, origin = _vehicle_text(doc.get("vehicle"), path)
     return CsvMap(path=src, columns=tuple(entries), vehicle_toml=text, vehicle_origin=origin,
                   delimiter=str(opts.get("delimiter", ",")), comment=opts.get("comment"),
                   time_from_zero=bool(opts.get("time_from_zero", False)), decimal=_decimal(opts, path))
 
 
-def _airspeed_kind(path: Path, target: str, entry: dict) -> str:
-    """The map entry's ``airspeed`` (V_m_s only); a V_m_s header that reads as an indicated,
-    calibrated or equivalent airspeed must state it: taken for the true airspeed, such a column
-    makes q-bar low by about rho / rho_0 (every coefficient x1.16 at 1500 m, x1.8 at 6 km)."""
-    from aerosid.vehicles.airspeed import AIRSPEED_KINDS
+@dataclass(frozen=True)
+class _StatedKind:
+    """A map key that says what a column holds when it is not what the raw column means: its
+    column, key, the kinds (the first is the raw column's own meaning), the header tokens and
+    words that read as another kind (then the key is required), and why it matters."""
 
-    kind = entry.get("airspeed")
-    if target != "V_m_s":
+    target: str
+    key: str
+    kinds: tuple[str, ...]
+    tokens: frozenset
+    words: tuple[str, ...]
+    reads_as: str
+    matters: str
+    converted: str
+
+
+_STATED_KINDS = (
+    _StatedKind("V_m_s", "airspeed", AIRSPEED_KINDS,
+                frozenset(_NOT_TRUE_AIRSPEED_TOKENS), _NOT_TRUE_AIRSPEED_WORDS,
+                "an indicated, calibrated or equivalent airspeed, and aerosid needs the true airspeed",
+                "taken for it, such a column makes the dynamic pressure low by about rho/rho_0: every coefficient "
+                "x1.16 at 1500 m, x1.8 at 6 km",
+                "converted with h_m and the mapped p_static_pa, T_total_K, rho_kg_m3"),
+    _StatedKind("qbar_pa", "pressure", PRESSURE_KINDS, frozenset(_IMPACT_PRESSURE_TOKENS), _IMPACT_PRESSURE_WORDS,
+                "an impact pressure q_c = p_t - p, and qbar_pa is the dynamic pressure 0.5 rho V^2",
+                "q_c exceeds it by about 1 + M^2/4: every coefficient x0.85 at Mach 0.8",
+                "converted with the mapped p_static_pa, else the US-1976 pressure at h_m"),
+)
+
+
+def _stated_kind(path: Path, target: str, entry: dict, key: str) -> str:
+    """The map entry's `key` (_STATED_KINDS: V_m_s's airspeed, qbar_pa's pressure); its own column's
+    only, one of its kinds, and required where the CSV header reads as another kind (KIAS for
+    V_m_s, qc for qbar_pa)."""
+    spec = next(k for k in _STATED_KINDS if k.key == key)
+    kind = entry.get(key)
+    if target != spec.target:
         if kind is not None:
-            raise ImportDataError(path, f"[columns] {target}: airspeed is a key of V_m_s only", column=target)
-        return "true"
+            raise ImportDataError(path, f"[columns] {target}: {key} is a key of {spec.target} only", column=target)
+        return spec.kinds[0]
     if kind is None:
         header = str(entry["column"]).lower()
-        tokens = set(re.split(r"[^a-z0-9]+", header))
-        if tokens & _NOT_TRUE_AIRSPEED_TOKENS or any(w in header for w in _NOT_TRUE_AIRSPEED_WORDS):
-            raise ImportDataError(path, f"[columns] V_m_s: the CSV column {entry['column']!r} reads as an indicated, "
-                                  "calibrated or equivalent airspeed, and aerosid needs the true airspeed (taken for "
-                                  "it, such a column makes the dynamic pressure low by about rho/rho_0: every "
-                                  "coefficient x1.16 at 1500 m, x1.8 at 6 km). State what it holds: airspeed = "
-                                  "\"calibrated\" (or \"indicated\", \"equivalent\"; converted with h_m and the "
-                                  "mapped p_static_pa, T_total_K, rho_kg_m3) or airspeed = \"true\"", column="V_m_s")
-        return "true"
-    if kind not in AIRSPEED_KINDS:
-        raise ImportDataError(path, f"[columns] V_m_s: airspeed must be one of {', '.join(AIRSPEED_KINDS)}, got "
-                              f"{kind!r}", column="V_m_s")
-    return str(kind)
-
-
-def _pressure_kind(path: Path, target: str, entry: dict) -> str:
-    """The map entry's ``pressure`` (qbar_pa only); a qbar_pa header that reads as an impact
-    pressure (q_c, what a pitot-static system measures) must state it: taken for the dynamic
-    pressure, it makes every coefficient low by 1 / (1 + M^2/4) (x0.85 at Mach 0.8)."""
-    kind = entry.get("pressure")
-    if target != "qbar_pa":
-        if kind is not None:
-            raise ImportDataError(path, f"[columns] {target}: pressure is a key of qbar_pa only", column=target)
-        return "dynamic"
-    if kind is None:
-        header = str(entry["column"]).lower()
-        if set(re.split(r"[^a-z0-9]+", header)) & _IMPACT_PRESSURE_TOKENS or \
-                any(w in header for w in _IMPACT_PRESSURE_WORDS):
-            raise ImportDataError(path, f"[columns] qbar_pa: the CSV column {entry['column']!r} reads as an impact "
-                                  "pressure q_c = p_t - p, and qbar_pa is the dynamic pressure 0.5 rho V^2 (q_c "
-                                  "exceeds it by about 1 + M^2/4: every coefficient x0.85 at Mach 0.8). State what it "
-                                  "holds: pressure = \"impact\" (converted with the mapped p_static_pa, else the "
-                                  "US-1976 pressure at h_m) or pressure = \"dynamic\"", column="qbar_pa")
-        return "dynamic"
-    if kind not in PRESSURE_KINDS:
-        raise ImportDataError(path, f"[columns] qbar_pa: pressure must be one of {', '.join(PRESSURE_KINDS)}, got "
-                              f"{kind!r}", column="qbar_pa")
+        if set(re.split(r"[^a-z0-9]+", header)) & spec.tokens or any(w in header for w in spec.words):
+            others = ", ".join(f'"{k}"' for k in spec.kinds[2:])
+            raise ImportDataError(path, f"[columns] {target}: the CSV column {entry['column']!r} reads as "
+                                  f"{spec.reads_as} ({spec.matters}). State what it holds: {key} = "
+                                  f'"{spec.kinds[1]}"{f" (or {others})" if others else ""} ({spec.converted}) or '
+                                  f'{key} = "{spec.kinds[0]}"', column=target)
+        return spec.kinds[0]
+    if kind not in spec.kinds:
+        raise ImportDataError(path, f"[columns] {target}: {key} must be one of {', '.join(spec.kinds)}, got "
+                              f"{kind!r}", column=target)
     return str(kind)
 
 
