@@ -366,7 +366,7 @@ def test_a_vehicle_file_that_states_a_calibrated_airspeed_has_it_converted(tmp_p
 
 def test_an_impact_pressure_in_qbar_pa_is_refused_where_the_air_is_measured(tmp_path):
     """A pitot-static system's q_c recorded as qbar_pa: at Mach 0.62 (global5000) and 1.59 (F4N)
-    it is 1.10 and 1.7 x the dynamic pressure the measured density gives, and every coefficient
+    it is 1.10 and 1.56 x the dynamic pressure the measured density gives, and every coefficient
     would be low by that; the dynamic pressure itself passes, and so does a real day's."""
     from aerosid.vehicles.airspeed import _qc_over_p
     from aerosid.vehicles.atmosphere import CP_AIR_J_KG_K, density_kg_m3, pressure_pa, speed_of_sound_m_s, temperature_K
