@@ -10,7 +10,6 @@ from dataclasses import dataclass
 
 import pandas as pd
 
-from aerosid.vehicles.airspeed import as_true_airspeed
 from aerosid.estimation.findings import Finding
 from aerosid.identification.flight_data import build_flight_data_segments, build_pooled_flight_data, load_database
 from aerosid.identification.identify import Identification, identify
@@ -19,6 +18,7 @@ from aerosid.preprocess import (DEFAULT_MIN_SEGMENT_S, PreprocessParams, Preproc
                                 preprocess)
 from aerosid.preprocess.segments import plan_segments
 from aerosid.estimation.smoothing import SmoothedSegmentResult, smooth_segment_frame
+from aerosid.vehicles.airspeed import as_true_airspeed
 from aerosid.vehicles.vehicle import Vehicle
 
 

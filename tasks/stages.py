@@ -18,12 +18,12 @@ from aerosid.identification.flight_data import (build_flight_data_segments, buil
 from aerosid.identification.identify import default_bias_pairs, identify
 from aerosid.modelling.models import default_models, load_models
 from aerosid.plausibility.estimates import implausible_estimate_findings
-from aerosid.vehicles.airspeed import as_true_airspeed
 from aerosid.plausibility.geometry import geometry_findings
 from aerosid.plausibility.units import check_units
 from aerosid.preprocess import PreprocessParams, preprocess
 from aerosid.preprocess.segments import plan_segments
 from aerosid.estimation.smoothing import smooth_segment_frame
+from aerosid.vehicles.airspeed import as_true_airspeed
 from aerosid.vehicles.vehicle import load_vehicle
 from schemas.coefficients import Coefficients
 from schemas.flight_data import FlightData

@@ -102,8 +102,14 @@ def aircraft_candidates() -> tuple[Candidate, ...]:
     )
 
 
+def named_candidates(mach_reference: float = 12.4) -> dict[str, Candidate]:
+    """The candidates a model spec accepts by name that are not catalogue effects: the extras and
+    an aircraft's layout's."""
+    return {c.name: c for c in extra_candidates(mach_reference) + aircraft_candidates()}
+
+
 #: name -> (channel, coefficient) of the extra candidates: a model spec accepts them by name
-_EXTRA_NAMES = {c.name: (c.channel, c.coefficient) for c in extra_candidates() + aircraft_candidates()}
+_EXTRA_NAMES = {name: (c.channel, c.coefficient) for name, c in named_candidates().items()}
 
 
 def default_candidates(mach_reference: float = 12.4, vehicle_class: str = "finned") -> tuple[Candidate, ...]:

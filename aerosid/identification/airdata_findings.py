@@ -105,13 +105,13 @@ def _calibrated_airspeed_hint(scale: tuple[float, float], clean: dict, ok: np.nd
     cannot tell it either (aerosid.plausibility.airspeed_scale), so the finding names it, unless the
     pitch kinematics' airspeed scale lies above a calibrated airspeed's share by 3 sigma (the real
     Twin Otter's 0.965 +- 0.004 against 0.898: its lag is the vane's)."""
-    from aerosid.vehicles.airspeed import true_airspeed_m_s
+    from aerosid.vehicles.airspeed import calibrated_share
 
     V, h = clean["V_m_s"][ok], clean["h_m"][ok]
     good = np.isfinite(V) & np.isfinite(h) & (V > 0)
     if good.sum() < 10:
         return ""
-    share = float(np.median(V[good] / true_airspeed_m_s(V[good], h[good], "calibrated")))
+    share = calibrated_share(V[good], h[good])
     s, se = scale
     if share >= CAS_HINT_SHARE_MAX or s - 3.0 * se > share:
         return ""

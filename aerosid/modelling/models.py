@@ -148,9 +148,9 @@ def parse_term(text: str, channel: str, source: str = "<memory>", mach_reference
             # Mach terms about the vehicle's reference Mach, as the diagnosis tests them
             return Term(effect.coefficient, effect.term.replace("(mach - 12.4)", f"(mach - {mach_reference:g})"),
                         effect.name)
-        from aerosid.diagnosis.candidates import aircraft_candidates, extra_candidates  # (a cycle otherwise)
+        from aerosid.diagnosis.candidates import named_candidates  # (a cycle otherwise)
 
-        named = {c.name: c for c in extra_candidates(mach_reference) + aircraft_candidates()}
+        named = named_candidates(mach_reference)
         cand = named.get(text)
         if cand is None:
             raise ModelSpecError(f"{source}: [{channel}] term {text!r} is neither 'NAME = EXPRESSION' nor the name "

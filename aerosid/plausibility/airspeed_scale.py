@@ -112,7 +112,7 @@ def airspeed_finding(frame: pd.DataFrame, vehicle) -> UnitFinding | None:
     beyond [plausibility] airspeed_scale_min (3 sigma).  Below about 4 km a calibrated airspeed
     is within 18 % of the true one, as close as the kinematics' own spread over flights
     (0.908-1.058): it is not told apart there."""
-    from aerosid.vehicles.airspeed import true_airspeed_m_s
+    from aerosid.vehicles.airspeed import calibrated_share
     from aerosid.vehicles.atmosphere import H_MAX_M, H_MIN_M
 
     s, se = airspeed_scale(frame, vehicle)
@@ -128,7 +128,7 @@ def airspeed_finding(frame: pd.DataFrame, vehicle) -> UnitFinding | None:
     V, h = _air_rows(frame, h_bounds=(H_MIN_M, H_MAX_M))
     if len(V) < 10:
         return None
-    cas = float(np.median(V / true_airspeed_m_s(V, h, "calibrated")))
+    cas = calibrated_share(V, h)
     if abs(math.log(s / cas)) >= math.log(AIRSPEED_HYPOTHESIS_TOLERANCE):
         return None
     return UnitFinding(("V_m_s",), "true airspeed", "a calibrated (or indicated, or equivalent) airspeed", 1.0 / cas,

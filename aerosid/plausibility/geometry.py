@@ -20,12 +20,17 @@ import numpy as np
 SLIPS = (("chord_m in ft", 1.0 / 0.3048), ("span_m in ft", 1.0 / 0.3048), ("S_m2 in ft^2", 0.3048**2))
 
 
-def chord_ratio(vehicle) -> float:
-    """chord_m / (S_m2 / span_m), NaN when the file lacks one of them."""
-    S, c, b = vehicle.S_m2, vehicle.chord_m, vehicle.span_m
-    if not all(x is not None and math.isfinite(float(x)) and float(x) > 0 for x in (S, c, b)):
+def reference_chord_ratio(S_m2, chord_m, span_m) -> float:
+    """chord_m / (S_m2 / span_m): the chord over the mean chord the wing area and span give; NaN
+    when one of them is missing."""
+    if not all(x is not None and math.isfinite(float(x)) and float(x) > 0 for x in (S_m2, chord_m, span_m)):
         return math.nan
-    return float(c) / (float(S) / float(b))
+    return float(chord_m) / (float(S_m2) / float(span_m))
+
+
+def chord_ratio(vehicle) -> float:
+    """The vehicle file's reference_chord_ratio."""
+    return reference_chord_ratio(vehicle.S_m2, vehicle.chord_m, vehicle.span_m)
 
 
 def geometry_findings(vehicle, t_s) -> list[dict]:

@@ -316,24 +316,28 @@ def _impact_pressure_finding(frame: pd.DataFrame) -> UnitFinding | None:
     Mach 0.8), and nothing else in the run sees it.  The dynamic pressure to compare with: 0.5 rho
     V^2 with the measured density, else 0.7 p M^2 with the measured static pressure and total
     temperature; the Mach number from the total temperature, else US-1976's at h_m (q_c / q-bar
-    moves by 0.35 per unit Mach at Mach 0.7: a weather's temperature hardly matters)."""
+    moves by 0.35 per unit Mach at Mach 0.7: a weather's temperature hardly matters).  Both from
+    aerosid.vehicles.atmosphere.air_data with the measured columns but qbar_pa, as the run takes them."""
     from aerosid.vehicles.airspeed import _qc_over_p
-    from aerosid.vehicles.atmosphere import CP_AIR_J_KG_K, GAMMA_AIR, H_MAX_M, H_MIN_M, R_AIR_J_KG_K, temperature_K
+    from aerosid.vehicles.atmosphere import H_MAX_M, H_MIN_M, air_data
 
     have = set(frame.columns)
     if "qbar_pa" not in have or not ("rho_kg_m3" in have or {"p_static_pa", "T_total_K"} <= have):
         return None
-    cols = ["V_m_s", "h_m", "qbar_pa", *(c for c in ("rho_kg_m3", "p_static_pa", "T_total_K") if c in have)]
+    measured = [c for c in ("rho_kg_m3", "p_static_pa", "T_total_K") if c in have]
+    cols = ["V_m_s", "h_m", "qbar_pa", *measured]
     x = frame[cols].to_numpy(float)
     x = x[np.all(np.isfinite(x) & (x > 0), axis=1) & (x[:, 1] >= H_MIN_M) & (x[:, 1] <= H_MAX_M)]
     if len(x) < 10:
         return None
     col = {c: x[:, i] for i, c in enumerate(cols)}
-    V = col["V_m_s"]
-    T = col["T_total_K"] - V**2 / (2.0 * CP_AIR_J_KG_K) if "T_total_K" in col else temperature_K(col["h_m"])
-    mach = V / np.sqrt(GAMMA_AIR * R_AIR_J_KG_K * T)
-    dynamic = 0.5 * col["rho_kg_m3"] * V**2 if "rho_kg_m3" in col else 0.5 * GAMMA_AIR * col["p_static_pa"] * mach**2
-    ratio, expected = float(np.median(col["qbar_pa"] / dynamic)), float(np.median(_qc_over_p(mach) / (0.7 * mach**2)))
+    try:
+        air = air_data(col["V_m_s"], col["h_m"], **{c: col[c] for c in measured})
+    except ValueError:  # a total temperature too low for the speed: the run's own check names it
+        return None
+    mach = air.mach
+    ratio = float(np.median(col["qbar_pa"] / air.qbar_pa))
+    expected = float(np.median(_qc_over_p(mach) / (0.7 * mach**2)))
     if not (np.median(mach) >= IMPACT_MACH_MIN and abs(ratio / expected - 1.0) < IMPACT_TOLERANCE
             and ratio > 0.5 * (1.0 + expected)):
         return None

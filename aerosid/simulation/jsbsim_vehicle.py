@@ -15,20 +15,21 @@ ABS_BETA_SHARE = 0.01  # Cm_abs_beta joins the model when |dCm/d|beta|| * 2 deg 
 MACH_SHARE = 0.01      # a Mach term joins CN / Cm when 0.01 of Mach moves it by > 1 % of the manoeuvre's effect
 
 
-
 def _geometry_plausibility(reference: dict) -> list[str]:
     """A [plausibility] chord_ratio table when JSBSim's own metrics put the chord outside the
     aircraft default (aerosid.plausibility.geometry): the file states what JSBSim says (minisgs:
     a wing area 9 x its span times its chord), so the runs do not report it as a unit slip."""
     from aerosid.plausibility.envelope import CLASS_DEFAULTS
+    from aerosid.plausibility.geometry import reference_chord_ratio
 
-    ratio = reference["chord_m"] / (reference["S_m2"] / reference["span_m"])
+    ratio = reference_chord_ratio(reference["S_m2"], reference["chord_m"], reference["span_m"])
     lo, hi = CLASS_DEFAULTS["aircraft"].chord_ratio
     if lo <= ratio <= hi:
         return []
     return ["[plausibility]",
             f"# JSBSim's metrics give chord / (S / span) = {ratio:.3g}, outside the aircraft default {lo:g}..{hi:g}",
             f"chord_ratio = [{_num(min(lo, ratio / 1.5))}, {_num(max(hi, ratio * 1.5))}]", ""]
+
 
 def powered_level(design: FlightDesign) -> bool:
     """A flight trimmed level on its thrust (the jets): along the phugoid its thrust's moment and

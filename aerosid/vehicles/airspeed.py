@@ -55,6 +55,14 @@ def _mach_from_qc_over_p(ratio: np.ndarray) -> np.ndarray:
     return np.where(r <= QC_OVER_P_SONIC, sub, m)
 
 
+def calibrated_share(V_m_s, h_m) -> float:
+    """The median share of the true airspeed a calibrated airspeed is, for an airspeed column V_m_s
+    [m/s] at altitudes h_m [m] read as calibrated (US-1976): what V_m_s / true airspeed would be if
+    the column held a calibrated airspeed (0.93 at 1400 m, 0.74 at 6 km)."""
+    V = np.asarray(V_m_s, dtype=float)
+    return float(np.median(V / true_airspeed_m_s(V, h_m, "calibrated")))
+
+
 def calibrated_from_true_m_s(V_m_s, h_m, p_static_pa=None, T_static_K=None) -> np.ndarray:
     """The calibrated airspeed [m/s] of a true airspeed V_m_s [m/s] at altitude h_m [m]
     (US-1976 static pressure and temperature unless given [Pa], [K]): the simulator's CAS

@@ -16,6 +16,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+from aerosid.vehicles.airspeed import AIRSPEED_KINDS
+
 #: Largest aerodynamic database file read [bytes] (seed-rlv's is ~0.2 MB).
 MAX_DATABASE_BYTES = 50_000_000
 #: Largest vehicle file read [bytes].
@@ -116,7 +118,7 @@ TABLES: dict[str, dict[str, Key] | None] = {
         "cutoff_hz": pos(1e4), "derivative_half_window_s": pos(60.0),
         "delay_s": num(-0.5, 0.5, doc="the vanes' delay behind the IMU [s]: the vane angles are advanced by it"),
         "vane_position_m": vec(3, -100.0, 100.0, doc="the vanes' position from the CG, body axes [m]"),
-        "airspeed": Key("choice", choices=("true", "calibrated", "indicated", "equivalent"),
+        "airspeed": Key("choice", choices=AIRSPEED_KINDS,
                         doc="what the telemetry's V_m_s holds; not true: converted at preprocessing"),
     },
     "aero": {
