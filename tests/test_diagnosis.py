@@ -472,7 +472,7 @@ def test_a_term_whose_simex_estimate_flips_sign_is_an_angle_error_artefact(refer
 
     fd = _fd(inject(reference_flight, CATALOGUE["mach_cm_alpha"]), 0)
     assert diagnose(fd, vehicle).effect("mach_cm_alpha").significant
-    monkeypatch.setattr(core, "_simex_fraction", lambda *a, **k: 1.98)
+    monkeypatch.setattr(core, "simex_fraction", lambda *a, **k: 1.98)
     e = diagnose(fd, vehicle).effect("mach_cm_alpha")
     assert e.estimate_simex == pytest.approx(-0.98 * e.estimate)
     assert e.p_value_simex == pytest.approx(1.0) and not e.significant

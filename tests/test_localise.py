@@ -158,6 +158,42 @@ def test_drift_of_cm_alpha_is_found_as_a_trend_in_time(hidden_flights, vehicle):
     assert f.evidence["window_slope_per_s"] > 0  # Cm_alpha (negative) rises toward zero per window
 
 
+def test_kink_in_beta_is_localised_where_it_sits(reference_flight, vehicle):
+    """Cn += k |beta - 0.8 mrad| (a quarter of the Cn variation): an effect even in a beta whose
+    record is offset from the effect's own zero (here by 0.8 mrad, about 0.2 of beta's std: the
+    kink sits at its 65th percentile), as a vane's calibration bias puts it.  The localisation
+    names abs(beta), finds the kink's place and suggests the shifted term."""
+    truth = reference_flight.truth.copy()
+    win = (truth["mach"] - vehicle.mach_reference).abs() <= 0.5
+    beta = truth["beta_rad"].to_numpy()
+    col = np.abs(beta - 0.0008)
+    k = 0.25 * truth.loc[win, "Cn"].std() / np.std(col[win])
+    truth["Cn"] = truth["Cn"] + k * col
+    d = diagnose(flight_data_from_truth(truth, NOISE, seed=1), vehicle)
+    kinks = [f for f in _significant(d, "Cn") if f.kind == "shape" and f.variable == "beta"]
+    assert kinks, [f.message for f in d.localisation["Cn"]]
+    f = kinks[0]
+    assert f.suggested_coefficient == "Cn_abs_beta"
+    assert f.evidence["kink_at"] == pytest.approx(0.0008, abs=2e-4)
+    at = float(f"{f.evidence['kink_at']:.2g}")
+    assert f.suggested_expression == f"abs(beta - {at:g})"
+    assert f.evidence["kink_p_value"] < 1e-3 and "its kink is at beta = " in f.message
+
+
+def test_shape_the_angle_errors_could_bend_passes_by_its_simex_estimate(reference_flight, vehicle):
+    """At the full measured noise the recorded beta's errors make a third of the variance of a
+    beta shape: more than the guard's 5 %, so the shape is significant only if its estimate
+    corrected for them (SIMEX) still is.  A real kink of half the Cn variation is."""
+    truth = reference_flight.truth.copy()
+    win = (truth["mach"] - vehicle.mach_reference).abs() <= 0.5
+    col = np.abs(truth["beta_rad"].to_numpy() - 0.0008)
+    truth["Cn"] = truth["Cn"] + 0.5 * truth.loc[win, "Cn"].std() / np.std(col[win]) * col
+    d = diagnose(flight_data_from_truth(truth, MEASURED_NOISE, seed=1), vehicle)
+    f = next(f for f in d.localisation["Cn"] if f.kind == "shape" and f.variable == "beta")
+    assert f.significant, f.message
+    assert f.evidence["error_variance_share"] > 0.05 and f.evidence["p_value_simex"] < 1e-3
+
+
 def test_no_effect_flight_has_no_significant_localisation(reference_flight, vehicle):
     for seed in (1, 2):
         d = _diagnosis(reference_flight, vehicle, seed=seed)

@@ -266,12 +266,8 @@ def diagnose(flight_data: pd.DataFrame, vehicle, models: dict[str, ChannelModel]
             p_plain = float(scipy.stats.f.sf(f_plain, 1, max(n - p_a, 1)))
             est, se = float(fa.estimate[j]), float(fa.std_error[j])
             sse_a = _heldout_sse(Xa.to_numpy(float), y, win)
-            eiv = _simex_fraction(simex, model, c, y, est, simex_cache)
-            est_simex = est * (1.0 - eiv) if math.isfinite(eiv) else est
-            # one-sided in the estimate's own direction: a SIMEX estimate of the opposite sign
-            # (eiv_fraction > 1) says angle errors made the whole term, so p = 1
-            p_simex = (float(2.0 * scipy.stats.t.sf(max(math.copysign(1.0, est) * est_simex, 0.0) / se, fa.dof_eff))
-                       if se > 0 else float("nan"))
+            eiv = simex_fraction(simex, model, c.regressor, y, est, simex_cache)
+            est_simex, p_simex = simex_corrected(est, se, eiv, fa.dof_eff)
             d = sse_b - sse_a
             d = d[np.isfinite(d)]
             tot = float(np.sum(np.abs(d)))
@@ -327,7 +323,7 @@ def diagnose(flight_data: pd.DataFrame, vehicle, models: dict[str, ChannelModel]
         from aerosid.diagnosis.localise import localise
 
         loc = localise(signals, {ch: fd[ch].to_numpy(float) for ch in models}, models, t, groups, win,
-                       vehicle.mach_reference, float(angle_sigma_rad))
+                       vehicle.mach_reference, float(angle_sigma_rad), simex=simex)
     return Diagnosis(tuple(ranked), reports, models, n, window, int(win.max()) + 1,
                      identities, looks, recommended, floor, loc, n_flights,
                      bool(getattr(vehicle, "turbulent_air", False)))
@@ -348,12 +344,23 @@ def _simex_signals(fd: pd.DataFrame, vehicle, sigma: float) -> dict:
     return out
 
 
-def _simex_fraction(simex: dict, model: ChannelModel, c: Candidate, y: np.ndarray, est: float,
+def simex_corrected(est: float, se: float, eiv_fraction: float, dof: float) -> tuple[float, float]:
+    """(estimate corrected for the angle errors, its two-sided p with the uncorrected sigma):
+    one-sided in the estimate's own direction, so a SIMEX estimate of the opposite sign
+    (eiv_fraction > 1: angle errors made the whole term) has p = 1."""
+    est_simex = est * (1.0 - eiv_fraction) if math.isfinite(eiv_fraction) else est
+    p = (float(2.0 * scipy.stats.t.sf(max(math.copysign(1.0, est) * est_simex, 0.0) / se, dof))
+         if se > 0 else float("nan"))
+    return est_simex, p
+
+
+def simex_fraction(simex: dict, model: ChannelModel, regressor, y: np.ndarray, est: float,
                     cache: dict | None = None) -> float:
     """SIMEX (Cook & Stefanski 1994): refit with extra angle noise of variance lambda sigma^2
     (lambda = 1, 2), extrapolate the estimate quadratically to lambda = -1 (no angle error)
     and return the share of the estimate the angle errors account for, 1 - theta(-1)/theta(0).
-    ~1: the term exists only because the angles are noisy; <= 0: a real, attenuated effect."""
+    ~1: the term exists only because the angles are noisy; <= 0: a real, attenuated effect.
+    regressor: signals -> the added column."""
     if not simex or not (math.isfinite(est) and est != 0.0):
         return float("nan")
     means = []
@@ -367,7 +374,7 @@ def _simex_fraction(simex: dict, model: ChannelModel, c: Candidate, y: np.ndarra
                     cache[key] = base
             else:
                 base = cache[key]
-            A = np.column_stack([base, c.regressor(sig)])
+            A = np.column_stack([base, regressor(sig)])
             th.append(_scaled_lstsq(A, y)[-1] if np.all(np.isfinite(A)) else math.nan)
         # the draws come in antithetic pairs (i, i + 1): a pair with a non-finite design is
         # dropped whole, so the terms odd in the noise still cancel in the rest

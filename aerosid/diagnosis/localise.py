@@ -7,7 +7,7 @@ turns a clear pattern into a suggested expression for the model spec:
 ``shape``
     The partial residual (residual + the term's own part) against every signal the
     model reads and against Mach, q-bar and time: a low-order shape is added to the
-    model (x**2, x*abs(x), x**3 for a regressor; the 2nd and 4th harmonics for phi_r;
+    model (x**2, abs(x), x*abs(x), x**3 for a regressor; the 2nd and 4th harmonics for phi_r;
     a line and a parabola for Mach, q-bar and t) and the best shape per signal is kept.
     "residual bends as alpha**3 in Cm" -> ``Cm_alpha3 = alpha**3``.
 ``trend``
@@ -56,8 +56,16 @@ IDENTITY_RATIO = 1e-3
 #: Findings kept per channel: every significant one, and the strongest non-significant ones up to this.
 MAX_PER_CHANNEL = 3
 #: A shape whose column gets more than this share of its variance from the recovered angles'
-#: own errors is not called significant: errors in the variable bend its partial residual.
+#: own errors is significant only if its estimate corrected for them (SIMEX, the catalogue's
+#: check) still is: errors in the variable bend its partial residual by themselves.
 MAX_ERROR_VARIANCE_SHARE = 0.05
+#: The recorded angles, whose shapes may pass that guard by the SIMEX check.  Not alpha_r and
+#: phi_r: functions of both angles that are singular at alpha_r = 0, where SIMEX's extrapolation
+#: does not hold and the band's low-pass bends their harmonics by itself (on the no-effect
+#: seed-rlv flights sin(2 phi_r) in C_l passed SIMEX in 4/10).
+SIMEX_CHECKED = ("alpha", "beta")
+#: Kink positions tried for an abs(x) shape (between the 5th and 95th percentile of x).
+KINK_SCAN_POINTS = 81
 CONTROLS = ("delta_p", "delta_y", "delta_r")
 SLOW = ("mach", "qbar", "t")  # the flight-condition variables
 _UNITS = {"mach": "-", "qbar": "Pa", "t": "s"}
@@ -86,7 +94,11 @@ def _shapes(var: str, x: np.ndarray, mach_ref: float) -> list[tuple[str, str]]:
         c = mach_ref if var == "mach" else _centre(x)
         d = f"({var} - {_num(c)})"
         return [(var, d), (f"{var}2", f"{d}**2")]
-    return [(f"{var}2", f"{var}**2"), (f"abs_{var}", f"{var}*abs({var})"), (f"{var}3", f"{var}**3")]
+    # named as the catalogue names them (Cm_abs_beta = abs(beta), Cn_beta_abs_beta = beta*abs(beta));
+    # abs(x) is a kink at zero: an effect that does not change sign with x (a JSBSim DHC6's roll
+    # moment grows as 0.41 |beta| at low alpha)
+    return [(f"{var}2", f"{var}**2"), (f"abs_{var}", f"abs({var})"), (f"{var}_abs_{var}", f"{var}*abs({var})"),
+            (f"{var}3", f"{var}**3")]
 
 
 def _shift(t: np.ndarray, u: np.ndarray, groups: np.ndarray, tau: float) -> np.ndarray:
@@ -214,7 +226,22 @@ def _perturbed(signals: dict, sigma: float) -> dict | None:
     return out
 
 
-def _shape_findings(c: _Channel, mach_ref: float, perturbed: dict | None) -> list[Finding]:
+def _simex_check(c: _Channel, expr: str, r: dict, simex: dict | None, cache: dict) -> dict:
+    """The catalogue's errors-in-variables check of an added shape: refits with extra angle
+    noise (aerosid.diagnosis.core.simex_fraction), the estimate extrapolated to no angle
+    error and its p with the uncorrected sigma; {} without SIMEX draws."""
+    if not simex:
+        return {}
+    from aerosid.diagnosis.core import simex_fraction, simex_corrected
+
+    est = r["estimate"]
+    eiv = simex_fraction(simex, c.model, lambda sig: evaluate(expr, sig, c.n), c.y, est, cache)
+    est_s, p_s = simex_corrected(est, r["std_error"], eiv, float(r["fit"].dof_eff))
+    return {"eiv_fraction": eiv, "estimate_simex": est_s, "p_value_simex": p_s}
+
+
+def _shape_findings(c: _Channel, mach_ref: float, perturbed: dict | None, simex: dict | None = None,
+                    cache: dict | None = None) -> list[Finding]:
     out = []
     model_vars = sorted(set().union(*(signal_names(t.expression, c.signals) for t in c.model.terms)) - {"t"})
     for var in [v for v in model_vars if v in c.signals] + [v for v in SLOW if v not in model_vars]:
@@ -224,15 +251,28 @@ def _shape_findings(c: _Channel, mach_ref: float, perturbed: dict | None) -> lis
         tried = []
         for suffix, expr in _shapes(var, x, mach_ref):
             r = c.test(f"{c.ch}_{suffix}", evaluate(expr, c.signals, c.n))
+            kink = {}
+            if r is not None and expr == f"abs({var})":  # the kink where the flight puts it
+                kink = _kink_scan(c, var, x, r)
+                moved = c.test(f"{c.ch}_{suffix}", evaluate(kink["kink_expression"], c.signals, c.n)) \
+                    if "kink_expression" in kink else None
+                if moved is not None:
+                    expr, r = kink["kink_expression"], moved
             if r is not None:
-                tried.append((suffix, expr, r))
+                tried.append((suffix, expr, r, kink))
         if not tried:
             continue
-        suffix, expr, r = max(tried, key=lambda s: abs(s[2]["t_value"]))
+        suffix, expr, r, kink = max(tried, key=lambda s: abs(s[2]["t_value"]))
         reasons = _rule(r)
+        from aerosid.diagnosis.rule import P_MAX
+
         share = _error_share(expr, c.signals, perturbed)
-        if share > MAX_ERROR_VARIANCE_SHARE:
-            reasons.append(f"the errors of the recovered angles make {share:.0%} of the variance of {expr}: "
+        eiv = _simex_check(c, expr, r, simex, {} if cache is None else cache) \
+            if share > MAX_ERROR_VARIANCE_SHARE and var in SIMEX_CHECKED else {}
+        if share > MAX_ERROR_VARIANCE_SHARE and not eiv.get("p_value_simex", 1.0) < P_MAX:
+            corrected = (f"; corrected for them (SIMEX) its estimate is {eiv['estimate_simex']:.3g}, "
+                         f"p = {eiv['p_value_simex']:.2g}" if eiv else "")
+            reasons.append(f"the errors of the recovered angles make {share:.0%} of the variance of {expr}{corrected}: "
                            "they bend its partial residual by themselves (errors in variables)")
         # partial residual: residual + the model's own part in this variable
         own = np.zeros(c.n)
@@ -241,13 +281,55 @@ def _shape_findings(c: _Channel, mach_ref: float, perturbed: dict | None) -> lis
                 own += c.base.estimate[i] * c.Ab[:, i]
         others = {s[1]: round(s[2]["t_value"], 2) for s in tried}
         bend = "bends as" if var not in SLOW else "varies as"
-        msg = (f"{c.ch}: the partial residual against {var} {bend} {expr} ({_stats_text(r)}); "
+        where = (f" (its kink is at {var} = {kink['kink_at']:.2g}, not 0: moving it there leaves "
+                 f"{1.0 - kink['kink_rss_drop']:.0%} of the residual variance of abs({var}), p = "
+                 f"{kink['kink_p_value']:.2g})") if "kink_expression" in kink else ""
+        msg = (f"{c.ch}: the partial residual against {var} {bend} {expr}{where} ({_stats_text(r)}); "
                f"add `{c.ch}_{suffix} = {expr}` to [{c.ch}]")
-        out.append(Finding(c.ch, "shape", var, not reasons, f"{c.ch}_{suffix}", expr, r["estimate"], r["std_error"],
-                           r["t_value"], r["p_value"], r["variance_share"], r["window_consistency"], r["n_eff"], msg,
-                           evidence={"shapes_t": others, "error_variance_share": share,
+        out.append(Finding(c.ch, "shape", var, not reasons, f"{c.ch}_{suffix}", expr, r["estimate"],
+                           r["std_error"], r["t_value"], r["p_value"], r["variance_share"], r["window_consistency"],
+                           r["n_eff"], msg,
+                           evidence={"shapes_t": others, "error_variance_share": share, **eiv, **kink,
                                      **_binned_partial(x, c.resid + own)},
                            reasons=tuple(reasons), perp=r["perp"], column=r["column"]))
+    return out
+
+
+def _kink_scan(c: _Channel, var: str, x: np.ndarray, r: dict) -> dict:
+    """Where the kink of an abs(x) shape sits: the base model + abs(x - k) refitted for k over
+    KINK_SCAN_POINTS points within one standard deviation of x from zero and between its 20th
+    and 80th percentile.  The kink of an effect even in x sits at x's true zero, which the record
+    misses by its calibration bias (a fraction of the excursions), and both arms must be flown:
+    a kink farther out is a hinge that bends like x**2 or x**3 and takes their place (a cubic
+    in alpha was suggested as abs(alpha - 0.052) on 3 of 10 seed-rlv flights without the first
+    bound, 4 of 10 with the 5th..95th percentile instead of the second).  An effect that is even
+    in the true x kinks where the *recorded* x has its offset (a vane's calibration bias: -0.3
+    deg of beta put a JSBSim DHC6's |beta| roll moment at 0.56 of its size, and its C_l,p at
+    0.6).  The optimum is suggested (``kink_expression``) when moving the kink there lowers the
+    residual more than one more parameter would by chance: F-test, 1 and N_eff - p degrees of
+    freedom (the coloured residual's effective count), p < P_MAX; else abs(x) stands."""
+    from aerosid.diagnosis.rule import P_MAX
+
+    lo, hi = np.quantile(x, [0.2, 0.8])
+    s = float(np.std(x))
+    lo, hi = max(lo, -s), min(hi, s)
+    ks = np.unique(np.r_[np.linspace(lo, hi, KINK_SCAN_POINTS) if lo < hi else [], 0.0])
+    A = np.column_stack([c.Ab, np.zeros(c.n)])
+    rss = []
+    for k in ks:
+        A[:, -1] = np.abs(x - k)
+        e = c.y - A @ c._lstsq(A, c.y)
+        rss.append(float(e @ e))
+    rss = np.asarray(rss)
+    i, i0 = int(np.argmin(rss)), int(np.flatnonzero(ks == 0.0)[0])
+    dof = max(float(r["n_eff"]) - A.shape[1], 1.0)
+    f = (rss[i0] - rss[i]) / (rss[i] / dof) if rss[i] > 0 else 0.0
+    p = float(scipy.stats.f.sf(f, 1, dof)) if f > 0 else 1.0
+    out = {"kink_at": float(ks[i]), "kink_rss_drop": float(1.0 - rss[i] / rss[i0]) if rss[i0] > 0 else 0.0,
+           "kink_p_value": p}
+    if p < P_MAX and ks[i] != 0.0:
+        k = float(f"{ks[i]:.2g}")
+        out["kink_expression"] = f"abs({var} {'-' if k > 0 else '+'} {_num(abs(k))})"
     return out
 
 
@@ -443,17 +525,21 @@ def _shadows(c: _Channel, findings: list[Finding]) -> list[Finding]:
 
 # --------------------------------------------------------------------------- entry point
 def localise(signals: dict, y_by_channel: dict, models: dict, t: np.ndarray, groups: np.ndarray, win: np.ndarray,
-             mach_reference: float, angle_sigma_rad: float = 0.0) -> dict[str, tuple[Finding, ...]]:
+             mach_reference: float, angle_sigma_rad: float = 0.0,
+             simex: dict | None = None) -> dict[str, tuple[Finding, ...]]:
     """Localisation findings per channel (significant first, then by |t|): every
     significant one and the strongest others up to MAX_PER_CHANNEL.
 
     signals: the model signals on the diagnosed samples (the diagnosis' own);
     y_by_channel: measured coefficient per channel; win: time-window index per sample;
     angle_sigma_rad: 1-sigma error of the recovered angles (for the errors-in-variables
-    guard of the shapes: a shape the angle errors make by themselves is not significant)."""
+    guard of the shapes: a shape the angle errors make by themselves is not significant);
+    simex: the diagnosis' SIMEX draws of the signals ({lambda: [signals]}, aerosid.diagnosis.core):
+    a shape the angle errors could bend is significant only if its SIMEX-corrected estimate is."""
     from aerosid.diagnosis.rule import CONFUSION_R
 
     perturbed = _perturbed(signals, float(angle_sigma_rad))
+    cache: dict = {}  # the SIMEX draws' base designs per channel
     result: dict[str, tuple[Finding, ...]] = {}
     for ch, model in models.items():
         y = np.asarray(y_by_channel[ch], float)
@@ -461,7 +547,7 @@ def localise(signals: dict, y_by_channel: dict, models: dict, t: np.ndarray, gro
         if not (np.std(y) > 0) or float(np.std(c.resid)) < IDENTITY_RATIO * float(np.std(y)):
             result[ch] = ()  # an identity by construction (the angles were inverted from this channel)
             continue
-        found = _shape_findings(c, mach_reference, perturbed) + _trend_findings(c, mach_reference, t) + \
+        found = _shape_findings(c, mach_reference, perturbed, simex, cache) + _trend_findings(c, mach_reference, t) + \
             _lag_findings(c, t, groups)
         found = _confusions(found, CONFUSION_R)
         found = _shadows(c, found)
