@@ -180,6 +180,29 @@ def test_kink_in_beta_is_localised_where_it_sits(reference_flight, vehicle):
     assert f.evidence["kink_p_value"] < 1e-3 and "its kink is at beta = " in f.message
 
 
+def test_derivative_scheduled_on_alpha_is_found_with_a_biased_beta_record(reference_flight, vehicle):
+    """Cn_beta grows with alpha (Cn += k beta (alpha - mean), a quarter of the Cn variation), and
+    the beta record is 0.3 deg off (a vane's calibration bias).  beta_record x alpha holds
+    -0.3 deg x alpha, which Cn's model (no alpha term) cannot absorb: tested without alpha itself
+    beside it, the schedule is lost in that; with it, Cn_beta's trend with alpha is found."""
+    from aerosid.identification.inversion import total_angles
+
+    truth = reference_flight.truth.copy()
+    win = (truth["mach"] - vehicle.mach_reference).abs() <= 0.5
+    a = truth["alpha_rad"].to_numpy()
+    col = truth["beta_rad"].to_numpy() * (a - a[win].mean())
+    truth["Cn"] = truth["Cn"] + 0.25 * truth.loc[win, "Cn"].std() / np.std(col[win]) * col
+    fd = flight_data_from_truth(truth, NOISE, seed=1)
+    fd["beta_rad"] = fd["beta_rad"] - np.radians(0.3)
+    fd["alpha_r_rad"], fd["phi_r_rad"] = total_angles(fd["alpha_rad"], fd["beta_rad"])
+    d = diagnose(fd, vehicle)
+    found = [f for f in _significant(d, "Cn") if f.kind == "trend" and f.variable == "alpha"]
+    assert [f.coefficient for f in found] == ["Cn_beta"], [f.message for f in d.localisation["Cn"]]
+    f = found[0]
+    assert f.suggested_expression.startswith("beta*(alpha - ") and f.evidence["main_effect"] == "Cn_alpha"
+    assert "`Cn_alpha = alpha`" in f.message
+
+
 def test_shape_the_angle_errors_could_bend_passes_by_its_simex_estimate(reference_flight, vehicle):
     """At the full measured noise the recorded beta's errors make a third of the variance of a
     beta shape: more than the guard's 5 %, so the shape is significant only if its estimate

@@ -37,6 +37,8 @@ class Finding:
     perp: np.ndarray | None = field(default=None, repr=False, compare=False)
     #: the added column itself (for the shadow check)
     column: np.ndarray | None = field(default=None, repr=False, compare=False)
+    #: columns tested beside it, ((name, column), ...): a schedule's main effect (for the shadow check)
+    given: tuple = field(default=(), repr=False, compare=False)
 
     @property
     def id(self) -> str:

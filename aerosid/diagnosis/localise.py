@@ -7,19 +7,22 @@ turns a clear pattern into a suggested expression for the model spec:
 ``shape``
     The partial residual (residual + the term's own part) against every signal the
     model reads and against Mach, q-bar and time: a low-order shape is added to the
-    model (x**2, abs(x), x*abs(x), x**3 for a regressor; the 2nd and 4th harmonics for phi_r;
-    a line and a parabola for Mach, q-bar and t) and the best shape per signal is kept.
+    model (x**2, abs(x - k) with the kink k scanned, x*abs(x), x**3 for a regressor; the 2nd
+    and 4th harmonics for phi_r; a line and a parabola for Mach, q-bar and t) and the best shape
+    per signal is kept.
     "residual bends as alpha**3 in Cm" -> ``Cm_alpha3 = alpha**3``.
 ``trend``
     Each coefficient against time, Mach and q-bar: the term times the variable is added
     (``alpha*t``: Cm_alpha changing linearly with time); the coefficient is also fitted
     per time window and its estimates regressed on the window time (evidence).
-    "Cm_alpha drifts +5 %/min" -> ``Cm_alpha_t = alpha*t``.
+    "Cm_alpha drifts +5 %/min" -> ``Cm_alpha_t = alpha*t``.  Also against alpha, as a finding
+    of its own (a derivative scheduled on the angle of attack): ``Cn_beta_alpha = beta*(alpha - 0.04)``.
 ``lag``
     Each control the model reads, shifted by tau: the refit's residual over
     tau = -200 ... +200 ms (the scan's optimum) and, to first order,
     u(t - tau) = u(t) - tau u_dot: the fin rate's term is added and
     tau = -b_dot / b_u.  "control lag ~ 40 ms" -> ``Cm_delta_p_dot = delta_p_dot/2``.
+    (Trends and lags: :mod:`aerosid.diagnosis.trends`.)
 
 Every test is the catalogue's test (the same rule, coloured-residual honest): the
 added column's t with the Morelli-Klein sigma (``fit_linear(cov="morelli_klein")``,
@@ -39,7 +42,6 @@ import math
 import re
 
 import numpy as np
-import pandas as pd
 import scipy.stats
 
 from aerosid.diagnosis.finding import Finding, localisation_hint, localisation_text
@@ -64,11 +66,13 @@ MAX_ERROR_VARIANCE_SHARE = 0.05
 #: does not hold and the band's low-pass bends their harmonics by itself (on the no-effect
 #: seed-rlv flights sin(2 phi_r) in C_l passed SIMEX in 4/10).
 SIMEX_CHECKED = ("alpha", "beta")
-#: Kink positions tried for an abs(x) shape (between the 5th and 95th percentile of x).
+#: Kink positions tried for an abs(x) shape (aerosid.diagnosis.localise._kink_scan).
 KINK_SCAN_POINTS = 81
 CONTROLS = ("delta_p", "delta_y", "delta_r")
 SLOW = ("mach", "qbar", "t")  # the flight-condition variables
-_UNITS = {"mach": "-", "qbar": "Pa", "t": "s"}
+#: What a coefficient may be scheduled on besides the flight condition (a trend of its own).
+SCHEDULES = ("alpha",)
+_UNITS = {"mach": "unit Mach", "qbar": "Pa", "t": "s", "alpha": "rad of alpha"}
 
 
 # --------------------------------------------------------------------------- helpers
@@ -99,15 +103,6 @@ def _shapes(var: str, x: np.ndarray, mach_ref: float) -> list[tuple[str, str]]:
     # moment grows as 0.41 |beta| at low alpha)
     return [(f"{var}2", f"{var}**2"), (f"abs_{var}", f"abs({var})"), (f"{var}_abs_{var}", f"{var}*abs({var})"),
             (f"{var}3", f"{var}**3")]
-
-
-def _shift(t: np.ndarray, u: np.ndarray, groups: np.ndarray, tau: float) -> np.ndarray:
-    """u(t - tau) within each contiguous group (held at the ends)."""
-    out = np.empty_like(u)
-    for g in pd.unique(groups):
-        m = groups == g
-        out[m] = np.interp(t[m] - tau, t[m], u[m])
-    return out
 
 
 # --------------------------------------------------------------------------- the tests
@@ -333,144 +328,6 @@ def _kink_scan(c: _Channel, var: str, x: np.ndarray, r: dict) -> dict:
     return out
 
 
-def _trend_findings(c: _Channel, mach_ref: float, t: np.ndarray) -> list[Finding]:
-    out = []
-    for i, term in enumerate(c.model.terms):
-        names = signal_names(term.expression, c.signals)
-        if not names or "t" in names:
-            continue  # the intercept's trend is the partial residual against t (a shape)
-        e = c.Ab[:, i]
-        b = float(c.base.estimate[i])
-        tried = []
-        for var in SLOW:
-            v = np.asarray(c.signals[var], float)
-            if not np.all(np.isfinite(v)) or np.ptp(v) <= 0:
-                continue
-            if var == "mach":
-                expr, col = f"{_wrap(term.expression)}*(mach - {_num(mach_ref)})", e * (v - mach_ref)
-            else:
-                expr, col = f"{_wrap(term.expression)}*{var}", e * v
-            r = c.test(f"{term.coefficient}_{var}", col)
-            if r is not None:
-                tried.append((var, expr, r))
-        if not tried:
-            continue
-        var, expr, r = max(tried, key=lambda s: abs(s[2]["t_value"]))
-        from aerosid.diagnosis.rule import CONFUSION_R
-
-        alike = tuple(f"trend:{term.coefficient}:{v}" for v, _, o in tried
-                      if v != var and _corr(r["perp"], o["perp"]) >= CONFUSION_R)
-        reasons = _rule(r)
-        rel = r["estimate"] / b if b != 0 else float("nan")  # relative change of the coefficient per unit
-        ev = {"relative_change_per_unit": rel, "coefficient_mean": b,
-              "variable_range": [float(np.min(c.signals[var])), float(np.max(c.signals[var]))],
-              "others_t": {s[0]: round(s[2]["t_value"], 2) for s in tried}}
-        if var == "t":
-            ev["change_pct_per_min"] = 100.0 * 60.0 * rel
-            rate = f"{100.0 * 60.0 * rel:+.2g} %/min ({100.0 * rel * float(np.ptp(t)):+.2g} % over {np.ptp(t):.0f} s)"
-        else:
-            rate = f"{100.0 * rel:+.2g} % per {'unit Mach' if var == 'mach' else 'Pa'}"
-        ev.update(_window_slope(c, i, t))
-        also = [a.rsplit(":", 1)[1] for a in alike]
-        with_var = f"{var} (or {' or '.join(also)}: they move together on this flight)" if also else var
-        msg = (f"{c.ch}: {term.coefficient} {'drifts' if var == 't' else 'changes'} {rate} with {with_var} "
-               f"({_stats_text(r)}; per-window estimates: slope p = {ev.get('window_slope_p', float('nan')):.2g}); "
-               f"add `{term.coefficient}_{var} = {expr}` to [{c.ch}]")
-        out.append(Finding(c.ch, "trend", var, not reasons, f"{term.coefficient}_{var}", expr, r["estimate"],
-                           r["std_error"], r["t_value"], r["p_value"], r["variance_share"], r["window_consistency"],
-                           r["n_eff"], msg, coefficient=term.coefficient, evidence=ev, reasons=tuple(reasons),
-                           confused_with=alike, perp=r["perp"], column=r["column"]))
-    return out
-
-
-def _window_slope(c: _Channel, i: int, t: np.ndarray) -> dict:
-    """Coefficient i fitted per time window (Morelli-Klein sigma) and its estimates regressed
-    on the window's mean time (weighted; sigma inflated by sqrt(max(chi2/dof, 1)))."""
-    est, se, tm = [], [], []
-    for k in np.unique(c.win):
-        m = c.win == k
-        try:
-            f = fit_linear(c.y[m], c.Xb.loc[m], names=c.model.names, channel=c.ch, cov="morelli_klein")
-        except ValueError:
-            continue
-        if f.identifiable[i] and math.isfinite(f.std_error[i]) and f.std_error[i] > 0:
-            est.append(float(f.estimate[i]))
-            se.append(float(f.std_error[i]))
-            tm.append(float(np.mean(t[m])))
-    if len(est) < 4:
-        return {}
-    est, se, tm = map(np.asarray, (est, se, tm))
-    w = 1.0 / se**2
-    A = np.column_stack([np.ones_like(tm), tm - np.average(tm, weights=w)])
-    cov = np.linalg.inv(A.T @ (A * w[:, None]))
-    coef = cov @ (A.T @ (w * est))
-    chi2 = float(np.sum(w * (est - A @ coef) ** 2))
-    dof = len(est) - 2
-    s = math.sqrt(cov[1, 1] * max(chi2 / dof, 1.0))
-    tv = coef[1] / s if s > 0 else float("nan")
-    return {"window_estimates": [float(v) for v in est], "window_std_errors": [float(v) for v in se],
-            "window_t_s": [float(v) for v in tm], "window_slope_per_s": float(coef[1]),
-            "window_slope_p": float(2.0 * scipy.stats.t.sf(abs(tv), dof)) if math.isfinite(tv) else float("nan")}
-
-
-def _lag_findings(c: _Channel, t: np.ndarray, groups: np.ndarray) -> list[Finding]:
-    out = []
-    for i, term in enumerate(c.model.terms):
-        names = signal_names(term.expression, c.signals)
-        ctrl = [u for u in CONTROLS if u in names]
-        if len(ctrl) != 1 or f"{ctrl[0]}_dot" not in c.signals:
-            continue
-        u = ctrl[0]
-        expr = re.sub(rf"\b{u}\b", f"{u}_dot", term.expression)
-        r = c.test(f"{term.coefficient}_dot", evaluate(expr, c.signals, c.n))
-        if r is None:
-            continue
-        fa, j = r["fit"], r["j"]
-        b_u, b_d = float(fa.estimate[i]), r["estimate"]
-        tau = -b_d / b_u if b_u != 0 else float("nan")
-        # delta method: tau = -b_d/b_u (the added column was fitted scaled by 1/r["scale"])
-        unscale = np.diag([1.0, 1.0 / r["scale"]])
-        cov = unscale @ np.asarray(fa.cov)[np.ix_([i, j], [i, j])] @ unscale
-        g = np.array([b_d / b_u**2, -1.0 / b_u]) if b_u != 0 else np.full(2, np.nan)
-        tau_se = float(math.sqrt(max(g @ cov @ g, 0.0))) if np.all(np.isfinite(cov)) else float("nan")
-        scan = _lag_scan(c, i, term.expression, u, t, groups)
-        reasons = _rule(r)
-        if not abs(tau) <= LAG_SCAN_S:
-            reasons.append(f"the implied lag {1e3 * tau:.0f} ms is outside +-{1e3 * LAG_SCAN_S:.0f} ms")
-        what = "lag" if tau > 0 else "lead"
-        msg = (f"{c.ch}: control {what} of about {1e3 * abs(tau):.0f} ± {1e3 * tau_se:.0f} ms on {u} "
-               f"(refit with {u} shifted: optimum at {1e3 * scan['lag_scan_s']:+.0f} ms; {_stats_text(r)}); "
-               f"add `{term.coefficient}_dot = {expr}` to [{c.ch}] (its coefficient is -lag x {term.coefficient})")
-        out.append(Finding(c.ch, "lag", u, not reasons, f"{term.coefficient}_dot", expr, r["estimate"],
-                           r["std_error"], r["t_value"], r["p_value"], r["variance_share"], r["window_consistency"],
-                           r["n_eff"], msg, coefficient=term.coefficient,
-                           evidence={"lag_s": tau, "lag_std_s": tau_se, **scan}, reasons=tuple(reasons),
-                           perp=r["perp"], column=r["column"]))
-    return out
-
-
-def _lag_scan(c: _Channel, i: int, expression: str, u: str, t: np.ndarray, groups: np.ndarray) -> dict:
-    """RSS of the base model with the control shifted by tau (u(t - tau)) over +-LAG_SCAN_S."""
-    dt = float(np.median(np.diff(t))) if t.size > 1 else 0.01
-    step = max(dt, 0.005)
-    taus = np.arange(-LAG_SCAN_S, LAG_SCAN_S + 0.5 * step, step)
-    rss = []
-    sig = dict(c.signals)
-    u0 = np.asarray(c.signals[u], float)
-    A = c.Ab.copy()
-    for tau in taus:
-        sig[u] = _shift(t, u0, groups, tau)
-        A[:, i] = evaluate(expression, sig, c.n)
-        e = c.y - A @ c._lstsq(A, c.y)
-        rss.append(float(e @ e))
-    rss = np.asarray(rss)
-    k = int(np.argmin(rss))
-    k0 = int(np.argmin(np.abs(taus)))
-    return {"lag_scan_s": float(taus[k]), "lag_scan_rss_drop": float(1.0 - rss[k] / rss[k0]) if rss[k0] > 0 else 0.0,
-            "lag_scan_tau_s": [round(float(v), 4) for v in taus[:: max(1, len(taus) // 20)]],
-            "lag_scan_rss": [float(v) for v in rss[:: max(1, len(taus) // 20)]]}
-
-
 def _corr(a: np.ndarray, b: np.ndarray) -> float:
     den = float(np.linalg.norm(a) * np.linalg.norm(b))
     return abs(float(a @ b)) / den if den > 0 else 0.0
@@ -502,8 +359,9 @@ def _shadows(c: _Channel, findings: list[Finding]) -> list[Finding]:
     for a in range(len(sig)):
         for b in range(len(sig)):
             if a != b:
-                r = c.test(sig[a].suggested_coefficient, sig[a].column,
-                           given=((sig[b].suggested_coefficient, sig[b].column),))
+                given = dict(sig[a].given + sig[b].given)  # the main effects, once each
+                given[sig[b].suggested_coefficient] = sig[b].column
+                r = c.test(sig[a].suggested_coefficient, sig[a].column, given=tuple(given.items()))
                 passes[a, b] = (r is not None and not _rule(r), r)
     out = {id(f): f for f in findings}
     for a in range(len(sig)):
@@ -537,6 +395,7 @@ def localise(signals: dict, y_by_channel: dict, models: dict, t: np.ndarray, gro
     simex: the diagnosis' SIMEX draws of the signals ({lambda: [signals]}, aerosid.diagnosis.core):
     a shape the angle errors could bend is significant only if its SIMEX-corrected estimate is."""
     from aerosid.diagnosis.rule import CONFUSION_R
+    from aerosid.diagnosis.trends import _lag_findings, _trend_findings
 
     perturbed = _perturbed(signals, float(angle_sigma_rad))
     cache: dict = {}  # the SIMEX draws' base designs per channel

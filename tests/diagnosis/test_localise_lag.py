@@ -14,7 +14,8 @@ import pytest
 import scipy.signal
 import scipy.stats
 
-from aerosid.diagnosis.localise import _Channel, _lag_findings
+from aerosid.diagnosis.localise import _Channel
+from aerosid.diagnosis.trends import _lag_findings
 from aerosid.modelling.models import ChannelModel, Term
 
 FS_HZ = 100.0
