@@ -227,6 +227,24 @@ def test_no_effect_flight_has_no_significant_localisation(reference_flight, vehi
         assert set(d.localisation) == {"CN", "Cm", "CY", "Cn", "Cl"}
 
 
+def test_loop_is_not_closed_while_the_localisation_finds_a_term(hidden_flights, vehicle):
+    """The catalogue may have nothing left while a term outside it is still missing: then the
+    message must not say "Nothing significant is missing", and the loop is not closed."""
+    from dataclasses import replace
+
+    d = _diagnosis(hidden_flights["pitch_control_lag"], vehicle)
+    lag = [f for f in _significant(d, "Cm") if f.kind == "lag"]
+    assert lag and d.localised
+    quiet = replace(d, effects=tuple(replace(e, significant=False) for e in d.effects), lookalikes=(),
+                    recommended=None)
+    assert quiet.nothing_significant and not quiet.loop_closed
+    assert quiet.message.startswith("No catalogue effect is missing, but the model is not complete")
+    assert "Outside the catalogue, the localisation finds" in quiet.message
+    closed = replace(quiet, localisation={ch: tuple(f for f in fs if not f.significant)
+                                          for ch, fs in d.localisation.items()})
+    assert closed.loop_closed and closed.message.startswith("Nothing significant is missing")
+
+
 def test_localisation_is_in_the_json_and_the_summary(hidden_flights, vehicle):
     d = _diagnosis(hidden_flights["pitch_control_lag"], vehicle)
     doc = json.loads(json.dumps(d.to_json()))

@@ -235,9 +235,10 @@ class Diagnosis:
 
     @property
     def loop_closed(self) -> bool:
-        """Nothing significant is missing and no look-alike choice is open or refuted."""
-        return self.nothing_significant and not any(c.swap or (c.in_model and c.verdict != "separated")
-                                                    for c in self.lookalikes)
+        """Nothing significant is missing (in the catalogue or outside it: no significant
+        localisation finding) and no look-alike choice is open or refuted."""
+        return self.nothing_significant and not self.localised and not any(
+            c.swap or (c.in_model and c.verdict != "separated") for c in self.lookalikes)
     #: channel -> localisation findings (aerosid.diagnosis.localise), best first
     localisation: dict = field(default_factory=dict)
     #: flights pooled in the diagnosed data (`aerosid run A B`): the message speaks of "these N
@@ -253,7 +254,13 @@ class Diagnosis:
 
     @property
     def nothing_significant(self) -> bool:
+        """No catalogue candidate passes the rule (the localisation may still find a term)."""
         return not self.significant
+
+    @property
+    def localised(self) -> tuple:
+        """The significant localisation findings (terms outside the catalogue)."""
+        return tuple(f for fs in self.localisation.values() for f in fs if f.significant)
 
     @property
     def top(self) -> EffectEvidence | None:
@@ -319,7 +326,10 @@ class Diagnosis:
         unident = [e.name for e in self.effects if not e.identifiable]
         cannot = (f" Not separable from the model's own terms on this flight (so not tested): "
                   f"{', '.join(unident)}." if unident else "")
-        return ("Nothing significant is missing: no candidate effect passes the rule (corrected p < "
+        head = ("Nothing significant is missing: no candidate effect passes" if not self.localised else
+                "No catalogue effect is missing, but the model is not complete (the localisation below finds a "
+                "term outside the catalogue): no candidate effect passes")
+        return (f"{head} the rule (corrected p < "
                 f"{P_MAX:g}, consistency >= {MIN_WINDOW_CONSISTENCY:.0%}, >= {MIN_VARIANCE_SHARE:.0%} of the "
                 f"residual variance).{strongest}{cannot} {where}")
 
