@@ -45,6 +45,7 @@ import numpy as np
 import scipy.stats
 
 from aerosid.diagnosis.finding import Finding, localisation_hint, localisation_text
+from aerosid.diagnosis.rule import CONFUSION_R, MIN_VARIANCE_SHARE, MIN_WINDOW_CONSISTENCY, P_MAX
 from aerosid.modelling.expressions import evaluate, signal_names
 from aerosid.identification.regression import fit_linear
 
@@ -166,8 +167,6 @@ class _Channel:
 
 
 def _rule(r: dict) -> list[str]:
-    from aerosid.diagnosis.rule import MIN_VARIANCE_SHARE, MIN_WINDOW_CONSISTENCY, P_MAX
-
     reasons = []
     if not r["p_value"] < P_MAX:
         reasons.append(f"corrected p = {r['p_value']:.2g} >= {P_MAX:g}")
@@ -259,8 +258,6 @@ def _shape_findings(c: _Channel, mach_ref: float, perturbed: dict | None, simex:
             continue
         suffix, expr, r, kink = max(tried, key=lambda s: abs(s[2]["t_value"]))
         reasons = _rule(r)
-        from aerosid.diagnosis.rule import P_MAX
-
         share = _error_share(expr, c.signals, perturbed)
         eiv = _simex_check(c, expr, r, simex, {} if cache is None else cache) \
             if share > MAX_ERROR_VARIANCE_SHARE and var in SIMEX_CHECKED else {}
@@ -303,8 +300,6 @@ def _kink_scan(c: _Channel, var: str, x: np.ndarray, r: dict) -> dict:
     0.6).  The optimum is suggested (``kink_expression``) when moving the kink there lowers the
     residual more than one more parameter would by chance: F-test, 1 and N_eff - p degrees of
     freedom (the coloured residual's effective count), p < P_MAX; else abs(x) stands."""
-    from aerosid.diagnosis.rule import P_MAX
-
     lo, hi = np.quantile(x, [0.2, 0.8])
     s = float(np.std(x))
     lo, hi = max(lo, -s), min(hi, s)
@@ -394,7 +389,6 @@ def localise(signals: dict, y_by_channel: dict, models: dict, t: np.ndarray, gro
     guard of the shapes: a shape the angle errors make by themselves is not significant);
     simex: the diagnosis' SIMEX draws of the signals ({lambda: [signals]}, aerosid.diagnosis.core):
     a shape the angle errors could bend is significant only if its SIMEX-corrected estimate is."""
-    from aerosid.diagnosis.rule import CONFUSION_R
     from aerosid.diagnosis.trends import _lag_findings, _trend_findings
 
     perturbed = _perturbed(signals, float(angle_sigma_rad))

@@ -17,6 +17,7 @@ import scipy.stats
 from aerosid.diagnosis.finding import Finding
 from aerosid.diagnosis.localise import (_UNITS, CONTROLS, LAG_SCAN_S, SCHEDULES, SLOW, _centre, _Channel, _corr, _num,
                                         _rule, _stats_text, _wrap)
+from aerosid.diagnosis.rule import CONFUSION_R
 from aerosid.identification.regression import fit_linear
 from aerosid.modelling.expressions import evaluate, signal_names
 
@@ -50,7 +51,6 @@ def _trend_finding(c: _Channel, i: int, term, variables: list[str], mach_ref: fl
     effect): the term's signal times alpha holds the signal's record offset times alpha, which
     only that term absorbs (the DHC-6's beta vane, -0.3 deg off, made beta*alpha in C_n a
     third alpha, and the schedule t = -0.26 instead of its share of the residual)."""
-    from aerosid.diagnosis.rule import CONFUSION_R
 
     e = c.Ab[:, i]
     b = float(c.base.estimate[i])
