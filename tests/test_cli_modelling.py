@@ -258,6 +258,20 @@ def test_run_ends_with_the_samples_and_mach_window_and_the_verdict(run_dir, flig
                                                         "message": "Nothing significant is missing: no. Strongest"}))
     lines = run_outcome_lines(run_dir, 0.5)
     assert lines[1] == "diagnosis: Nothing significant is missing: no." and not any("add = [" in li for li in lines)
+    # nothing from the catalogue, but the localisation finds a term: its lines (with its main effect) to paste,
+    # the strongest significant one
+    loc = {"Cn": [{"id": "trend:Cn_beta:alpha", "channel": "Cn", "variable": "alpha", "significant": True,
+                   "t_value": 5.4, "spec_line": "Cn_beta_alpha = beta*(alpha + 0.0066)",
+                   "evidence": {"main_effect": "Cn_alpha"}},
+                  {"id": "shape:Cn:beta", "channel": "Cn", "variable": "beta", "significant": False, "t_value": 9.0,
+                   "spec_line": "Cn_beta2 = beta**2", "evidence": {}}],
+           "Cl": [{"id": "shape:Cl:beta", "channel": "Cl", "variable": "beta", "significant": True, "t_value": -3.9,
+                   "spec_line": "Cl_abs_beta = abs(beta)", "evidence": {}}]}
+    (run_dir / "diagnosis.json").write_text(json.dumps({**doc, "recommended": None, "localisation": loc,
+                                                        "message": "No catalogue effect is missing, but no."}))
+    lines = run_outcome_lines(run_dir, 0.5)
+    assert "the localisation's strongest term (Cn: trend:Cn_beta:alpha)" in lines[2]
+    assert lines[3:5] == ["  [Cn]", '  add = ["Cn_beta_alpha = beta*(alpha + 0.0066)", "Cn_alpha = alpha"]']
 
 
 # --------------------------------------------------------------------------- progress

@@ -75,6 +75,16 @@ def verdict_lines(run_dir: Path) -> list[str]:
     if top and top.get("spec_term"):
         lines += [f"to add it, put these lines in a model spec file SPEC and run `aerosid fit {run_dir} --model SPEC`:",
                   *("  " + li for li in paste_lines(top["channel"], top["spec_term"]).splitlines())]
+    elif not name:  # nothing from the catalogue: the localisation's strongest significant term, if any
+        found = sorted((f for fs in (doc.get("localisation") or {}).values() for f in fs if f.get("significant")),
+                       key=lambda f: -abs(f.get("t_value") or 0.0))
+        if found:
+            f = found[0]
+            main = (f.get("evidence") or {}).get("main_effect")
+            terms = [f["spec_line"]] + ([f"{main} = {f['variable']}"] if main else [])
+            lines += [f"outside the catalogue, the localisation's strongest term ({f['channel']}: {f['id']}); to add "
+                      f"it, put these lines in a model spec file SPEC and run `aerosid fit {run_dir} --model SPEC`:",
+                      *("  " + li for li in paste_lines(f["channel"], *terms).splitlines())]
     open_pair = next((c for c in doc.get("lookalikes") or [] if c.get("verdict") == "unresolved"
                       and len(c.get("alternatives") or []) > 1), None) if not name else None
     if open_pair:  # the manoeuvre that would separate them, and the command that designs it

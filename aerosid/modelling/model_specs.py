@@ -32,10 +32,10 @@ def term_label(t: Term) -> str:
     return t.effect or f"{t.coefficient} = {t.expression}"
 
 
-def paste_lines(channel: str, term: str) -> str:
-    """The spec lines that add one term to a channel, ready to paste into a spec file."""
-    quoted = term.replace("\\", "\\\\").replace('"', '\\"')
-    return f'[{channel}]\nadd = ["{quoted}"]'
+def paste_lines(channel: str, *terms: str) -> str:
+    """The spec lines that add terms to a channel, ready to paste into a spec file."""
+    quoted = ", ".join('"' + t.replace("\\", "\\\\").replace('"', '\\"') + '"' for t in terms)
+    return f'[{channel}]\nadd = [{quoted}]'
 
 
 @dataclass(frozen=True)
