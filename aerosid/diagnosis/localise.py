@@ -73,7 +73,7 @@ CONTROLS = ("delta_p", "delta_y", "delta_r")
 SLOW = ("mach", "qbar", "t")  # the flight-condition variables
 #: What a coefficient may be scheduled on besides the flight condition (a trend of its own).
 SCHEDULES = ("alpha",)
-_UNITS = {"mach": "unit Mach", "qbar": "Pa", "t": "s", "alpha": "rad of alpha"}
+_UNITS = {"mach": "unit Mach", "qbar": "Pa", "t": "s", "alpha": "rad"}
 
 
 # --------------------------------------------------------------------------- helpers

@@ -51,7 +51,6 @@ def _trend_finding(c: _Channel, i: int, term, variables: list[str], mach_ref: fl
     effect): the term's signal times alpha holds the signal's record offset times alpha, which
     only that term absorbs (the DHC-6's beta vane, -0.3 deg off, made beta*alpha in C_n a
     third alpha, and the schedule t = -0.26 instead of its share of the residual)."""
-
     e = c.Ab[:, i]
     b = float(c.base.estimate[i])
     tried = []
@@ -66,7 +65,7 @@ def _trend_finding(c: _Channel, i: int, term, variables: list[str], mach_ref: fl
             ref = mach_ref if var == "mach" else _centre(v)
             expr, col = f"{_wrap(term.expression)}*{_minus(var, ref)}", e * (v - ref)
             if var in SCHEDULES and var not in in_model:
-                given = ((_main_effect(c.ch, var), v - ref),)
+                given = ((f"{c.ch}_{var}", v - ref),)  # its main effect, as a spec would name it
         r = c.test(f"{term.coefficient}_{var}", col, given=given)
         if r is not None:
             r["given"] = given
@@ -100,10 +99,6 @@ def _trend_finding(c: _Channel, i: int, term, variables: list[str], mach_ref: fl
                    r["std_error"], r["t_value"], r["p_value"], r["variance_share"], r["window_consistency"],
                    r["n_eff"], msg, coefficient=term.coefficient, evidence=ev, reasons=tuple(reasons),
                    confused_with=alike, perp=r["perp"], column=r["column"], given=r["given"])
-
-
-def _main_effect(channel: str, var: str) -> str:
-    return f"{channel}_{var}"
 
 
 def _minus(var: str, ref: float) -> str:
