@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from aerosid.vehicles.atmosphere import GAMMA_AIR, R_AIR_J_KG_K, pressure_pa, temperature_K
+from aerosid.vehicles.atmosphere import CP_AIR_J_KG_K, GAMMA_AIR, R_AIR_J_KG_K, pressure_pa, temperature_K
 
 #: What an airspeed column may hold (an import map's ``airspeed`` key).
 AIRSPEED_KINDS = ("true", "calibrated", "indicated", "equivalent")
@@ -92,10 +92,10 @@ def true_airspeed_m_s(V_m_s, h_m, kind: str = "calibrated", p_static_pa=None, T_
     if kind == "equivalent":
         if rho_kg_m3 is not None:
             return V * np.sqrt(RHO0_KG_M3 / np.asarray(rho_kg_m3, dtype=float))
-        T = temperature_K(h)  # the gas law on what is measured; a total temperature needs the Mach number
-        for _ in range(3 if T_total_K is not None else 0):
-            mach = V * np.sqrt(RHO0_KG_M3 * R_AIR_J_KG_K * T / p) / np.sqrt(GAMMA_AIR * R_AIR_J_KG_K * T)
-            T = np.asarray(T_total_K, dtype=float) / (1.0 + 0.2 * mach**2)
+        if T_total_K is None:
+            T = temperature_K(h)
+        else:  # T = T_t - V_true^2 / (2 c_p) as in atmosphere.air_data, V_true^2 = V^2 rho_0 R T / p, solved for T
+            T = np.asarray(T_total_K, dtype=float) / (1.0 + V**2 * RHO0_KG_M3 * R_AIR_J_KG_K / (2.0 * CP_AIR_J_KG_K * p))
         return V * np.sqrt(RHO0_KG_M3 * R_AIR_J_KG_K * T / p)
     qc = P0_PA * _qc_over_p(V / A0_M_S)
     mach = _mach_from_qc_over_p(qc / p)
