@@ -132,19 +132,28 @@ def true_airspeed_where_known(V_m_s, h_m, kind: str, measured: dict) -> tuple[np
     return out, int((have_V & ~ok).sum())
 
 
+def columns_to_true_airspeed(columns, kind: str, said: str) -> tuple[np.ndarray, str]:
+    """(true airspeed [m/s], the note to record): the V_m_s of `columns` (a frame or a dict of
+    arrays with V_m_s, h_m and any MEASURED_FOR_AIRSPEED) read as an airspeed of `kind`
+    (true_airspeed_where_known); said: where the kind was stated, for the note."""
+    measured = {c: np.asarray(columns[c], dtype=float) for c in MEASURED_FOR_AIRSPEED if c in columns}
+    V, kept = true_airspeed_where_known(np.asarray(columns["V_m_s"], dtype=float),
+                                        np.asarray(columns["h_m"], dtype=float), kind, measured)
+    with_what = ", ".join(["h_m" + ("" if measured else " (US-1976)"), *measured])
+    return V, (f"V_m_s: {said} converted to the true airspeed with {with_what} (aerosid.vehicles.airspeed); "
+               f"{kept} row(s) without them left empty")
+
+
 def as_true_airspeed(frame, kind: str):
     """(frame, note): a raw telemetry frame whose V_m_s holds an airspeed of `kind` (the vehicle
     file's [air_data] airspeed) with V_m_s converted to the true airspeed (a copy; the frame itself
     when kind is "true", with an empty note)."""
     if kind == "true" or "V_m_s" not in frame.columns or "h_m" not in frame.columns:
         return frame, ""
-    measured = {c: frame[c].to_numpy(float) for c in MEASURED_FOR_AIRSPEED if c in frame.columns}
-    V, kept = true_airspeed_where_known(frame["V_m_s"].to_numpy(float), frame["h_m"].to_numpy(float), kind, measured)
+    V, note = columns_to_true_airspeed(frame, kind, f"the vehicle file's [air_data] airspeed = \"{kind}\"")
     out = frame.copy()
     out["V_m_s"] = V
-    with_what = ", ".join(["h_m" + ("" if measured else " (US-1976)"), *measured])
-    return out, (f"V_m_s: the vehicle file's [air_data] airspeed = \"{kind}\" converted to the true airspeed with "
-                 f"{with_what} (aerosid.vehicles.airspeed); {kept} row(s) without them left empty")
+    return out, note
 
 
 def dynamic_from_impact_pressure_pa(qc_pa, p_static_pa) -> np.ndarray:

@@ -289,16 +289,13 @@ def import_csv(csv_path: str | Path, map_path: str | Path) -> ImportedFlight:
 def _to_true_airspeed(data: dict[str, np.ndarray], cmap: CsvMap) -> tuple[str, ...]:
     """Convert data["V_m_s"] in place when the map says it is not a true airspeed; the note
     the import records."""
-    from aerosid.vehicles.airspeed import MEASURED_FOR_AIRSPEED, true_airspeed_where_known
+    from aerosid.vehicles.airspeed import columns_to_true_airspeed
 
     kind = next(c.airspeed for c in cmap.columns if c.target == "V_m_s")
     if kind == "true":
         return ()
-    measured = {c: data[c] for c in MEASURED_FOR_AIRSPEED if c in data}
-    data["V_m_s"], kept = true_airspeed_where_known(data["V_m_s"], data["h_m"], kind, measured)
-    with_what = ", ".join(["h_m" + ("" if measured else " (US-1976)"), *measured])
-    return (f"V_m_s: the map's {kind} airspeed converted to the true airspeed with {with_what} "
-            f"(aerosid.vehicles.airspeed.true_airspeed_m_s); {kept} row(s) without them left empty",)
+    data["V_m_s"], note = columns_to_true_airspeed(data, kind, f"the map's {kind} airspeed")
+    return (note,)
 
 
 def _to_dynamic_pressure(data: dict[str, np.ndarray], cmap: CsvMap) -> tuple[str, ...]:
