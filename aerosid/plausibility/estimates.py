@@ -74,14 +74,20 @@ def physical_range_departure(channel: str, expression: str, ci: tuple[float, flo
     return ""
 
 
+def regression_span(t_s) -> tuple[float, float, int]:
+    """(first, last [s], count) of the regressed flight data's finite times t_s: a regression
+    finding's span (NaN, NaN, 0 when there are none)."""
+    t = np.asarray(t_s, float)
+    t = t[np.isfinite(t)]
+    return (float(t.min()), float(t.max()), int(t.size)) if t.size else (math.nan, math.nan, 0)
+
+
 def implausible_estimate_findings(table, t_s) -> list[dict]:
     """Run findings (aerosid.estimation.findings.Finding as dicts, kind ``implausible_estimate``)
     for the coefficients table's rows that carry a ``preflight_warning`` (a preflight departure
     or an aircraft's physical range): such a run is not "ok".  t_s: the regressed flight data's
     times [s], for the span."""
-    t = np.asarray(t_s, float)
-    t = t[np.isfinite(t)]
-    t0, t1 = (float(t.min()), float(t.max())) if t.size else (math.nan, math.nan)
+    t0, t1, _ = regression_span(t_s)
     out = []
     for _, row in table.iterrows():
         text = row.get("preflight_warning") or ""

@@ -14,7 +14,8 @@ from __future__ import annotations
 
 import math
 
-import numpy as np
+from aerosid.estimation.findings import Finding
+from aerosid.plausibility.estimates import regression_span
 
 #: Each unit slip and the factor it puts on chord_m / (S_m2 / span_m).
 SLIPS = (("chord_m in ft", 1.0 / 0.3048), ("span_m in ft", 1.0 / 0.3048), ("S_m2 in ft^2", 0.3048**2))
@@ -44,13 +45,9 @@ def geometry_findings(vehicle, t_s) -> list[dict]:
     slips = [name for name, f in SLIPS if lo <= ratio / f <= hi]
     cause = (f"as if {' or '.join(slips)} (it would read {ratio / dict(SLIPS)[slips[0]]:.3g})" if slips else
              "no single unit slip explains it")
-    t = np.asarray(t_s, float)
-    t = t[np.isfinite(t)]
-    return [{"kind": "vehicle_geometry", "segment": "regression", "channel": "Cm",
-             "t0_s": float(t.min()) if t.size else math.nan, "t1_s": float(t.max()) if t.size else math.nan,
-             "n_samples": int(t.size), "cut": False,
-             "detail": (f"the vehicle file's chord_m {vehicle.chord_m:.4g} m is {ratio:.3g} x the mean chord its "
-                        f"wing area and span give (S_m2 / span_m = {vehicle.S_m2 / vehicle.span_m:.4g} m), outside "
-                        f"{lo:g}..{hi:g} ([plausibility] chord_ratio; a wing's mean aerodynamic chord is 1.0-1.33 x "
-                        f"S/b): {cause}. Every C_m scales with 1/chord and its pitch-rate terms with 1/chord^2, so "
-                        "check the reference lengths' units before comparing the coefficients with anything")}]
+    detail = (f"the vehicle file's chord_m {vehicle.chord_m:.4g} m is {ratio:.3g} x the mean chord its wing area and "
+              f"span give (S_m2 / span_m = {vehicle.S_m2 / vehicle.span_m:.4g} m), outside {lo:g}..{hi:g} "
+              f"([plausibility] chord_ratio; a wing's mean aerodynamic chord is 1.0-1.33 x S/b): {cause}. Every C_m "
+              "scales with 1/chord and its pitch-rate terms with 1/chord^2, so check the reference lengths' units "
+              "before comparing the coefficients with anything")
+    return [Finding("vehicle_geometry", "regression", "Cm", *regression_span(t_s), False, detail).as_dict()]

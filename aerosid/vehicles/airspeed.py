@@ -94,8 +94,9 @@ def true_airspeed_m_s(V_m_s, h_m, kind: str = "calibrated", p_static_pa=None, T_
             return V * np.sqrt(RHO0_KG_M3 / np.asarray(rho_kg_m3, dtype=float))
         if T_total_K is None:
             T = temperature_K(h)
-        else:  # T = T_t - V_true^2 / (2 c_p) as in atmosphere.air_data, V_true^2 = V^2 rho_0 R T / p, solved for T
-            T = np.asarray(T_total_K, dtype=float) / (1.0 + V**2 * RHO0_KG_M3 * R_AIR_J_KG_K / (2.0 * CP_AIR_J_KG_K * p))
+        else:  # T = T_t - V_true^2 / (2 c_p) as in atmosphere.air_data, V_true^2 = V^2 rho_0 R T / p: solved for T
+            heating = V**2 * RHO0_KG_M3 * R_AIR_J_KG_K / (2.0 * CP_AIR_J_KG_K * p)
+            T = np.asarray(T_total_K, dtype=float) / (1.0 + heating)
         return V * np.sqrt(RHO0_KG_M3 * R_AIR_J_KG_K * T / p)
     qc = P0_PA * _qc_over_p(V / A0_M_S)
     mach = _mach_from_qc_over_p(qc / p)
