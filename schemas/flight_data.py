@@ -60,7 +60,7 @@ class FlightData(pa.DataFrameModel):
     eiv_sigma_delta_r_rad: Optional[Series[float]] = _f("rad", "surface-sensor white noise in delta_r_rad (before "
                                                         "the band low-pass; 0: none found)", ge=0, nullable=True)
     # the band path's regressor signals before its low-pass (aerosid.identification.flight_data.
-    # WIDEBAND_COLUMNS), for the floor's band-path non-linearity; optional (smoother path, older files)
+    # WIDEBAND_COLUMNS), for the band order of non-linear terms; optional (smoother path, older files)
     # and nullable (flight data pooled with older files)
     alpha_wideband_rad: Optional[Series[float]] = _f("rad", "alpha before the band's low-pass (vanes, or inverted "
                                                      "from the smoother's accelerations)", nullable=True)

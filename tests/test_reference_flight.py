@@ -52,7 +52,7 @@ def test_wideband_columns_are_the_band_paths_signals_before_its_low_pass(referen
     """The floor's band-path part reads them: the fins' low-pass is the flight data's fins (the
     mixing is linear), and the wide-band alpha (inverted from the smoother's accelerations) is
     as close to the true alpha as the band's."""
-    from aerosid.diagnosis.floor import flight_data_runs
+    from aerosid.identification.band_order import flight_data_runs
     from aerosid.identification.band import low_pass_runs
     from aerosid.identification.flight_data import WIDEBAND_COLUMNS
 

@@ -309,7 +309,7 @@ def diagnose(flight_data: pd.DataFrame, vehicle, models: dict[str, ChannelModel]
 
     ranked = sorted(evidence, key=lambda e: (not e.significant, not e.identifiable, -e.score))
     window = (float(fd["mach"].min()), float(fd["mach"].max()))
-    from aerosid.diagnosis.floor import angle_floor_rms, band_nonlinearity_rms, floors
+    from aerosid.diagnosis.floor import angle_floor_rms, floors
     from aerosid.diagnosis.lookalikes import resolve
 
     looks, recommended = resolve(ranked, models, signals, fd, candidates, confusion_r=CONFUSION_R, p_max=P_MAX,
@@ -317,7 +317,7 @@ def diagnose(flight_data: pd.DataFrame, vehicle, models: dict[str, ChannelModel]
     identities = identity_channels(vehicle, models)  # their residual is numerical: no floor to speak of
     floored = [ch for ch in reports if ch not in identities]
     floor = floors({ch: reports[ch].residual for ch in floored}, fd, angle_floor_rms(fd, vehicle, models, floored),
-                   vehicle, band_nonlinearity_rms(fd, vehicle, models, floored, signals))
+                   vehicle)
     loc = {}
     if localisation:
         from aerosid.diagnosis.localise import localise

@@ -19,6 +19,7 @@ from aerosid.identification.derivatives import zero_phase_low_pass
 from aerosid.estimation.findings import DEPARTURE_MIN_S, DEPARTURE_SIGMA, Finding, dilate, span_findings
 from aerosid.identification.band import (accel_at_cg, band_limited_signals, band_noise_gain, bridge_spikes,
                                          finite_runs, low_pass_runs, white_noise_sigma)
+from aerosid.identification.band_order import WIDEBAND_COLUMNS
 from aerosid.identification.low_qbar import low_qbar_rows
 from aerosid.identification.airdata_findings import airdata_findings
 from aerosid.identification.vanes import advance, angles_at_cg, vane_white_noise_rad
@@ -30,12 +31,6 @@ FIN_COLUMNS = ("d1_rad", "d2_rad", "d3_rad", "d4_rad")
 #: The margin cut around a condemned span: one band period, at most this [s].
 MAX_MARGIN_S = 1.0
 BAND_IMU = ("ax_m_s2", "ay_m_s2", "az_m_s2", "p_rad_s", "q_rad_s", "r_rad_s")
-#: The band path's regressor signals before its low-pass (band path only; see _wideband_signals):
-#: {flight-data column: its wide-band column}.
-WIDEBAND_COLUMNS = {"alpha_rad": "alpha_wideband_rad", "beta_rad": "beta_wideband_rad",
-                    "p_rad_s": "p_wideband_rad_s", "q_rad_s": "q_wideband_rad_s", "r_rad_s": "r_wideband_rad_s",
-                    "delta_p_rad": "delta_p_wideband_rad", "delta_y_rad": "delta_y_wideband_rad",
-                    "delta_r_rad": "delta_r_wideband_rad", "V_m_s": "V_wideband_m_s"}
 
 
 class SegmentUnusable(ValueError):
@@ -355,8 +350,8 @@ def _inverted_angles(fc, s: pd.DataFrame, delta_p, delta_y, vehicle: Vehicle, db
 def _wideband_signals(raw: dict, ok: np.ndarray, s: pd.DataFrame, fc, vehicle: Vehicle, db: AeroDatabase | None,
                       segment: str) -> dict[str, np.ndarray]:
     """The regressor signals on the flight-data rows *before* the band's low-pass, as
-    WIDEBAND_COLUMNS names them, for the floor's band-path non-linearity
-    (aerosid.diagnosis.floor.band_nonlinearity_rms): the clean fins (mixed) and V, the
+    WIDEBAND_COLUMNS names them, for the band order of the model's non-linear columns
+    (aerosid.identification.band_order): the clean fins (mixed) and V, the
     smoother's rates, and the vanes' clean angles minus their bias or the angles inverted from
     the smoother's accelerations (the smoother's own bandwidth, wider than the band).  NaN
     where the inversion is at the database's edge."""

@@ -170,14 +170,30 @@ def signal_names(expression: str, signals) -> frozenset[str]:
     return frozenset(n.id for n in ast.walk(tree) if isinstance(n, ast.Name) and n.id in signals)
 
 
+#: Keys a signals dict may carry besides its named signals (aerosid.modelling.models.vehicle_signals
+#: puts them there for band-path flight data): the flight data's band order (an
+#: aerosid.identification.band_order.BandOrder, or None) and each sample's row in that flight data.
+BAND_ORDER_KEY = "_band_order"
+ROW_KEY = "_row"
+
+
 def evaluate(expression: str, values: Mapping[str, np.ndarray], length: int | None = None) -> np.ndarray:
-    """Evaluate an expression on named arrays; a constant expression broadcasts to `length`."""
+    """Evaluate an expression on named arrays; a constant expression broadcasts to `length`.
+
+    When ``values`` carry a band order and their rows (BAND_ORDER_KEY, ROW_KEY), the result is the
+    column as the band path should form it, f(x) + LP(f(x_wide)) - f(LP(x_wide))
+    (aerosid.identification.band_order): a non-linear term low-passed after it is formed."""
     tree = parse(expression, frozenset(values))
     with np.errstate(all="ignore"):
         out = np.asarray(_eval(tree.body, values), dtype=float)
     if out.ndim == 0:
         n = length if length is not None else len(next(iter(values.values())))
         out = np.full(n, float(out))
+    band_order = values.get(BAND_ORDER_KEY)
+    if band_order is not None and ROW_KEY in values:
+        d = band_order.correction(expression)
+        if d is not None:
+            out = out + d[values[ROW_KEY]]
     return out
 
 

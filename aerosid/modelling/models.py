@@ -22,7 +22,7 @@ import pandas as pd
 
 from aerosid.identification.derivatives import smooth_derivative
 from aerosid.modelling.effects import CATALOGUE
-from aerosid.modelling.expressions import ExpressionError, evaluate, parse, signal_names
+from aerosid.modelling.expressions import BAND_ORDER_KEY, ROW_KEY, ExpressionError, evaluate, parse, signal_names
 
 SIGNALS = ("alpha", "beta", "alpha_r", "phi_r", "mach", "V", "qbar", "delta_p", "delta_y", "delta_r",
            "p", "q", "r", "p_hat", "q_hat", "r_hat", "alpha_dot_hat", "beta_dot_hat", "t",
@@ -278,8 +278,13 @@ def kinematic_angles(fd: pd.DataFrame, vehicle) -> bool:
             and set(KINEMATIC_COLUMNS) <= set(fd.columns))
 
 
-def vehicle_signals(fd: pd.DataFrame, vehicle) -> dict[str, np.ndarray]:
+def vehicle_signals(fd: pd.DataFrame, vehicle, with_band_order: bool = True) -> dict[str, np.ndarray]:
     """signals_from_flight_data with the vehicle's pitch and lateral reference lengths.
+
+    With ``with_band_order`` (the default) and band-path flight data, the signals also carry the flight
+    data's band order and their rows (aerosid.identification.band_order): every term evaluated
+    from them, by a model's design or a candidate, is then the band path's column of a non-linear
+    term, LP(f(x)) rather than f(LP(x)).
 
     With vanes (``[air_data] source = "vanes"``) and KINEMATIC_ALPHA_DOT set, alpha_dot_hat comes
     from the flight-path kinematics (rates, the specific forces -C_A, -C_N times qbar S/m) above
@@ -307,4 +312,9 @@ def vehicle_signals(fd: pd.DataFrame, vehicle) -> dict[str, np.ndarray]:
             sig["alpha"] = kin.alpha
             sig["alpha_r"], sig["phi_r"] = total_angles(kin.alpha, sig["beta"])
         sig["alpha_dot_hat"] = kin.alpha_dot * vehicle.length_pitch_m / (2 * sig["V"])
+    if with_band_order:
+        from aerosid.identification.band_order import band_order
+
+        sig[BAND_ORDER_KEY] = band_order(fd, vehicle)
+        sig[ROW_KEY] = np.arange(len(fd))
     return sig

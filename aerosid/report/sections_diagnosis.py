@@ -27,7 +27,7 @@ def _recommended(doc: dict) -> dict | None:
 
 def _floor_rows(floor) -> list:
     """Rows (channel, residual RMS, floor RMS, excess RMS, excess share, the floor's coefficient,
-    angle and band parts) of ``floor``."""
+    and angle parts) of ``floor``."""
     if not isinstance(floor, dict):
         return []
     rows = []
@@ -37,8 +37,7 @@ def _floor_rows(floor) -> list:
         res, flo, exc = f.get("residual_rms"), f.get("floor_rms"), f.get("excess_rms")
         share = float(exc) / float(res) if _finite(exc) and _finite(res) and float(res) > 0 else None
         rows.append((ch, _num(res, ".3g"), _num(flo, ".3g"), _num(exc, ".3g"), _pct(share, ".0f"),
-                     _num(f.get("coefficient_floor_rms"), ".3g"), _num(f.get("angle_floor_rms"), ".3g"),
-                     _num(f.get("nonlinearity_floor_rms"), ".3g")))
+                     _num(f.get("coefficient_floor_rms"), ".3g"), _num(f.get("angle_floor_rms"), ".3g")))
     return rows
 
 

@@ -1,0 +1,210 @@
+"""The band path's order of operations for a model's non-linear columns.
+
+Why
+---
+The band path (aerosid.identification.band) puts every flight signal through one low-pass LP
+and then forms the model's columns from the low-passed signals: a term f(x) enters the fit as
+f(LP(x)).  The flight-derived coefficient, though, holds the low-pass of the aerodynamics,
+LP(f(x)): the accelerations went through LP *after* the aircraft had formed f(x).  For a term
+linear in the signals the two are the same; for a non-linear one they are not -- |beta|'s kink,
+alpha^2's and alpha^3's harmonics, cos 4 phi_r near alpha_r = 0 -- and the difference is an
+error in the regressor that no model term takes and no interval knows.
+
+Measured (bench/results/band_order.md): on the JSBSim DHC6, whose C_l is even in beta, the
+suggested ``abs(beta + 0.0053)`` term gave C_l,p -0.426 +- 0.012 against a truth of -0.503
+(6.5 sigma) and a follow-up ``abs(r_hat)`` that was this artefact; formed in this order,
+-0.498 +- 0.016 and no such follow-up.  On seed-rlv the roll terms' non-linearity was 1.1-1.5 x
+the Cl floor of a complete model.
+
+What this module does
+---------------------
+The band path writes the regressor signals *before* its low-pass into the flight data
+(aerosid.identification.flight_data.WIDEBAND_COLUMNS: the vanes' clean angles or the angles
+inverted from the smoother's forces, the smoother's rates, the clean fins and V).  For every
+term, :meth:`BandOrder.correction` is
+
+    d = LP(f(x_wide)) - f(LP(x_wide)),
+
+both sides formed from the same wide-band x, so LP's attenuation of in-band content cancels and
+only the term's non-linearity is left; the model's column becomes f(x) + d (ChannelModel.design),
+which is LP(f(x_wide)) up to the difference between the flight data's own low-passed signals and
+LP(x_wide) (none for the vanes, the inversion's for inverted angles).  d is identically zero for
+a term linear in the signals (alpha, delta_p/2, a rate) and tiny for one through V (q_hat).
+
+LP here is the band's low-pass over every run of consecutive flight-data rows
+(:func:`flight_data_runs`: a segment's own rate and band, cut at holes and at rows without
+their wide-band values); the first and last band period of a run (the filter's transients)
+keep d = 0.  Flight data without the wide-band columns (the smoother path, older files) have no
+band order: every column is f(x) as before.
+
+How it reaches the fit: aerosid.modelling.models.vehicle_signals puts a lazy :class:`BandOrder`
+and the row numbers into the signals it returns (aerosid.modelling.expressions.BAND_ORDER_KEY,
+ROW_KEY), and expressions.evaluate adds d to every term it forms from such signals: any code that
+designs a model or a candidate from them, or from a row subset of them, gets the corrected columns.
+The wide-band signals are computed once per flight data and cached (SIMEX designs its models on
+many copies of one frame with noise added to the low-passed angles: d is the same for all).
+"""
+from __future__ import annotations
+
+import hashlib
+import math
+from collections import OrderedDict
+from dataclasses import dataclass, field
+
+import numpy as np
+import pandas as pd
+
+from aerosid.identification.band import finite_runs, low_pass_runs, segment_rates_and_bands
+
+#: The flight data's regressor signals before the band's low-pass: {flight-data column: its
+#: wide-band column} (written by aerosid.identification.flight_data on the band path).
+WIDEBAND_COLUMNS = {"alpha_rad": "alpha_wideband_rad", "beta_rad": "beta_wideband_rad",
+                    "p_rad_s": "p_wideband_rad_s", "q_rad_s": "q_wideband_rad_s", "r_rad_s": "r_wideband_rad_s",
+                    "delta_p_rad": "delta_p_wideband_rad", "delta_y_rad": "delta_y_wideband_rad",
+                    "delta_r_rad": "delta_r_wideband_rad", "V_m_s": "V_wideband_m_s"}
+#: Form the band order (the default).  False: every column f(LP(x)) as before 2026-11-29 (for
+#: the before/after comparison of bench/bench_band_order.py).
+ENABLED = True
+#: Flight data whose wide-band signals are kept (a small LRU: SIMEX's frames share one).
+_CACHE_SIZE = 4
+_WIDE_CACHE: OrderedDict = OrderedDict()
+
+
+def flight_data_runs(fd, valid: np.ndarray | None = None) -> list[tuple[slice, float, float, int]]:
+    """(rows, sample rate [Hz], band edge [Hz], edge samples = one band period) of every run of
+    consecutive flight-data rows: one flight segment (its own rate and band), adjacent rows, time
+    increasing by at most 1.5 of the segment's steps, ``valid`` (default all), and longer than two
+    band periods and 16 samples.  Rows are expected in flight and time order (as diagnose sorts
+    them); a segment whose rows are not adjacent is cut where they are not."""
+    t = fd["t_s"].to_numpy(float)
+    valid = np.ones(len(fd), bool) if valid is None else np.asarray(valid, bool)
+    out = []
+    for idx, fs, band in segment_rates_and_bands(fd):
+        if not (math.isfinite(fs) and math.isfinite(band)) or idx.size < 2:
+            continue
+        edge = int(math.ceil(fs / band - 1e-6))
+        dt = np.diff(t[idx])
+        joined = np.r_[False, (np.diff(idx) == 1) & (dt > 0) & (dt <= 1.5 / fs)]
+        for r in finite_runs(valid[idx]):
+            cuts = [r.start, *(r.start + 1 + np.flatnonzero(~joined[r.start + 1:r.stop])), r.stop]
+            for a, b in zip(cuts[:-1], cuts[1:]):
+                if b - a > 2 * edge + 16:
+                    out.append((slice(int(idx[a]), int(idx[a]) + int(b - a)), fs, band, edge))
+    return out
+
+
+def has_wideband(fd) -> bool:
+    """The flight data carry the band path's wide-band columns and a band on every row."""
+    need = {*WIDEBAND_COLUMNS, *WIDEBAND_COLUMNS.values(), "band_hz", "t_s", "mach", "qbar_pa"}
+    return (need <= set(fd.columns) and len(fd) > 2
+            and bool(np.all(np.isfinite(fd["band_hz"].to_numpy(float)))))
+
+
+@dataclass(frozen=True)
+class _Wide:
+    """One flight data's model signals formed from the wide-band columns (wide) and from their
+    low-pass (low), the runs, the rows where d may be non-zero (inner), and the corrections
+    computed so far (shared by every frame with the same wide-band content)."""
+
+    wide: dict
+    low: dict
+    runs: list
+    inner: np.ndarray
+    corrections: dict = field(default_factory=dict)
+
+    def low_pass(self, x: np.ndarray) -> np.ndarray:
+        out = np.array(x, float)
+        for r, fs, band, _ in self.runs:
+            out[r] = low_pass_runs(x[r], fs, band, [slice(0, r.stop - r.start)])
+        return out
+
+    def correction(self, expression: str) -> np.ndarray | None:
+        from aerosid.modelling.expressions import evaluate, signal_names
+
+        if expression not in self.corrections:
+            d = None
+            if signal_names(expression, self.wide):
+                n = len(self.inner)
+                f_wide = evaluate(expression, self.wide, n)
+                f_low = evaluate(expression, self.low, n)
+                f_wide = np.where(np.isfinite(f_wide), f_wide, f_low)  # one bad value would spread over its run
+                d = self.low_pass(f_wide) - f_low
+                d = np.where(self.inner & np.isfinite(d), d, 0.0)
+                d.setflags(write=False)
+            self.corrections[expression] = d
+        return self.corrections[expression]
+
+
+@dataclass(frozen=True)
+class BandOrder:
+    """The band order of one flight-data frame's model columns (module doc).  Lazy: nothing is
+    computed until a term asks for its correction."""
+
+    fd: pd.DataFrame = field(repr=False)
+    vehicle: object = field(repr=False)
+    _state: dict = field(default_factory=dict, repr=False, compare=False)
+
+    def correction(self, expression: str) -> np.ndarray | None:
+        """d = LP(f(x_wide)) - f(LP(x_wide)) of the term f = ``expression`` on every row of the
+        flight data (0 where it cannot be formed: the runs' edges, rows without wide-band values);
+        None for a constant term."""
+        if "wide" not in self._state:
+            self._state["wide"] = _wide_signals(self.fd, self.vehicle)
+        return self._state["wide"].correction(expression)
+
+
+def band_order(fd, vehicle) -> BandOrder | None:
+    """The flight data's BandOrder, or None without the wide-band columns (the smoother path,
+    older files)."""
+    return BandOrder(fd, vehicle) if ENABLED and has_wideband(fd) else None
+
+
+def _digest(fd, vehicle) -> bytes:
+    """What the wide-band model signals depend on: the wide-band columns, time, band, Mach, qbar,
+    flight and segment, and the vehicle's reference lengths (not the low-passed signals, which
+    SIMEX perturbs)."""
+    cols = [c for c in ("t_s", "band_hz", "mach", "qbar_pa", "flight", "segment", *WIDEBAND_COLUMNS.values())
+            if c in fd]
+    h = hashlib.blake2b(pd.util.hash_pandas_object(fd[cols], index=False).to_numpy().tobytes(), digest_size=16)
+    h.update(repr((vehicle.length_pitch_m, vehicle.length_lateral_m, vehicle.derivative_half_window_s,
+                   getattr(vehicle, "name", ""))).encode())
+    return h.digest()
+
+
+def _wide_signals(fd, vehicle) -> _Wide:
+    """The wide-band and the low-passed wide-band model signals of fd (cached by content)."""
+    key = _digest(fd, vehicle)
+    if key in _WIDE_CACHE:
+        _WIDE_CACHE.move_to_end(key)
+        return _WIDE_CACHE[key]
+    from aerosid.diagnosis.candidates import derived_signals
+    from aerosid.identification.inversion import total_angles
+    from aerosid.modelling.models import vehicle_signals
+
+    # rows without their wide-band values (pooled with older files, the inversion at the database's
+    # edge) end a run; there the low-passed values stand in, only so that every signal is finite
+    valid = np.all(np.column_stack([np.isfinite(fd[w].to_numpy(float)) for w in WIDEBAND_COLUMNS.values()]), axis=1)
+    runs = flight_data_runs(fd, valid)
+    inner = np.zeros(len(fd), bool)
+    for r, _, _, edge in runs:
+        inner[r.start + edge:r.stop - edge] = True
+    wide_cols = {c: np.where(valid, fd[w].to_numpy(float), fd[c].to_numpy(float)) for c, w in WIDEBAND_COLUMNS.items()}
+    w = _Wide({}, {}, runs, inner)
+
+    def signals(values: dict) -> dict:
+        frame = fd.copy()
+        for c, v in values.items():
+            frame[c] = v
+        v_ratio = frame["V_m_s"].to_numpy(float) / fd["V_m_s"].to_numpy(float)
+        frame["mach"] = fd["mach"].to_numpy(float) * v_ratio  # the same speed of sound and density
+        frame["qbar_pa"] = fd["qbar_pa"].to_numpy(float) * v_ratio ** 2
+        frame["alpha_r_rad"], frame["phi_r_rad"] = total_angles(frame["alpha_rad"], frame["beta_rad"])
+        return derived_signals(vehicle_signals(frame, vehicle, with_band_order=False), vehicle.length_pitch_m,
+                               vehicle.length_lateral_m)
+
+    w.wide.update(signals(wide_cols))
+    w.low.update(signals({c: w.low_pass(x) for c, x in wide_cols.items()}))
+    _WIDE_CACHE[key] = w
+    while len(_WIDE_CACHE) > _CACHE_SIZE:
+        _WIDE_CACHE.popitem(last=False)
+    return w

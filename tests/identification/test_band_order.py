@@ -1,0 +1,147 @@
+"""The band order of a model's non-linear columns (aerosid.identification.band_order): the
+band path forms a term from the low-passed signals, f(LP(x)), where the flight-derived
+coefficient holds LP(f(x)); the fit's columns are now LP(f(x_wide))."""
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from aerosid.diagnosis.lookalikes import scaled_lstsq
+from aerosid.identification.band import low_pass_runs
+from aerosid.identification.band_order import WIDEBAND_COLUMNS, band_order, flight_data_runs
+from aerosid.identification.inversion import total_angles
+from aerosid.modelling.models import ChannelModel, default_models, parse_term, vehicle_signals
+from aerosid.vehicles.vehicle import load_vehicle
+
+N, FS, BAND = 6000, 100.0, 1.0
+EDGE = int(np.ceil(FS / BAND))
+INNER = slice(EDGE, N - EDGE)
+
+
+@pytest.fixture(scope="module")
+def vehicle():
+    return load_vehicle("seed-rlv")
+
+
+def _band_frame(n: int, fs: float, band: float, wide: dict) -> pd.DataFrame:
+    """A band-path flight-data frame of one run: every regressor signal the band's low-pass of
+    its wide-band column (given in `wide`, SI), alpha_r and phi_r formed after the low-pass, as
+    the band path does."""
+    lp = {c: low_pass_runs(np.asarray(x, float), fs, band, [slice(0, n)]) for c, x in wide.items()}
+    fd = pd.DataFrame({"t_s": np.arange(n) / fs, "flight": "f", "segment": "s", "band_hz": band,
+                       "mach": lp["V_m_s"] / 300.0, "qbar_pa": 0.5 * 1.2 * lp["V_m_s"] ** 2, **lp,
+                       **{WIDEBAND_COLUMNS[c]: np.asarray(x, float) for c, x in wide.items()}})
+    fd["alpha_r_rad"], fd["phi_r_rad"] = total_angles(fd["alpha_rad"], fd["beta_rad"])
+    return fd
+
+
+def _square_flight():
+    """alpha: a slow swing plus a tone far above the band whose amplitude A(t) varies slowly; the
+    band path's alpha^2 loses the tone, LP(alpha^2) keeps A(t)^2 / 2."""
+    t = np.arange(N) / FS
+    a_t = 0.05 * (1.0 + 0.5 * np.cos(2 * np.pi * 0.13 * t))
+    alpha = 0.1 + 0.05 * np.sin(2 * np.pi * 0.05 * t) + a_t * np.sin(2 * np.pi * 8.0 * t)
+    wide = {"alpha_rad": alpha, "beta_rad": np.zeros(N),
+            **{c: np.zeros(N) for c in ("p_rad_s", "q_rad_s", "r_rad_s", "delta_p_rad", "delta_y_rad", "delta_r_rad")},
+            "V_m_s": np.full(N, 300.0)}
+    return _band_frame(N, FS, BAND, wide), alpha
+
+
+def test_a_square_is_low_passed_after_it_is_formed(vehicle):
+    """Cm = 0.01 + k LP(alpha^2): with the band order the model [1, alpha^2] recovers k and leaves
+    nothing inside the runs; formed from the low-passed alpha (the order before) it misses k A^2/2,
+    which a refit cannot take.  A term linear in the signals has no correction."""
+    fd, alpha = _square_flight()
+    k = 2.0
+    fd["Cm"] = 0.01 + k * low_pass_runs(alpha ** 2, FS, BAND, [slice(0, N)])
+    model = ChannelModel("Cm", (parse_term("Cm_0 = 1", "Cm"), parse_term("Cm_a2 = alpha**2", "Cm")))
+    y = fd["Cm"].to_numpy()[INNER]
+    fits = {}
+    for band in (True, False):
+        A = model.design(vehicle_signals(fd, vehicle, with_band_order=band))[0].to_numpy(float)[INNER]
+        theta = scaled_lstsq(A, y)
+        fits[band] = theta, float(np.sqrt(np.mean((y - A @ theta) ** 2)))
+    assert fits[True][0][1] == pytest.approx(k, rel=1e-3)
+    assert fits[True][1] < 1e-4 * np.std(y)
+    assert fits[False][1] > 0.05 * np.std(y)  # the old order's error, not taken by a refit
+    bo = band_order(fd, vehicle)
+    assert not np.any(bo.correction("alpha")) and np.max(np.abs(bo.correction("delta_p/2"))) < 1e-15
+    assert bo.correction("1") is None
+    d = bo.correction("alpha**2")
+    assert not np.any(d[:EDGE]) and not np.any(d[-EDGE:])  # the filter's transients keep the old column
+
+
+def test_a_row_subset_of_the_signals_keeps_its_rows_corrections(vehicle):
+    """Windows (the diagnosis' held-out windows, a designed flight's window) subset the signals'
+    arrays: each kept sample keeps its own row's correction."""
+    from aerosid.modelling.expressions import evaluate
+
+    fd, _ = _square_flight()
+    sig = vehicle_signals(fd, vehicle)
+    full = evaluate("alpha**2", sig)
+    keep = np.zeros(N, bool)
+    keep[1000:1500] = keep[4000:4100] = True
+    sub = {k: np.asarray(v)[keep] if np.ndim(v) else v for k, v in sig.items()}
+    np.testing.assert_array_equal(evaluate("alpha**2", sub), full[keep])
+
+
+def test_flight_data_without_wide_band_values_keep_the_old_columns(vehicle):
+    """A flight pooled with one written before the wide-band columns (NaN there) keeps f(x) on
+    that flight's rows and is corrected on its own; flight data without the columns (the smoother
+    path, older files) have no band order."""
+    fd, _ = _square_flight()
+    old = fd.assign(flight="older", **{c: np.nan for c in fd.columns if "wideband" in c})
+    pooled = pd.concat([fd, old], ignore_index=True)
+    d = band_order(pooled, vehicle).correction("alpha**2")
+    assert not np.any(d[N:])
+    np.testing.assert_allclose(d[:N], band_order(fd, vehicle).correction("alpha**2"), atol=1e-12)
+    assert band_order(fd.drop(columns=["alpha_wideband_rad"]), vehicle) is None
+
+
+def test_a_complete_model_on_noise_free_band_limited_truth_leaves_almost_nothing(reference_flight, vehicle):
+    """No noise, no hidden effect, the default models complete: formed after the low-pass, the
+    Cl model's non-linear roll terms (cos 4 phi_r, alpha_r near alpha_r = 0) left a residual of
+    their own (4.4-4.8e-5, 1.1-1.5 x the Cl floor on noisy flights); in the band's order the
+    residual is a small fraction of it.  Cm's model is linear and unchanged."""
+    from aerosid.identification.identify import mach_window_mask
+
+    tr = reference_flight.truth
+    tr = tr.loc[mach_window_mask(tr["mach"].to_numpy(float), vehicle.mach_reference, 0.5)].reset_index(drop=True)
+    n = len(tr)
+    fs, band = 1.0 / float(np.median(np.diff(tr["t_s"]))), 0.75
+    cols = ("alpha_rad", "beta_rad", "p_rad_s", "q_rad_s", "r_rad_s", "delta_p_rad", "delta_y_rad", "delta_r_rad",
+            "V_m_s")
+    fd = _band_frame(n, fs, band, {c: tr[c].to_numpy(float) for c in cols})
+    fd["t_s"] = tr["t_s"].to_numpy(float)
+    for c in ("mach", "qbar_pa", "Cl", "Cm"):
+        fd[c] = low_pass_runs(tr[c].to_numpy(float), fs, band, [slice(0, n)])
+    models = default_models(vehicle)
+    edge = int(np.ceil(fs / band))
+    inner = slice(edge, n - edge)
+    resid = {}
+    for order in (True, False):
+        sig = vehicle_signals(fd, vehicle, with_band_order=order)
+        for ch in ("Cl", "Cm"):
+            A = models[ch].design(sig)[0].to_numpy(float)[inner]
+            y = fd[ch].to_numpy(float)[inner]
+            resid[ch, order] = float(np.sqrt(np.mean((y - A @ scaled_lstsq(A, y)) ** 2)))
+    assert resid["Cl", False] > 1e-5  # the old order's own error is real here ...
+    assert resid["Cl", True] < 0.3 * resid["Cl", False]  # ... and the band's order removes most of it
+    assert resid["Cm", True] == pytest.approx(resid["Cm", False], rel=0.02)
+
+
+def test_flight_data_runs_keep_each_flights_rate_and_cut_at_holes_and_invalid_rows():
+    """Two flights pooled, 100 Hz and 50 Hz, band 1 Hz: each run gets its own flight's rate
+    (and so its own edge of one band period); a time hole, a change of segment and a row
+    without its wide-band values each end a run; runs of two band periods or less are dropped."""
+    t_a = np.r_[np.arange(0, 1000) * 0.01, 12.0 + np.arange(0, 600) * 0.01]  # a 2 s hole
+    t_b = np.arange(0, 800) * 0.02
+    fd = pd.DataFrame({"t_s": np.r_[t_a, t_b], "flight": ["a"] * t_a.size + ["b"] * t_b.size,
+                       "segment": ["s0"] * 1300 + ["s1"] * 300 + ["s0"] * 800, "band_hz": 1.0})
+    valid = np.ones(len(fd), bool)
+    valid[1600 + 100] = False  # flight b, row 100: the 100 rows before it are too short a run
+    runs = [(r.start, r.stop, round(fs), edge) for r, fs, _, edge in flight_data_runs(fd, valid)]
+    assert runs == [(0, 1000, 100, 100), (1000, 1300, 100, 100), (1300, 1600, 100, 100), (1701, 2400, 50, 50)]
+    # a flight without a band (smoother path) or with a zero band has no runs
+    assert flight_data_runs(fd.assign(band_hz=np.where(fd["flight"] == "b", 0.0, 1.0)))[-1][0].stop == 1600
