@@ -51,7 +51,6 @@ def _trend_finding(c: _Channel, i: int, term, variables: list[str], mach_ref: fl
     effect): the term's signal times alpha holds the signal's record offset times alpha, which
     only that term absorbs (the DHC-6's beta vane, -0.3 deg off, made beta*alpha in C_n a
     third alpha, and the schedule t = -0.26 instead of its share of the residual)."""
-    e = c.Ab[:, i]
     b = float(c.base.estimate[i])
     tried = []
     for var in variables:
@@ -60,13 +59,15 @@ def _trend_finding(c: _Channel, i: int, term, variables: list[str], mach_ref: fl
             continue
         given = ()
         if var in SLOW and var != "mach":
-            expr, col = f"{_wrap(term.expression)}*{var}", e * v
+            expr = f"{_wrap(term.expression)}*{var}"
         else:  # about the reference Mach, or the flight's mean angle (the coefficient keeps its meaning)
             ref = mach_ref if var == "mach" else _centre(v)
-            expr, col = f"{_wrap(term.expression)}*{_minus(var, ref)}", e * (v - ref)
+            expr = f"{_wrap(term.expression)}*{_minus(var, ref)}"
             if var in SCHEDULES and var not in in_model:
                 given = ((f"{c.ch}_{var}", v - ref),)  # its main effect, as a spec would name it
-        r = c.test(f"{term.coefficient}_{var}", col, given=given)
+        # evaluated as the spec will have it: a product of signals is low-passed after it is formed
+        # (aerosid.identification.band_order), as the model's own columns are
+        r = c.test(f"{term.coefficient}_{var}", evaluate(expr, c.signals, c.n), given=given)
         if r is not None:
             r["given"] = given
             tried.append((var, expr, r))
