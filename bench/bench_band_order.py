@@ -2,7 +2,9 @@
 on an aircraft nobody here modelled: JSBSim's DHC-6, whose C_l is even in beta.
 
 Each seed: ``aerosid simulate --jsbsim DHC6`` and the estimation chain (cached in --cache), then
-with the old order (every column f(LP(x))) and the new one (LP(f(x_wide))):
+with the old order (every column f(LP(x))), the new one without its pre-filter (LP(f(x_wide)),
+"unfiltered") and the new one (LP(f(LP_3(x_wide))), the wide-band signal first low-passed at
+WIDE_BAND_FACTOR x the band):
 
 * diagnose the default models and take the C_l localisation's first significant suggestion, as a
   user pasting the printed lines would;
@@ -59,9 +61,10 @@ def one(job: tuple) -> list[dict]:
     vehicle = load_vehicle(out / "vehicle.toml")
     fd = pd.read_parquet(out / "run" / "flight_data.parquet").sort_values(["flight", "t_s"]).reset_index(drop=True)
     rows = []
-    for order in ("old", "new"):
+    for order, enabled, factor in (("old", False, band_order.WIDE_BAND_FACTOR), ("unfiltered", True, None),
+                                   ("new", True, band_order.WIDE_BAND_FACTOR)):
         t0 = time.perf_counter()
-        band_order.ENABLED = order == "new"
+        band_order.ENABLED, band_order.WIDE_BAND_FACTOR = enabled, factor
         d = diagnose(fd, vehicle)
         sig = [f for f in d.localisation.get("Cl", ()) if f.significant]
         row = {"seed": seed, "order": order, "suggested": sig[0].suggested_expression if sig else ""}
@@ -89,7 +92,8 @@ def _report(df: pd.DataFrame, wall_s: float, seeds: list[int]) -> str:
              f"{date.today().isoformat()}, {cpu_model()}, load {loadavg()}; wall {wall_s / 60:.1f} min. "
              f"`python bench/bench_band_order.py --seeds {seeds[0]}-{seeds[-1]}`.", "",
              "Per seed: the default models plus the C_l localisation's first significant suggestion (as a user "
-             "would paste it), fitted with the old order (f(LP(x))) and the new (LP(f(x_wide))). Error = "
+             "would paste it), fitted with the old order (f(LP(x))), the new one without its pre-filter "
+             "(unfiltered: LP(f(x_wide))) and the new one (LP(f(LP_3(x_wide))), WIDE_BAND_FACTOR = 3). Error = "
              "estimate - truth (JSBSim's tables at the trim, truth.json), in % and in the estimate's sigma.", "",
              "| seed | order | suggested | R^2 | C_l,p (err %, sigma) | C_l,delta_a (err %, sigma) | term | "
              "C_l findings after adding it |", "|---|---|---|---|---|---|---|---|"]

@@ -36,40 +36,64 @@ def _band_frame(n: int, fs: float, band: float, wide: dict) -> pd.DataFrame:
     return fd
 
 
+ZEROS = ("p_rad_s", "q_rad_s", "r_rad_s", "delta_p_rad", "delta_y_rad", "delta_r_rad")
+
+
 def _square_flight():
-    """alpha: a slow swing plus a tone far above the band whose amplitude A(t) varies slowly; the
-    band path's alpha^2 loses the tone, LP(alpha^2) keeps A(t)^2 / 2."""
+    """alpha: a slow swing plus a 0.7 Hz tone inside the 1 Hz band whose amplitude varies slowly:
+    the low-pass attenuates the tone (|H| = 0.90) and alpha^2's 1.4 Hz harmonic (|H| = 0.45), so
+    LP(alpha)^2 is not LP(alpha^2)."""
     t = np.arange(N) / FS
     a_t = 0.05 * (1.0 + 0.5 * np.cos(2 * np.pi * 0.13 * t))
-    alpha = 0.1 + 0.05 * np.sin(2 * np.pi * 0.05 * t) + a_t * np.sin(2 * np.pi * 8.0 * t)
-    wide = {"alpha_rad": alpha, "beta_rad": np.zeros(N),
-            **{c: np.zeros(N) for c in ("p_rad_s", "q_rad_s", "r_rad_s", "delta_p_rad", "delta_y_rad", "delta_r_rad")},
-            "V_m_s": np.full(N, 300.0)}
+    alpha = 0.1 + 0.05 * np.sin(2 * np.pi * 0.05 * t) + a_t * np.sin(2 * np.pi * 0.7 * t)
+    wide = {"alpha_rad": alpha, "beta_rad": np.zeros(N), **{c: np.zeros(N) for c in ZEROS}, "V_m_s": np.full(N, 300.0)}
     return _band_frame(N, FS, BAND, wide), alpha
 
 
+def _fit(fd, vehicle, y, expression, with_band_order=True):
+    """(coefficient of the term, residual RMS / std(y)) of Cm = c0 + c1 expression inside the runs."""
+    model = ChannelModel("Cm", (parse_term("Cm_0 = 1", "Cm"), parse_term(f"Cm_x = {expression}", "Cm")))
+    A = model.design(vehicle_signals(fd, vehicle, with_band_order=with_band_order))[0].to_numpy(float)[INNER]
+    theta = scaled_lstsq(A, y[INNER])
+    return theta[1], float(np.sqrt(np.mean((y[INNER] - A @ theta) ** 2)) / np.std(y[INNER]))
+
+
 def test_a_square_is_low_passed_after_it_is_formed(vehicle):
-    """Cm = 0.01 + k LP(alpha^2): with the band order the model [1, alpha^2] recovers k and leaves
-    nothing inside the runs; formed from the low-passed alpha (the order before) it misses k A^2/2,
-    which a refit cannot take.  A term linear in the signals has no correction."""
+    """Cm = 0.01 + k LP(alpha^2): in the band's order the model [1, alpha^2] recovers k and leaves
+    (almost) nothing inside the runs; formed from the low-passed alpha (the order before) it
+    leaves 6 % of Cm's spread, which a refit cannot take.  A term linear in the signals has no
+    correction."""
     fd, alpha = _square_flight()
     k = 2.0
-    fd["Cm"] = 0.01 + k * low_pass_runs(alpha ** 2, FS, BAND, [slice(0, N)])
-    model = ChannelModel("Cm", (parse_term("Cm_0 = 1", "Cm"), parse_term("Cm_a2 = alpha**2", "Cm")))
-    y = fd["Cm"].to_numpy()[INNER]
-    fits = {}
-    for band in (True, False):
-        A = model.design(vehicle_signals(fd, vehicle, with_band_order=band))[0].to_numpy(float)[INNER]
-        theta = scaled_lstsq(A, y)
-        fits[band] = theta, float(np.sqrt(np.mean((y - A @ theta) ** 2)))
-    assert fits[True][0][1] == pytest.approx(k, rel=1e-3)
-    assert fits[True][1] < 1e-4 * np.std(y)
-    assert fits[False][1] > 0.05 * np.std(y)  # the old order's error, not taken by a refit
+    y = 0.01 + k * low_pass_runs(alpha ** 2, FS, BAND, [slice(0, N)])
+    k_new, res_new = _fit(fd, vehicle, y, "alpha**2")
+    k_old, res_old = _fit(fd, vehicle, y, "alpha**2", with_band_order=False)
+    assert k_new == pytest.approx(k, rel=1e-4)
+    assert res_old > 0.03 and res_new < 0.02 * res_old
     bo = band_order(fd, vehicle)
-    assert not np.any(bo.correction("alpha")) and np.max(np.abs(bo.correction("delta_p/2"))) < 1e-15
+    assert np.max(np.abs(bo.correction("alpha"))) < 1e-12 and np.max(np.abs(bo.correction("delta_p/2"))) < 1e-15
     assert bo.correction("1") is None
     d = bo.correction("alpha**2")
     assert not np.any(d[:EDGE]) and not np.any(d[-EDGE:])  # the filter's transients keep the old column
+
+
+def test_sensor_noise_is_not_rectified_into_a_kink(vehicle, monkeypatch):
+    """C = 0.01 + 0.4 LP(|beta|), beta swinging through 0 by +-0.02 rad and its vane adding white
+    noise of 0.005 rad: formed from the raw vane, |beta + n| > |beta| near the kink and the slope
+    came out +6.6 %; with the wide-band signal first low-passed at WIDE_BAND_FACTOR x the band
+    (the noise far above the band out) it is within 1 %."""
+    import aerosid.identification.band_order as band_order_module
+
+    t = np.arange(N) / FS
+    beta = 0.02 * np.sin(2 * np.pi * 0.2 * t) * (1 + 0.5 * np.sin(2 * np.pi * 0.03 * t))
+    vane = beta + 0.005 * np.random.default_rng(1).standard_normal(N)
+    wide = {"alpha_rad": np.full(N, 0.05), "beta_rad": vane, **{c: np.zeros(N) for c in ZEROS},
+            "V_m_s": np.full(N, 300.0)}
+    fd = _band_frame(N, FS, BAND, wide)
+    y = 0.01 + 0.4 * low_pass_runs(np.abs(beta), FS, BAND, [slice(0, N)])
+    assert _fit(fd, vehicle, y, "abs(beta)")[0] == pytest.approx(0.4, rel=0.01)
+    monkeypatch.setattr(band_order_module, "WIDE_BAND_FACTOR", None)
+    assert _fit(fd, vehicle, y, "abs(beta)")[0] > 1.04 * 0.4
 
 
 def test_a_row_subset_of_the_signals_keeps_its_rows_corrections(vehicle):
