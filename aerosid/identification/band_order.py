@@ -52,6 +52,7 @@ from __future__ import annotations
 
 import hashlib
 import math
+import threading
 from collections import OrderedDict
 from dataclasses import dataclass, field
 
@@ -80,6 +81,7 @@ WIDE_BAND_FACTOR = 3.0
 #: Flight data whose wide-band signals are kept (a small LRU: SIMEX's frames share one).
 _CACHE_SIZE = 4
 _WIDE_CACHE: OrderedDict = OrderedDict()
+_CACHE_LOCK = threading.Lock()  # Prefect's default task runner runs tasks in threads
 
 
 def flight_data_runs(fd, valid: np.ndarray | None = None) -> list[tuple[slice, float, float, int]]:
@@ -131,11 +133,15 @@ class _Wide:
         return out
 
     def correction(self, expression: str) -> np.ndarray | None:
-        from aerosid.modelling.expressions import evaluate, signal_names
+        from aerosid.modelling.expressions import ExpressionError, evaluate, signal_names
 
         if expression not in self.corrections:
             d = None
-            if signal_names(expression, self.wide):
+            try:  # a signal the flight data do not have (one a caller added: no wide-band form) -> none
+                names = signal_names(expression, self.wide)
+            except ExpressionError:
+                names = frozenset()
+            if names:
                 n = len(self.inner)
                 f_wide = evaluate(expression, self.wide, n)
                 f_low = evaluate(expression, self.low, n)
@@ -186,9 +192,10 @@ def _digest(fd, vehicle) -> bytes:
 def _wide_signals(fd, vehicle) -> _Wide:
     """The wide-band and the low-passed wide-band model signals of fd (cached by content)."""
     key = _digest(fd, vehicle)
-    if key in _WIDE_CACHE:
-        _WIDE_CACHE.move_to_end(key)
-        return _WIDE_CACHE[key]
+    with _CACHE_LOCK:
+        if key in _WIDE_CACHE:
+            _WIDE_CACHE.move_to_end(key)
+            return _WIDE_CACHE[key]
     from aerosid.diagnosis.candidates import derived_signals
     from aerosid.identification.inversion import total_angles
     from aerosid.modelling.models import vehicle_signals
@@ -219,7 +226,8 @@ def _wide_signals(fd, vehicle) -> _Wide:
 
     w.wide.update(signals(wide_cols))
     w.low.update(signals({c: w.low_pass(x) for c, x in wide_cols.items()}))
-    _WIDE_CACHE[key] = w
-    while len(_WIDE_CACHE) > _CACHE_SIZE:
-        _WIDE_CACHE.popitem(last=False)
+    with _CACHE_LOCK:
+        _WIDE_CACHE[key] = w
+        while len(_WIDE_CACHE) > _CACHE_SIZE:
+            _WIDE_CACHE.popitem(last=False)
     return w

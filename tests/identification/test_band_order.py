@@ -108,6 +108,9 @@ def test_a_row_subset_of_the_signals_keeps_its_rows_corrections(vehicle):
     keep[1000:1500] = keep[4000:4100] = True
     sub = {k: np.asarray(v)[keep] if np.ndim(v) else v for k, v in sig.items()}
     np.testing.assert_array_equal(evaluate("alpha**2", sub), full[keep])
+    # a signal a caller added has no wide-band form: its terms keep f(x)
+    extra = {**sig, "extra": np.full(N, 2.0)}
+    np.testing.assert_array_equal(evaluate("extra*alpha**2", extra), 2.0 * sig["alpha"] ** 2)
 
 
 def test_flight_data_without_wide_band_values_keep_the_old_columns(vehicle):
