@@ -10,11 +10,11 @@ linear in the signals the two are the same; for a non-linear one they are not --
 alpha^2's and alpha^3's harmonics, cos 4 phi_r near alpha_r = 0 -- and the difference is an
 error in the regressor that no model term takes and no interval knows.
 
-Measured (bench/results/band_order.md): on the JSBSim DHC6, whose C_l is even in beta, the
-suggested ``abs(beta + 0.0053)`` term gave C_l,p -0.426 +- 0.012 against a truth of -0.503
-(6.5 sigma) and a follow-up ``abs(r_hat)`` that was this artefact; formed in this order,
--0.498 +- 0.016 and no such follow-up.  On seed-rlv the roll terms' non-linearity was 1.1-1.5 x
-the Cl floor of a complete model.
+Measured (bench/results/band_order.md, JSBSim DHC-6, seeds 0-4): its C_l is even in beta, and
+with the ``abs(beta + k)`` term the localisation suggests, C_l,p came out +14.8 % off on average
+and outside 2 sigma on 5/5 seeds (a follow-up ``abs(r_hat)`` was this artefact); in the band's
+order, -0.3 % (RMS 1.1 %), within 2 sigma on 5/5.  On seed-rlv the roll terms' non-linearity was
+1.1-1.5 x the Cl floor of a complete model.
 
 What this module does
 ---------------------
@@ -26,7 +26,7 @@ term, :meth:`BandOrder.correction` is
     d = LP(f(x_wide)) - f(LP(x_wide)),
 
 both sides formed from the same wide-band x, so LP's attenuation of in-band content cancels and
-only the term's non-linearity is left; the model's column becomes f(x) + d (ChannelModel.design),
+only the term's non-linearity is left; the model's column becomes f(x) + d (expressions.evaluate),
 which is LP(f(x_wide)) up to the difference between the flight data's own low-passed signals and
 LP(x_wide) (none for the vanes, the inversion's for inverted angles).  d is identically zero for
 a term linear in the signals (alpha, delta_p/2, a rate) and tiny for one through V (q_hat).
