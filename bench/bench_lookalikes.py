@@ -149,8 +149,8 @@ def _report(df: pd.DataFrame, seeds: list[int], wall_s: float, other_txt: str | 
          "flight data, `diagnose` the default models. *recommended* = diagnosis.json `recommended`. For the two "
          "look-alikes the wrong one is then added and the flight re-diagnosed: *closed on wrong* = the "
          "re-diagnosis ends the loop (`loop_closed`, \"nothing missing\"). Floor = the diagnosis' `floor_rms` "
-         "(aerosid/diagnosis/floor.py: the band path's coefficient sigma, the angles' part measured by refits "
-         "and the band path's non-linearity, in quadrature); excess = sqrt(residual^2 - floor^2).", "",
+         "(aerosid/diagnosis/floor.py: the band path's coefficient sigma and the angles' part measured by refits, "
+         "in quadrature); excess = sqrt(residual^2 - floor^2).", "",
          "## Look-alikes", "",
          "| effect | true effect recommended | wrong one recommended | none recommended | verdicts | closed on the wrong one | re-diagnosis after the wrong one: recommends the true / unresolved |",
          "|---|---|---|---|---|---|---|"]
