@@ -10,8 +10,8 @@ The headline number is the *excess* over the floor,
 the part of the residual the model could still explain; it falls toward zero as the
 model completes, where the residual itself barely moves (docs/modelling-loop.md §5).
 
-How the floor is computed: the three parts below in quadrature
----------------------------------------------------------------
+How the floor is computed: the two parts below in quadrature
+-------------------------------------------------------------
 ``coefficient_floor_rms``, the error of the flight-derived coefficient.  On the band path
 (the default: flight data with ``band_hz`` and the sensors' white-noise sigma, the filter's
 R, per sample) it is that noise through what the band path does to it: the gyros' through
@@ -103,8 +103,7 @@ def _rms(x) -> float:
 def channel_floor(channel: str, residual: np.ndarray, sigma: np.ndarray | None, angle_rms: float = 0.0,
                   method: str = "smoother sigma") -> ChannelFloor:
     """One channel's residual RMS against its floor: the RMS of the coefficient's per-sample
-    sigma combined in quadrature with the angles' part angle_rms and the band path's
-    non-linearity nonlinearity_rms (module doc)."""
+    sigma combined in quadrature with the angles' part angle_rms (module doc)."""
     res_rms = _rms(residual) if np.size(residual) else float("nan")
     ang = float(angle_rms) if math.isfinite(angle_rms) else 0.0
     if sigma is None:
