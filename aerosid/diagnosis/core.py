@@ -337,9 +337,10 @@ def _simex_signals(fd: pd.DataFrame, vehicle, sigma: float) -> dict:
     inverted from the database, through the vanes' low-pass for vanes."""
     cutoff = angle_cutoff_hz(fd, vehicle) if vehicle.air_data_source == "vanes" else None
     out: dict = {lam: [] for lam in SIMEX_LAMBDAS}
+    parent = vehicle_signals(fd, vehicle)
     for lam, f in simex_frames(fd, sigma, cutoff, seed=SIMEX_SEED, lambdas=SIMEX_LAMBDAS,
                                replicates=SIMEX_REPLICATES):
-        out[lam].append(derived_signals(vehicle_signals(f, vehicle), vehicle.length_pitch_m,
+        out[lam].append(derived_signals(vehicle_signals(f, vehicle, like=parent), vehicle.length_pitch_m,
                                         vehicle.length_lateral_m))
     return out
 

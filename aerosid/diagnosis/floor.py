@@ -178,9 +178,11 @@ def angle_floor_rms(fd, vehicle, models: dict, channels, replicates: int = ANGLE
     groups = segment_keys(fd)
     cutoff = angle_cutoff_hz(fd, vehicle)
     rng = np.random.default_rng(ANGLE_SEED)
+    parent = vehicle_signals(fd, vehicle)
 
     def mean_squares(frame) -> dict[str, float]:
-        sig = derived_signals(vehicle_signals(frame, vehicle), vehicle.length_pitch_m, vehicle.length_lateral_m)
+        sig = derived_signals(vehicle_signals(frame, vehicle, like=parent), vehicle.length_pitch_m,
+                              vehicle.length_lateral_m)
         out = {}
         for ch in channels:
             A = models[ch].design(sig)[0].to_numpy(float)

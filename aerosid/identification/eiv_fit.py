@@ -169,9 +169,12 @@ def eiv_corrected(fd: pd.DataFrame, vehicle: Vehicle, models: dict, fits: dict, 
         return fits
     mixed = rate_sigma is not None and len(noisy_rates) < len(ok)  # some channels read the measured rates
     base = vehicle_signals(fd, vehicle) if mixed and not model_signals.kinematic_angles(fd, vehicle) else None
+    parent: dict = {}  # vehicle_signals(fd), whose band order every frame shares (filled on the first)
 
     def design(frame: pd.DataFrame) -> dict:
-        sig = vehicle_signals(frame, vehicle)
+        if not parent:
+            parent.update(base if base is not None else vehicle_signals(fd, vehicle))
+        sig = vehicle_signals(frame, vehicle, like=parent)
         exact = _with_measured_rates(frame, fd, vehicle, sig, base) if mixed else sig
         return {ch: models[ch].regressors(sig if ch in noisy_rates else exact).to_numpy(float) for ch in ok}
 
@@ -197,7 +200,7 @@ def _with_measured_rates(frame: pd.DataFrame, fd: pd.DataFrame, vehicle: Vehicle
     rates feed the angles too (aerosid.modelling.models.kinematic_angles): then the signals are
     rebuilt from the frame with fd's rate columns."""
     if base is None:
-        return vehicle_signals(frame.assign(**{c: fd[c].to_numpy() for c in RATE_COLUMNS}), vehicle)
+        return vehicle_signals(frame.assign(**{c: fd[c].to_numpy() for c in RATE_COLUMNS}), vehicle, like=sig)
     return {**sig, **{k: base[k] for k in RATE_SIGNALS if k in base}}
 
 

@@ -278,13 +278,16 @@ def kinematic_angles(fd: pd.DataFrame, vehicle) -> bool:
             and set(KINEMATIC_COLUMNS) <= set(fd.columns))
 
 
-def vehicle_signals(fd: pd.DataFrame, vehicle, with_band_order: bool = True) -> dict[str, np.ndarray]:
+def vehicle_signals(fd: pd.DataFrame, vehicle, with_band_order: bool = True,
+                    like: dict | None = None) -> dict[str, np.ndarray]:
     """signals_from_flight_data with the vehicle's pitch and lateral reference lengths.
 
     With ``with_band_order`` (the default) and band-path flight data, the signals also carry the flight
     data's band order and their rows (aerosid.identification.band_order): every term evaluated
     from them, by a model's design or a candidate, is then the band path's column of a non-linear
-    term, LP(f(x)) rather than f(LP(x)).
+    term, LP(f(x)) rather than f(LP(x)).  like: the signals of the flight data fd is a copy of, row
+    for row (a SIMEX frame: noise on the low-passed signals, the wide-band ones untouched): their
+    band order is reused rather than looked up again (~1000 frames per identify).
 
     With vanes (``[air_data] source = "vanes"``) and KINEMATIC_ALPHA_DOT set, alpha_dot_hat comes
     from the flight-path kinematics (rates, the specific forces -C_A, -C_N times qbar S/m) above
@@ -312,7 +315,9 @@ def vehicle_signals(fd: pd.DataFrame, vehicle, with_band_order: bool = True) -> 
             sig["alpha"] = kin.alpha
             sig["alpha_r"], sig["phi_r"] = total_angles(kin.alpha, sig["beta"])
         sig["alpha_dot_hat"] = kin.alpha_dot * vehicle.length_pitch_m / (2 * sig["V"])
-    if with_band_order:
+    if with_band_order and like is not None and len(like.get(ROW_KEY, ())) == len(fd):
+        sig[BAND_ORDER_KEY], sig[ROW_KEY] = like.get(BAND_ORDER_KEY), like[ROW_KEY]
+    elif with_band_order:
         from aerosid.identification.band_order import band_order
 
         sig[BAND_ORDER_KEY] = band_order(fd, vehicle)
