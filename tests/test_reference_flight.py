@@ -49,7 +49,7 @@ def test_alpha_beta_inversion_errors_against_truth(reference_flight, reference_r
 
 
 def test_wideband_columns_are_the_band_paths_signals_before_its_low_pass(reference_flight, reference_run):
-    """The floor's band-path part reads them: the fins' low-pass is the flight data's fins (the
+    """The band order of non-linear terms reads them: the fins' low-pass is the flight data's fins (the
     mixing is linear), and the wide-band alpha (inverted from the smoother's accelerations) is
     as close to the true alpha as the band's."""
     from aerosid.identification.band_order import flight_data_runs
@@ -140,3 +140,25 @@ def test_flight_derived_cm_error_below_0_6_hz_sits_at_the_gyro_noise_bound(refer
     noise_psd = 2.0 / fs * ((2 * np.pi * fg) ** 2 * sq ** 2 + coupling) * h2
     bound = np.sqrt(np.trapezoid(noise_psd, fg)) * v.Iyy_kg_m2 / (tr["qbar_pa"].mean() * v.S_m2 * v.d_m)
     assert 0.7 <= low_rms / bound <= 1.5, (low_rms, bound)
+
+
+def test_simex_frames_share_their_flight_datas_band_order(reference_run, monkeypatch):
+    """identify's SIMEX designs the models on ~1000 noisy copies of the flight data, which reuse the
+    band order of the flight data itself (vehicle_signals(..., like=)) instead of looking it up per
+    copy: the same C_l estimates (its cos 4 phi_r and alpha_r terms are non-linear) to rounding, and
+    the band order does act on them."""
+    import aerosid.identification.band_order as band_order
+    import aerosid.identification.eiv_fit as eiv_fit
+    from aerosid.identification.identify import identify
+    from aerosid.modelling.models import default_models, vehicle_signals
+    from aerosid.vehicles.vehicle import load_vehicle
+
+    veh = load_vehicle("seed-rlv")
+    fd = reference_run.flight_data
+    models = {"Cl": default_models(veh)["Cl"]}
+    shared = identify(fd, veh, models).fits["Cl"].estimate
+    monkeypatch.setattr(eiv_fit, "vehicle_signals", lambda frame, vehicle, like=None: vehicle_signals(frame, vehicle))
+    looked_up = identify(fd, veh, models).fits["Cl"].estimate
+    np.testing.assert_allclose(shared, looked_up, rtol=1e-9, atol=1e-15)
+    monkeypatch.setattr(band_order, "ENABLED", False)
+    assert np.max(np.abs(identify(fd, veh, models).fits["Cl"].estimate - shared) / np.abs(shared)) > 1e-3
