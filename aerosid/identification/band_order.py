@@ -80,6 +80,10 @@ ENABLED = True
 WIDE_BAND_FACTOR = 3.0
 #: Flight data whose wide-band signals are kept (a small LRU: SIMEX's frames share one).
 _CACHE_SIZE = 4
+#: Corrections kept per flight data (an LRU: the model's terms are asked for again and again, the
+#: localisation's ~400 trial terms once or twice each; a kept correction is one float per row, so
+#: keeping them all cost ~200 MB on a 60 000-row campaign).
+_CORRECTIONS_KEPT = 64
 _WIDE_CACHE: OrderedDict = OrderedDict()
 _CACHE_LOCK = threading.Lock()  # Prefect's default task runner runs tasks in threads
 
@@ -124,7 +128,7 @@ class _Wide:
     low: dict
     runs: list
     inner: np.ndarray
-    corrections: dict = field(default_factory=dict)
+    corrections: OrderedDict = field(default_factory=OrderedDict)
 
     def low_pass(self, x: np.ndarray) -> np.ndarray:
         out = np.array(x, float)
@@ -135,22 +139,28 @@ class _Wide:
     def correction(self, expression: str) -> np.ndarray | None:
         from aerosid.modelling.expressions import ExpressionError, evaluate, signal_names
 
-        if expression not in self.corrections:
-            d = None
-            try:  # a signal the flight data do not have (one a caller added: no wide-band form) -> none
-                names = signal_names(expression, self.wide)
-            except ExpressionError:
-                names = frozenset()
-            if names:
-                n = len(self.inner)
-                f_wide = evaluate(expression, self.wide, n)
-                f_low = evaluate(expression, self.low, n)
-                f_wide = np.where(np.isfinite(f_wide), f_wide, f_low)  # one bad value would spread over its run
-                d = self.low_pass(f_wide) - f_low
-                d = np.where(self.inner & np.isfinite(d), d, 0.0)
-                d.setflags(write=False)
+        with _CACHE_LOCK:
+            if expression in self.corrections:
+                self.corrections.move_to_end(expression)
+                return self.corrections[expression]
+        d = None
+        try:  # a signal the flight data do not have (one a caller added: no wide-band form) -> none
+            names = signal_names(expression, self.wide)
+        except ExpressionError:
+            names = frozenset()
+        if names:
+            n = len(self.inner)
+            f_wide = evaluate(expression, self.wide, n)
+            f_low = evaluate(expression, self.low, n)
+            f_wide = np.where(np.isfinite(f_wide), f_wide, f_low)  # one bad value would spread over its run
+            d = self.low_pass(f_wide) - f_low
+            d = np.where(self.inner & np.isfinite(d), d, 0.0)
+            d.setflags(write=False)
+        with _CACHE_LOCK:
             self.corrections[expression] = d
-        return self.corrections[expression]
+            while len(self.corrections) > _CORRECTIONS_KEPT:
+                self.corrections.popitem(last=False)
+        return d
 
 
 @dataclass(frozen=True)
