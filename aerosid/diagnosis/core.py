@@ -209,7 +209,7 @@ def diagnose(flight_data: pd.DataFrame, vehicle, models: dict[str, ChannelModel]
         sig_cn = fd["sigma_CN"].to_numpy(float) if "sigma_CN" in fd else np.array([0.0])
         cn_alpha = abs(float(vehicle.preflight.CN_alpha))
         angle_sigma_rad = float(np.nanmedian(sig_cn)) / cn_alpha if cn_alpha > 0 else 0.0
-    simex = _simex_signals(fd, vehicle, float(angle_sigma_rad)) if angle_sigma_rad > 0 else []
+    simex = _simex_signals(fd, vehicle, float(angle_sigma_rad), signals) if angle_sigma_rad > 0 else []
     n_flights = max(int(fd["flight"].astype(str).nunique()) if "flight" in fd.columns else 1, 1)
     on_flights = "on this flight" if n_flights == 1 else f"on these {n_flights} pooled flights"
 
@@ -329,18 +329,18 @@ def diagnose(flight_data: pd.DataFrame, vehicle, models: dict[str, ChannelModel]
                      bool(getattr(vehicle, "turbulent_air", False)))
 
 
-def _simex_signals(fd: pd.DataFrame, vehicle, sigma: float) -> dict:
+def _simex_signals(fd: pd.DataFrame, vehicle, sigma: float, signals: dict) -> dict:
     """{lambda: [signals]}: extra noise of variance lambda sigma^2 on alpha and beta (alpha_r,
     phi_r and the derivatives recomputed from them), SIMEX_REPLICATES per lambda in SIMEX_LAMBDAS,
     drawn as the identification's SIMEX draws them (aerosid.identification.eiv.simex_frames:
     antithetic pairs of common random numbers; deterministic, SIMEX_SEED): white for angles
-    inverted from the database, through the vanes' low-pass for vanes."""
+    inverted from the database, through the vanes' low-pass for vanes.  signals: fd's own (their
+    band order serves every noisy copy)."""
     cutoff = angle_cutoff_hz(fd, vehicle) if vehicle.air_data_source == "vanes" else None
     out: dict = {lam: [] for lam in SIMEX_LAMBDAS}
-    parent = vehicle_signals(fd, vehicle)
     for lam, f in simex_frames(fd, sigma, cutoff, seed=SIMEX_SEED, lambdas=SIMEX_LAMBDAS,
                                replicates=SIMEX_REPLICATES):
-        out[lam].append(derived_signals(vehicle_signals(f, vehicle, like=parent), vehicle.length_pitch_m,
+        out[lam].append(derived_signals(vehicle_signals(f, vehicle, like=signals), vehicle.length_pitch_m,
                                         vehicle.length_lateral_m))
     return out
 

@@ -180,9 +180,8 @@ def angle_floor_rms(fd, vehicle, models: dict, channels, replicates: int = ANGLE
     rng = np.random.default_rng(ANGLE_SEED)
     parent = vehicle_signals(fd, vehicle)
 
-    def mean_squares(frame) -> dict[str, float]:
-        sig = derived_signals(vehicle_signals(frame, vehicle, like=parent), vehicle.length_pitch_m,
-                              vehicle.length_lateral_m)
+    def mean_squares(sig: dict) -> dict[str, float]:
+        sig = derived_signals(sig, vehicle.length_pitch_m, vehicle.length_lateral_m)
         out = {}
         for ch in channels:
             A = models[ch].design(sig)[0].to_numpy(float)
@@ -192,10 +191,11 @@ def angle_floor_rms(fd, vehicle, models: dict, channels, replicates: int = ANGLE
             out[ch] = float(np.mean(e * e)) if e.size else float("nan")
         return out
 
-    base = mean_squares(fd)
+    base = mean_squares(parent)
     rise = {ch: 0.0 for ch in channels}
     for _ in range(replicates):
-        for ch, ms in mean_squares(with_angle_noise(fd, rng, groups, sigma, cutoff)).items():
+        noisy = with_angle_noise(fd, rng, groups, sigma, cutoff)
+        for ch, ms in mean_squares(vehicle_signals(noisy, vehicle, like=parent)).items():
             rise[ch] += (ms - base[ch]) / replicates
     return {ch: math.sqrt(max(v, 0.0)) if math.isfinite(v) else float("nan") for ch, v in rise.items()}
 
