@@ -306,8 +306,8 @@ def _kink_scan(c: _Channel, var: str, x: np.ndarray, r: dict) -> dict:
     ks = np.unique(np.r_[np.linspace(lo, hi, KINK_SCAN_POINTS) if lo < hi else [], 0.0])
     A = np.column_stack([c.Ab, np.zeros(c.n)])
     rss = []
-    for k in ks:
-        A[:, -1] = np.abs(x - k)
+    for k in ks:  # each column as the fit forms it (the band order of a non-linear term), not kept
+        A[:, -1] = evaluate(_kink(var, float(k)), c.signals, c.n, keep_band_order=False)
         e = c.y - A @ c._lstsq(A, c.y)
         rss.append(float(e @ e))
     rss = np.asarray(rss)
@@ -318,9 +318,13 @@ def _kink_scan(c: _Channel, var: str, x: np.ndarray, r: dict) -> dict:
     out = {"kink_at": float(ks[i]), "kink_rss_drop": float(1.0 - rss[i] / rss[i0]) if rss[i0] > 0 else 0.0,
            "kink_p_value": p}
     if p < P_MAX and ks[i] != 0.0:
-        k = float(f"{ks[i]:.2g}")
-        out["kink_expression"] = f"abs({var} {'-' if k > 0 else '+'} {_num(abs(k))})"
+        out["kink_expression"] = _kink(var, float(f"{ks[i]:.2g}"), _num)
     return out
+
+
+def _kink(var: str, k: float, number=repr) -> str:
+    """abs(var - k) as an expression."""
+    return f"abs({var})" if k == 0.0 else f"abs({var} {'-' if k > 0 else '+'} {number(abs(k))})"
 
 
 def _corr(a: np.ndarray, b: np.ndarray) -> float:

@@ -136,7 +136,7 @@ class _Wide:
             out[r] = low_pass_runs(x[r], fs, band, [slice(0, r.stop - r.start)])
         return out
 
-    def correction(self, expression: str) -> np.ndarray | None:
+    def correction(self, expression: str, keep: bool = True) -> np.ndarray | None:
         from aerosid.modelling.expressions import ExpressionError, evaluate, signal_names
 
         with _CACHE_LOCK:
@@ -156,6 +156,8 @@ class _Wide:
             d = self.low_pass(f_wide) - f_low
             d = np.where(self.inner & np.isfinite(d), d, 0.0)
             d.setflags(write=False)
+        if not keep:
+            return d
         with _CACHE_LOCK:
             self.corrections[expression] = d
             while len(self.corrections) > _CORRECTIONS_KEPT:
@@ -172,13 +174,14 @@ class BandOrder:
     vehicle: object = field(repr=False)
     _state: dict = field(default_factory=dict, repr=False, compare=False)
 
-    def correction(self, expression: str) -> np.ndarray | None:
+    def correction(self, expression: str, keep: bool = True) -> np.ndarray | None:
         """d = LP(f(x_wide)) - f(LP(x_wide)) of the term f = ``expression`` on every row of the
         flight data (0 where it cannot be formed: the runs' edges, rows without wide-band values);
-        None for a constant term."""
+        None for a constant term.  keep=False: not kept among the flight data's corrections (a
+        scan's trial terms, which would push the model's own terms out)."""
         if "wide" not in self._state:
             self._state["wide"] = _wide_signals(self.fd, self.vehicle)
-        return self._state["wide"].correction(expression)
+        return self._state["wide"].correction(expression, keep)
 
 
 def band_order(fd, vehicle) -> BandOrder | None:

@@ -177,12 +177,14 @@ BAND_ORDER_KEY = "_band_order"
 ROW_KEY = "_row"
 
 
-def evaluate(expression: str, values: Mapping[str, np.ndarray], length: int | None = None) -> np.ndarray:
+def evaluate(expression: str, values: Mapping[str, np.ndarray], length: int | None = None,
+             keep_band_order: bool = True) -> np.ndarray:
     """Evaluate an expression on named arrays; a constant expression broadcasts to `length`.
 
     When ``values`` carry a band order and their rows (BAND_ORDER_KEY, ROW_KEY), the result is the
     column as the band path should form it, f(x) + LP(f(x_wide)) - f(LP(x_wide))
-    (aerosid.identification.band_order): a non-linear term low-passed after it is formed."""
+    (aerosid.identification.band_order): a non-linear term low-passed after it is formed.
+    keep_band_order=False: that correction is not kept for the next call (a scan's trial terms)."""
     tree = parse(expression, frozenset(values))
     with np.errstate(all="ignore"):
         out = np.asarray(_eval(tree.body, values), dtype=float)
@@ -191,7 +193,7 @@ def evaluate(expression: str, values: Mapping[str, np.ndarray], length: int | No
         out = np.full(n, float(out))
     band_order = values.get(BAND_ORDER_KEY)
     if band_order is not None and ROW_KEY in values:
-        d = band_order.correction(expression)
+        d = band_order.correction(expression, keep_band_order)
         if d is not None:
             out = out + d[values[ROW_KEY]]
     return out

@@ -172,3 +172,22 @@ def test_flight_data_runs_keep_each_flights_rate_and_cut_at_holes_and_invalid_ro
     assert runs == [(0, 1000, 100, 100), (1000, 1300, 100, 100), (1300, 1600, 100, 100), (1701, 2400, 50, 50)]
     # a flight without a band (smoother path) or with a zero band has no runs
     assert flight_data_runs(fd.assign(band_hz=np.where(fd["flight"] == "b", 0.0, 1.0)))[-1][0].stop == 1600
+
+
+def test_a_trial_term_not_kept_gives_the_same_column_and_keeps_the_model_terms(vehicle):
+    """A scan's trial terms (the localisation's kink positions) are corrected like any term but not
+    kept: the flight data's kept corrections (the model's own terms) are not pushed out by them."""
+    from aerosid.modelling.expressions import evaluate
+
+    fd, _ = _square_flight()
+    sig = vehicle_signals(fd, vehicle)
+    bo = sig["_band_order"]
+    kept = evaluate("alpha**2", sig)
+    wide = bo._state["wide"]
+    before = list(wide.corrections)
+    trials = [evaluate(f"abs(alpha - {float(k)!r})", sig, keep_band_order=False) for k in np.linspace(0.05, 0.15, 100)]
+    assert list(wide.corrections) == before and "alpha**2" in wide.corrections
+    again = evaluate("abs(alpha - 0.1)", sig)  # the same column whether kept or not
+    assert np.array_equal(again, evaluate("abs(alpha - 0.1)", sig, keep_band_order=False))
+    assert np.max(np.abs(again - np.abs(fd["alpha_rad"].to_numpy()[sig["_row"]] - 0.1))) > 1e-3  # corrected
+    assert np.array_equal(kept, evaluate("alpha**2", sig)) and len(trials) == 100
