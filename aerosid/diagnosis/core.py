@@ -174,10 +174,11 @@ def diagnose(flight_data: pd.DataFrame, vehicle, models: dict[str, ChannelModel]
     |M - M_ref| <= mach_half_width are used, as in :func:`aerosid.identification.identify.identify`.
     candidates: the effects to test (default :func:`default_candidates`); the ones
     already in a channel's model are skipped.
-    angle_sigma_rad: 1-sigma error of the recovered alpha and beta, for the
-    errors-in-variables (SIMEX) check.  Default: median(sigma_CN) / |CN_alpha|
-    (alpha and beta come from inverting the force database, so a C_N error maps
-    to an angle error through the normal-force slope); 0 switches the check off.
+    angle_sigma_rad: 1-sigma white error of the recovered alpha and beta, for the
+    errors-in-variables (SIMEX) check.  Default: the flight data's own (``eiv_sigma_*``, per
+    angle and sample, through the band: :func:`_angle_noise`), else median(sigma_CN) /
+    |CN_alpha| for inverted angles (a C_N error maps to an angle error through the normal-force
+    slope); 0 switches the check off.
     progress: an optional callback progress("candidates", fraction done) (the CLI's display).
     localisation: also localise where each channel's model fails, as suggested terms
     (:mod:`aerosid.diagnosis.localise`; the ``localisation`` field).
@@ -200,16 +201,8 @@ def diagnose(flight_data: pd.DataFrame, vehicle, models: dict[str, ChannelModel]
     dts = dts[dts > 0]
     fs = 1.0 / float(np.median(dts)) if dts.size else 1.0
     win = _windows_index(n, n_windows)
-    if angle_sigma_rad is None and vehicle.air_data_source == "vanes":
-        angle_sigma_rad = vehicle.vane_noise_rad
-        if not math.isfinite(angle_sigma_rad):  # not stated: what the flight data measured on the vanes
-            measured = angle_eiv_sigma(fd, vehicle)
-            angle_sigma_rad = float(np.median(np.concatenate(measured))) if measured is not None else 0.0
-    if angle_sigma_rad is None:
-        sig_cn = fd["sigma_CN"].to_numpy(float) if "sigma_CN" in fd else np.array([0.0])
-        cn_alpha = abs(float(vehicle.preflight.CN_alpha))
-        angle_sigma_rad = float(np.nanmedian(sig_cn)) / cn_alpha if cn_alpha > 0 else 0.0
-    simex = _simex_signals(fd, vehicle, float(angle_sigma_rad), signals) if angle_sigma_rad > 0 else []
+    noise = _angle_noise(fd, vehicle, angle_sigma_rad)
+    simex = _simex_signals(fd, vehicle, *noise, signals) if noise is not None else []
     n_flights = max(int(fd["flight"].astype(str).nunique()) if "flight" in fd.columns else 1, 1)
     on_flights = "on this flight" if n_flights == 1 else f"on these {n_flights} pooled flights"
 
@@ -323,20 +316,47 @@ def diagnose(flight_data: pd.DataFrame, vehicle, models: dict[str, ChannelModel]
         from aerosid.diagnosis.localise import localise
 
         loc = localise(signals, {ch: fd[ch].to_numpy(float) for ch in models}, models, t, groups, win,
-                       vehicle.mach_reference, float(angle_sigma_rad), simex=simex)
+                       vehicle.mach_reference, noise, simex=simex)
     return Diagnosis(tuple(ranked), reports, models, n, window, int(win.max()) + 1,
                      identities, looks, recommended, floor, loc, n_flights,
                      bool(getattr(vehicle, "turbulent_air", False)))
 
 
-def _simex_signals(fd: pd.DataFrame, vehicle, sigma: float, signals: dict) -> dict:
+def _angle_noise(fd: pd.DataFrame, vehicle, angle_sigma_rad: float | None) -> tuple | None:
+    """(sigma, cutoff_hz) of the recovered angles' noise, as aerosid.identification.eiv.angle_noise
+    draws it, for the errors-in-variables checks (SIMEX, the shapes' guard); None: the angles are
+    taken as exact.
+
+    Not stated (angle_sigma_rad None): the flight data's own ``eiv_sigma_*`` per angle and sample
+    through the band (aerosid.identification.eiv_fit.angle_eiv_sigma, angle_cutoff_hz), as the
+    identification's SIMEX and the floor draw it.  Before, angles inverted from the database got
+    white noise of median(sigma_CN) / |CN_alpha| here: on seed-rlv flights a fifth to a third of
+    the inversion's noise the flight data measure (0.0027 against 0.0077 rad for beta at 50 Hz),
+    and with its band-limited part so small, the check passed a beta|beta| in Cn that the
+    inverted beta's own errors made (recommended on 2 of 10 no-effect flights at 50 Hz).  That
+    estimate remains for flight data without the columns (the smoother's path, older files).
+    Stated: white of that 1-sigma for inverted angles, through the vanes' low-pass for vanes."""
+    vanes = vehicle.air_data_source == "vanes"
+    if angle_sigma_rad is None:
+        measured = angle_eiv_sigma(fd, vehicle)
+        if measured is not None:
+            return tuple(measured), angle_cutoff_hz(fd, vehicle)
+        if vanes:
+            return None
+        sig_cn = fd["sigma_CN"].to_numpy(float) if "sigma_CN" in fd else np.array([0.0])
+        cn_alpha = abs(float(vehicle.preflight.CN_alpha))
+        angle_sigma_rad = float(np.nanmedian(sig_cn)) / cn_alpha if cn_alpha > 0 else 0.0
+    if not (angle_sigma_rad > 0):
+        return None
+    return float(angle_sigma_rad), (angle_cutoff_hz(fd, vehicle) if vanes else None)
+
+
+def _simex_signals(fd: pd.DataFrame, vehicle, sigma, cutoff: float | None, signals: dict) -> dict:
     """{lambda: [signals]}: extra noise of variance lambda sigma^2 on alpha and beta (alpha_r,
     phi_r and the derivatives recomputed from them), SIMEX_REPLICATES per lambda in SIMEX_LAMBDAS,
     drawn as the identification's SIMEX draws them (aerosid.identification.eiv.simex_frames:
-    antithetic pairs of common random numbers; deterministic, SIMEX_SEED): white for angles
-    inverted from the database, through the vanes' low-pass for vanes.  signals: fd's own (their
-    band order serves every noisy copy)."""
-    cutoff = angle_cutoff_hz(fd, vehicle) if vehicle.air_data_source == "vanes" else None
+    antithetic pairs of common random numbers; deterministic, SIMEX_SEED); sigma, cutoff: as
+    :func:`_angle_noise` gives them.  signals: fd's own (their band order serves every noisy copy)."""
     out: dict = {lam: [] for lam in SIMEX_LAMBDAS}
     for lam, f in simex_frames(fd, sigma, cutoff, seed=SIMEX_SEED, lambdas=SIMEX_LAMBDAS,
                                replicates=SIMEX_REPLICATES):

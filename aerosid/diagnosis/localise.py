@@ -205,17 +205,23 @@ def _error_share(expr: str, signals: dict, perturbed: dict | None) -> float:
     return float(np.var(xp - x) / v) if v > 0 else 0.0
 
 
-def _perturbed(signals: dict, sigma: float) -> dict | None:
-    """The signals with white errors of sigma [rad] added to alpha and beta (alpha_r, phi_r
-    recomputed), a fixed draw: the errors-in-variables guard of the shapes."""
-    if not sigma > 0:
+def _perturbed(signals: dict, noise, t: np.ndarray, groups: np.ndarray) -> dict | None:
+    """The signals with one fixed draw of the angles' errors added to alpha and beta (alpha_r,
+    phi_r recomputed): the errors-in-variables guard of the shapes.  noise: a white 1-sigma [rad],
+    or (sigma, cutoff_hz) as aerosid.identification.eiv.angle_noise draws them (the diagnosis'
+    own: the flight data's per-angle sigma through the band); None or 0: no guard."""
+    if noise is None:
         return None
+    sigma, cutoff = noise if isinstance(noise, tuple) else (float(noise), None)
+    if not any(np.any(np.asarray(x, float) > 0) for x in (sigma if isinstance(sigma, tuple) else (sigma,))):
+        return None
+    from aerosid.identification.eiv import angle_noise
     from aerosid.identification.inversion import total_angles
 
-    rng = np.random.default_rng(20240613)
+    da, db = angle_noise(np.random.default_rng(20240613), groups, t, sigma, cutoff)
     out = dict(signals)
-    out["alpha"] = signals["alpha"] + sigma * rng.standard_normal(len(signals["alpha"]))
-    out["beta"] = signals["beta"] + sigma * rng.standard_normal(len(signals["beta"]))
+    out["alpha"] = signals["alpha"] + da
+    out["beta"] = signals["beta"] + db
     out["alpha_r"], out["phi_r"] = total_angles(out["alpha"], out["beta"])
     return out
 
@@ -382,20 +388,21 @@ def _shadows(c: _Channel, findings: list[Finding]) -> list[Finding]:
 
 # --------------------------------------------------------------------------- entry point
 def localise(signals: dict, y_by_channel: dict, models: dict, t: np.ndarray, groups: np.ndarray, win: np.ndarray,
-             mach_reference: float, angle_sigma_rad: float = 0.0,
+             mach_reference: float, angle_noise=0.0,
              simex: dict | None = None) -> dict[str, tuple[Finding, ...]]:
     """Localisation findings per channel (significant first, then by |t|): every
     significant one and the strongest others up to MAX_PER_CHANNEL.
 
     signals: the model signals on the diagnosed samples (the diagnosis' own);
     y_by_channel: measured coefficient per channel; win: time-window index per sample;
-    angle_sigma_rad: 1-sigma error of the recovered angles (for the errors-in-variables
-    guard of the shapes: a shape the angle errors make by themselves is not significant);
+    angle_noise: the recovered angles' error (for the errors-in-variables guard of the shapes: a
+    shape the angle errors make by themselves is not significant): a white 1-sigma [rad], or
+    (sigma, cutoff_hz) as aerosid.identification.eiv.angle_noise takes them, or None;
     simex: the diagnosis' SIMEX draws of the signals ({lambda: [signals]}, aerosid.diagnosis.core):
     a shape the angle errors could bend is significant only if its SIMEX-corrected estimate is."""
     from aerosid.diagnosis.trends import _lag_findings, _trend_findings
 
-    perturbed = _perturbed(signals, float(angle_sigma_rad))
+    perturbed = _perturbed(signals, angle_noise, t, groups)
     cache: dict = {}  # the SIMEX draws' base designs per channel
     result: dict[str, tuple[Finding, ...]] = {}
     for ch, model in models.items():
