@@ -217,6 +217,23 @@ def test_shape_the_angle_errors_could_bend_passes_by_its_simex_estimate(referenc
     assert f.evidence["error_variance_share"] > 0.05 and f.evidence["p_value_simex"] < 1e-3
 
 
+def test_a_beta_shape_is_simex_checked_however_little_the_angle_errors_make_of_it(reference_flight, vehicle):
+    """Every shape of beta is checked by SIMEX when the angles carry errors, as the catalogue's
+    candidates are, not only above the guard's 5 %: drawn as the band-path flight data measure
+    them, beta's error makes 3.5 % of beta*abs(beta)'s variance on seed-rlv and it passed as a
+    Cn shape on 2 of 10 no-effect flights.  A real shape (beta*abs(beta), a third of Cn's
+    variation) with angle errors of 0.2 mrad: SIMEX-checked, and it still passes."""
+    truth = reference_flight.truth.copy()
+    win = (truth["mach"] - vehicle.mach_reference).abs() <= 0.5
+    b = truth["beta_rad"].to_numpy()
+    col = b * np.abs(b)
+    truth["Cn"] = truth["Cn"] + 0.3 * truth.loc[win, "Cn"].std() / np.std(col[win]) * col
+    d = diagnose(flight_data_from_truth(truth, NOISE, seed=3), vehicle, angle_sigma_rad=2e-4)
+    f = next(f for f in _significant(d, "Cn") if f.kind == "shape" and f.variable == "beta")
+    assert 0.0 < f.evidence["error_variance_share"] < 0.05, f.evidence
+    assert f.evidence["p_value_simex"] < 1e-3 and np.isfinite(f.evidence["estimate_simex"])
+
+
 def test_no_effect_flight_has_no_significant_localisation(reference_flight, vehicle):
     for seed in (1, 2):
         d = _diagnosis(reference_flight, vehicle, seed=seed)
