@@ -229,16 +229,23 @@ def _perturbed(signals: dict, noise, t: np.ndarray, groups: np.ndarray) -> dict 
     return out
 
 
-def _simex_check(c: _Channel, expr: str, r: dict, simex: dict | None, cache: dict) -> dict:
-    """The catalogue's errors-in-variables check of an added shape: refits with extra angle
+def _simex_check(c: _Channel, expr: str, r: dict, simex: dict | None, cache: dict,
+                 given: tuple[tuple[str, str], ...] = ()) -> dict:
+    """The catalogue's errors-in-variables check of an added term: refits with extra angle
     noise (aerosid.diagnosis.core.simex_fraction), the estimate extrapolated to no angle
-    error and its p with the uncorrected sigma; {} without SIMEX draws."""
+    error and its p with the uncorrected sigma; {} without SIMEX draws.  given: (coefficient,
+    expression) of the columns the term was tested beside (a schedule's main effect)."""
     if not simex:
         return {}
     from aerosid.diagnosis.core import simex_fraction, simex_corrected
+    from aerosid.modelling.models import parse_term
 
     est = r["estimate"]
-    eiv = simex_fraction(simex, c.model, lambda sig: evaluate(expr, sig, c.n), c.y, est, cache)
+    model = c.model
+    for name, g in given:
+        model = model.with_term(parse_term(f"{name} = {g}", c.ch))
+    # the cache holds the SIMEX draws' designs of the channel's own model: not of this one
+    eiv = simex_fraction(simex, model, lambda sig: evaluate(expr, sig, c.n), c.y, est, None if given else cache)
     est_s, p_s = simex_corrected(est, r["std_error"], eiv, float(r["fit"].dof_eff))
     return {"eiv_fraction": eiv, "estimate_simex": est_s, "p_value_simex": p_s}
 
@@ -414,8 +421,8 @@ def localise(signals: dict, y_by_channel: dict, models: dict, t: np.ndarray, gro
         if not (np.std(y) > 0) or float(np.std(c.resid)) < IDENTITY_RATIO * float(np.std(y)):
             result[ch] = ()  # an identity by construction (the angles were inverted from this channel)
             continue
-        found = _shape_findings(c, mach_reference, perturbed, simex, cache) + _trend_findings(c, mach_reference, t) + \
-            _lag_findings(c, t, groups)
+        found = _shape_findings(c, mach_reference, perturbed, simex, cache) + \
+            _trend_findings(c, mach_reference, t, simex, cache) + _lag_findings(c, t, groups)
         found = _confusions(found, CONFUSION_R)
         found = _shadows(c, found)
         found.sort(key=lambda f: (not f.significant, -f.score))

@@ -15,14 +15,19 @@ import pandas as pd
 import scipy.stats
 
 from aerosid.diagnosis.finding import Finding
-from aerosid.diagnosis.localise import (_UNITS, CONTROLS, LAG_SCAN_S, SCHEDULES, SLOW, _centre, _Channel, _corr, _num,
-                                        _rule, _stats_text, _wrap)
-from aerosid.diagnosis.rule import CONFUSION_R
+from aerosid.diagnosis.localise import (_UNITS, CONTROLS, LAG_SCAN_S, SCHEDULES, SIMEX_CHECKED, SLOW, _centre, _Channel,
+                                        _corr, _num, _rule, _simex_check, _stats_text, _wrap)
+from aerosid.diagnosis.rule import CONFUSION_R, P_MAX
 from aerosid.identification.regression import fit_linear
 from aerosid.modelling.expressions import evaluate, signal_names
 
 
-def _trend_findings(c: _Channel, mach_ref: float, t: np.ndarray) -> list[Finding]:
+#: Signals the recovered angles' errors reach (the SIMEX draws recompute them from alpha and beta).
+ANGLE_SIGNALS = frozenset({"alpha", "beta", "alpha_r", "phi_r", "alpha_dot_hat", "beta_dot_hat"})
+
+
+def _trend_findings(c: _Channel, mach_ref: float, t: np.ndarray, simex: dict | None = None,
+                    cache: dict | None = None) -> list[Finding]:
     """Per model term (not the intercept): its coefficient against the flight condition (t, Mach,
     q-bar: the best of the three, the others listed where they move together) and, as a second
     finding, against the angle of attack (a derivative scheduled on alpha, as aerodynamic tables
@@ -38,14 +43,15 @@ def _trend_findings(c: _Channel, mach_ref: float, t: np.ndarray) -> list[Finding
             # cos(4 phi_r) x alpha "passed" on 4 of 10 no-effect seed-rlv flights (phi_r is singular
             # at alpha_r = 0, where the angles' errors and the band's low-pass bend it)
             skip = names | ({"alpha", "alpha_r", "phi_r"} if names & {"alpha_r", "phi_r"} else set())
-            f = _trend_finding(c, i, term, [v for v in group if v not in skip], mach_ref, t, in_model)
+            f = _trend_finding(c, i, term, [v for v in group if v not in skip], mach_ref, t, in_model, simex,
+                               {} if cache is None else cache)
             if f is not None:
                 out.append(f)
     return out
 
 
 def _trend_finding(c: _Channel, i: int, term, variables: list[str], mach_ref: float, t: np.ndarray,
-                   in_model: set) -> Finding | None:
+                   in_model: set, simex: dict | None = None, cache: dict | None = None) -> Finding | None:
     """The best variable's trend of term i.  A schedule on alpha is tested with alpha's own
     linear term beside it when the channel's model has none (an interaction with its main
     effect): the term's signal times alpha holds the signal's record offset times alpha, which
@@ -57,7 +63,7 @@ def _trend_finding(c: _Channel, i: int, term, variables: list[str], mach_ref: fl
         v = np.asarray(c.signals.get(var, np.full(c.n, np.nan)), float)
         if not np.all(np.isfinite(v)) or np.ptp(v) <= 0:
             continue
-        given = ()
+        given, given_expr = (), ()
         if var in SLOW and var != "mach":
             expr = f"{_wrap(term.expression)}*{var}"
         else:  # about the reference Mach, or the flight's mean angle (the coefficient keeps its meaning)
@@ -65,22 +71,31 @@ def _trend_finding(c: _Channel, i: int, term, variables: list[str], mach_ref: fl
             expr = f"{_wrap(term.expression)}*{_minus(var, ref)}"
             if var in SCHEDULES and var not in in_model:
                 given = ((f"{c.ch}_{var}", v - ref),)  # its main effect, as a spec would name it
+                given_expr = ((f"{c.ch}_{var}", _minus(var, ref)),)
         # evaluated as the spec will have it: a product of signals is low-passed after it is formed
         # (aerosid.identification.band_order), as the model's own columns are
         r = c.test(f"{term.coefficient}_{var}", evaluate(expr, c.signals, c.n), given=given)
         if r is not None:
             r["given"] = given
-            tried.append((var, expr, r))
+            tried.append((var, expr, r, given_expr))
     if not tried:
         return None
-    var, expr, r = max(tried, key=lambda s: abs(s[2]["t_value"]))
-    alike = tuple(f"trend:{term.coefficient}:{v}" for v, _, o in tried
+    var, expr, r, given_expr = max(tried, key=lambda s: abs(s[2]["t_value"]))
+    alike = tuple(f"trend:{term.coefficient}:{v}" for v, _, o, _ in tried
                   if v != var and _corr(r["perp"], o["perp"]) >= CONFUSION_R)
     reasons = _rule(r)
+    # a column the angles' errors reach is checked as the catalogue's are (SIMEX), where SIMEX
+    # holds: alpha and beta, not alpha_r, phi_r (singular at alpha_r = 0) or the angle rates
+    angles = signal_names(expr, c.signals) & ANGLE_SIGNALS
+    eiv = _simex_check(c, expr, r, simex, cache, given_expr) if angles and angles <= set(SIMEX_CHECKED) else {}
+    if eiv and not eiv.get("p_value_simex", 1.0) < P_MAX:
+        reasons.append(f"corrected for the recovered angles' errors (SIMEX) its estimate is "
+                       f"{eiv['estimate_simex']:.3g}, p = {eiv['p_value_simex']:.2g}: the angles' errors bend it "
+                       "by themselves (errors in variables)")
     rel = r["estimate"] / b if b != 0 else float("nan")  # relative change of the coefficient per unit
     ev = {"relative_change_per_unit": rel, "coefficient_mean": b,
           "variable_range": [float(np.min(c.signals[var])), float(np.max(c.signals[var]))],
-          "others_t": {s[0]: round(s[2]["t_value"], 2) for s in tried}}
+          "others_t": {s[0]: round(s[2]["t_value"], 2) for s in tried}, **eiv}
     if var == "t":
         ev["change_pct_per_min"] = 100.0 * 60.0 * rel
         rate = f"{100.0 * 60.0 * rel:+.2g} %/min ({100.0 * rel * float(np.ptp(t)):+.2g} % over {np.ptp(t):.0f} s)"
