@@ -63,15 +63,15 @@ def _trend_finding(c: _Channel, i: int, term, variables: list[str], mach_ref: fl
         v = np.asarray(c.signals.get(var, np.full(c.n, np.nan)), float)
         if not np.all(np.isfinite(v)) or np.ptp(v) <= 0:
             continue
-        given, given_expr = (), ()
+        given_expr = ()
         if var in SLOW and var != "mach":
             expr = f"{_wrap(term.expression)}*{var}"
         else:  # about the reference Mach, or the flight's mean angle (the coefficient keeps its meaning)
             ref = mach_ref if var == "mach" else _centre(v)
             expr = f"{_wrap(term.expression)}*{_minus(var, ref)}"
             if var in SCHEDULES and var not in in_model:
-                given = ((f"{c.ch}_{var}", v - ref),)  # its main effect, as a spec would name it
-                given_expr = ((f"{c.ch}_{var}", _minus(var, ref)),)
+                given_expr = ((f"{c.ch}_{var}", _minus(var, ref)),)  # its main effect, as a spec would name it
+        given = tuple((name, evaluate(e, c.signals, c.n)) for name, e in given_expr)
         # evaluated as the spec will have it: a product of signals is low-passed after it is formed
         # (aerosid.identification.band_order), as the model's own columns are
         r = c.test(f"{term.coefficient}_{var}", evaluate(expr, c.signals, c.n), given=given)
