@@ -291,3 +291,15 @@ def test_identity_channel_is_not_localised(reference_flight, vehicle):
     win = np.minimum((np.arange(t.size) * 8) // t.size, 7)
     out = localise(sig, {"CN": exact}, {"CN": default_models()["CN"]}, t, np.zeros(t.size), win, 12.4)
     assert out == {"CN": ()}
+
+
+def test_no_candidate_is_tested_in_a_channel_that_is_an_identity_by_construction(reference_flight, vehicle):
+    """With alpha and beta inverted from C_N and C_Y their residual is numerical: a candidate there
+    is reported not testable, with that reason, and is neither significant nor given a p (a 50 Hz
+    flight printed p = 4e-7 for C_Y's beta*abs(beta))."""
+    d = _diagnosis(reference_flight, vehicle, seed=2)
+    assert set(d.identities) == {"CN", "CY"}
+    inside = [e for e in d.effects if e.channel in d.identities]
+    assert inside and all(not e.identifiable and not e.significant and not np.isfinite(e.p_value) for e in inside)
+    assert all("identity by construction" in e.reasons[0] for e in inside)
+    assert all(e.identifiable for e in d.effects if e.channel == "Cm" and e.name != "alpha_dot")

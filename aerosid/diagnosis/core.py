@@ -207,6 +207,7 @@ def diagnose(flight_data: pd.DataFrame, vehicle, models: dict[str, ChannelModel]
     on_flights = "on this flight" if n_flights == 1 else f"on these {n_flights} pooled flights"
 
     reports: dict[str, ChannelReport] = {}
+    identities = identity_channels(vehicle, models)  # their residual is numerical: no floor to speak of
     simex_cache: dict = {}
     evidence: list[EffectEvidence] = []
     for ch_i, (ch, model) in enumerate(models.items()):
@@ -234,6 +235,11 @@ def diagnose(flight_data: pd.DataFrame, vehicle, models: dict[str, ChannelModel]
         for c_i, c in enumerate(cands):
             if progress is not None:
                 progress("candidates", (ch_i + c_i / len(cands)) / len(models))
+            if ch in identities:  # e.g. a p of 4e-7 for CY's beta*abs(beta) at 50 Hz, which meant nothing
+                chan_ev.append(_not_testable(c, f"{ch} is an identity by construction here (alpha and beta are "
+                                                "inverted from C_N and C_Y): its residual is numerical, no term "
+                                                "can be tested in it", base))
+                continue
             x = np.asarray(c.regressor(signals), float)
             if x.shape != y.shape or not np.all(np.isfinite(x)):
                 chan_ev.append(_not_testable(c, "the term is not finite on every sample", base))
@@ -307,7 +313,6 @@ def diagnose(flight_data: pd.DataFrame, vehicle, models: dict[str, ChannelModel]
 
     looks, recommended = resolve(ranked, models, signals, fd, candidates, confusion_r=CONFUSION_R, p_max=P_MAX,
                                  cov=cov)
-    identities = identity_channels(vehicle, models)  # their residual is numerical: no floor to speak of
     floored = [ch for ch in reports if ch not in identities]
     floor = floors({ch: reports[ch].residual for ch in floored}, fd, angle_floor_rms(fd, vehicle, models, floored),
                    vehicle)
