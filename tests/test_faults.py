@@ -78,7 +78,9 @@ KILLED_SCRIPT = textwrap.dedent("""
         if Path(str(where)).name.startswith(target):
             size = os.path.getsize(where)
             os.truncate(where, size // 2)          # half of the file is on disk ...
-            Path(os.environ["MARKER"]).write_text(str(where))
+            part = os.environ["MARKER"] + ".part"  # the marker appears whole: the test polls for it
+            Path(part).write_text(str(where))
+            os.replace(part, os.environ["MARKER"])
             time.sleep(300)                        # ... when SIGKILL arrives
 
     aio.pq.write_table = write_then_hang           # a hook of this test script only
