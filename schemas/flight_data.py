@@ -59,7 +59,7 @@ class FlightData(pa.DataFrameModel):
                                                         "the band low-pass; 0: none found)", ge=0, nullable=True)
     eiv_sigma_delta_r_rad: Optional[Series[float]] = _f("rad", "surface-sensor white noise in delta_r_rad (before "
                                                         "the band low-pass; 0: none found)", ge=0, nullable=True)
-    # the band path's regressor signals before its low-pass (aerosid.identification.flight_data.
+    # the band path's regressor signals before its low-pass (aerosid.identification.band_order.
     # WIDEBAND_COLUMNS), for the band order of non-linear terms; optional (smoother path, older files)
     # and nullable (flight data pooled with older files)
     alpha_wideband_rad: Optional[Series[float]] = _f("rad", "alpha before the band's low-pass (vanes, or inverted "

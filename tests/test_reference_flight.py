@@ -54,7 +54,7 @@ def test_wideband_columns_are_the_band_paths_signals_before_its_low_pass(referen
     as close to the true alpha as the band's."""
     from aerosid.identification.band_order import flight_data_runs
     from aerosid.identification.band import low_pass_runs
-    from aerosid.identification.flight_data import WIDEBAND_COLUMNS
+    from aerosid.identification.band_order import WIDEBAND_COLUMNS
 
     fd = reference_run.flight_data
     assert set(WIDEBAND_COLUMNS.values()) <= set(fd.columns)

@@ -213,11 +213,9 @@ def _perturbed(signals: dict, noise, t: np.ndarray, groups: np.ndarray) -> dict 
     phi_r recomputed): the errors-in-variables guard of the shapes.  noise: a white 1-sigma [rad],
     or (sigma, cutoff_hz) as aerosid.identification.eiv.angle_noise draws them (the diagnosis'
     own: the flight data's per-angle sigma through the band); None or 0: no guard."""
-    if noise is None:
-        return None
+    if noise is None or (not isinstance(noise, tuple) and not float(noise) > 0):
+        return None  # (the diagnosis' (sigma, cutoff) is None when the angles carry no error)
     sigma, cutoff = noise if isinstance(noise, tuple) else (float(noise), None)
-    if not any(np.any(np.asarray(x, float) > 0) for x in (sigma if isinstance(sigma, tuple) else (sigma,))):
-        return None
     from aerosid.identification.eiv import angle_noise
     from aerosid.identification.inversion import total_angles
 

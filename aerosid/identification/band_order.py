@@ -19,7 +19,7 @@ order, -0.3 % (RMS 1.1 %), within 2 sigma on 5/5.  On seed-rlv the roll terms' n
 What this module does
 ---------------------
 The band path writes the regressor signals *before* its low-pass into the flight data
-(aerosid.identification.flight_data.WIDEBAND_COLUMNS: the vanes' clean angles or the angles
+(:data:`WIDEBAND_COLUMNS`, written by aerosid.identification.flight_data: the vanes' clean angles or the angles
 inverted from the smoother's forces, the smoother's rates, the clean fins and V).  For every
 term, :meth:`BandOrder.correction` is
 

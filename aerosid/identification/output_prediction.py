@@ -108,7 +108,7 @@ def prediction_inputs(fd: pd.DataFrame, vehicle: Vehicle, phi_rad, theta_rad, sp
     path's low-pass (``delta_*_wideband_rad``, when the flight data carry them) instead of the
     low-passed ones the regression reads: what an output-error fit compares with unfiltered
     measurements needs (c172x seed 0: the low-passed 3-2-1-1 moved its C_m,delta by +9.4 %)."""
-    from aerosid.identification.flight_data import WIDEBAND_COLUMNS
+    from aerosid.identification.band_order import WIDEBAND_COLUMNS
     from aerosid.modelling.models import vehicle_signals
 
     if wideband_controls:  # where a wide-band value is missing, the low-passed one
