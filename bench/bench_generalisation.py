@@ -59,6 +59,7 @@ The machine is shared: --jobs defaults to 1; each run takes ~0.5-1.5 min.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import math
 import os
 import platform
@@ -181,8 +182,21 @@ def oracle(flight, vehicle) -> dict[str, float]:
     return out
 
 
-def one(job: tuple[str, int]) -> dict:
-    vehicle_name, seed = job
+def decimated(telemetry: pd.DataFrame, factor: int) -> pd.DataFrame:
+    """Every factor-th sample of the telemetry's sample grid (by time, so the rows a dropout
+    removed stay removed): the same flight logged at 1/factor of the rate, each sensor read
+    at its instant (no anti-alias filter: the sensors' white noise keeps its per-sample sigma)."""
+    if factor <= 1:
+        return telemetry
+    t = telemetry["t_s"].to_numpy(float)
+    dt = float(np.nanmedian(np.diff(t)))
+    k = np.rint((t - np.nanmin(t)) / dt).astype(np.int64)
+    return telemetry.loc[k % factor == 0].reset_index(drop=True)
+
+
+def one(job: tuple) -> dict:
+    vehicle_name, seed, *rest = job
+    factor = int(rest[0]) if rest else 1
     from aerosid.ebm import process_telemetry
 
     row = {"vehicle": vehicle_name, "seed": seed, "failed": "", "diverged": False}
@@ -193,6 +207,9 @@ def one(job: tuple[str, int]) -> dict:
             row["failed"] = f"simulation: {type(exc).__name__}: {exc}"
             return row
     orc = oracle(flight, vehicle)
+    if factor > 1:
+        row["decimate"] = factor
+        flight = dataclasses.replace(flight, telemetry=decimated(flight.telemetry, factor))
     t0 = time.perf_counter()
     try:
         with warnings.catch_warnings():
@@ -379,6 +396,11 @@ def main() -> None:
     ap.add_argument("--jobs", type=int, default=1)
     ap.add_argument("--label", default=None, help="'smoke' or 'full' (default: full with >= 10 seeds)")
     ap.add_argument("--from-csv", default=None, help="rewrite the report from a runs CSV of this bench")
+    ap.add_argument("--decimate", type=int, default=1,
+                    help="log every K-th sample only (100/K Hz for the JSBSim flights): a flight the rate of the "
+                         "bench's never saw")
+    ap.add_argument("--stem", default="generalisation",
+                    help="results file stem: bench/results/STEM.md and STEM_runs.csv")
     ap.add_argument("--truth-only", action="store_true",
                     help="simulate the runs CSV's (vehicle, seed) pairs again without the pipeline and merge the "
                          "flight-averaged truth into it (generalisation_avg)")
@@ -394,7 +416,7 @@ def main() -> None:
         return
     vehicles = args.vehicles.split(",") if args.vehicles else default_vehicles()
     label = args.label or ("full" if len(seeds) >= 10 else "smoke")
-    jobs = [(v, s) for v in vehicles for s in seeds]
+    jobs = [(v, s, args.decimate) for v in vehicles for s in seeds]
     load0, t0 = loadavg(), time.perf_counter()
     if args.jobs > 1:
         with ProcessPoolExecutor(args.jobs) as pool:
@@ -404,10 +426,10 @@ def main() -> None:
     wall = time.perf_counter() - t0
     df = pd.DataFrame(rows)
     out = Path(__file__).parent / "results"
-    df.drop(columns=["traceback"], errors="ignore").to_csv(out / "generalisation_runs.csv", index=False,
+    df.drop(columns=["traceback"], errors="ignore").to_csv(out / f"{args.stem}_runs.csv", index=False,
                                                            float_format="%.6g")
     text = report(df, seeds, label, (load0, loadavg()), args.jobs, wall)
-    (out / "generalisation.md").write_text(text)
+    (out / f"{args.stem}.md").write_text(text)
     print(text)
 
 
