@@ -17,7 +17,8 @@ regression (with a margin) and the rest of the segment is kept:
   smoother lags is cutting where the vehicle moves hardest -- a selection on the
   dependent variable that took C_m_alpha to -39 % on one c172x seed;
 * ``nis_mean``: the segment's mean NIS outside its chi-square band, either way (R or Q
-  mis-set for this flight: the smoother's sigma are not to be trusted) -- reported;
+  mis-set for this flight: the smoother's sigma are off by about the factor the message
+  gives, sqrt(mean NIS / its expected value)) -- reported;
 * ``departure``: the smoothed signal departs from its band-limited measurement by more
   than DEPARTURE_SIGMA of their combined uncertainty, for DEPARTURE_MIN_S -- cut: short
   and local, they mark where either side is wrong (a fault the gate let pass, the band
@@ -172,9 +173,12 @@ def smoother_findings(t_s: np.ndarray, gated: dict[str, np.ndarray], excursion: 
     lo, hi = nis_band
     if np.isfinite(mean_nis) and not (lo <= mean_nis <= hi):
         side = "above" if mean_nis > hi else "below"
+        # innovations of covariance k S give a mean NIS of k m: their spread is sqrt(k) x the filter's
+        spread = float(np.sqrt(mean_nis / (0.5 * (lo + hi)))) if mean_nis >= 0 and lo + hi > 0 else float("nan")
         found.append(Finding("nis_mean", segment, "", float(t[0]), float(t[-1]), int(t.size), False,
                              f"mean NIS {mean_nis:.2f} {side} its band {lo:.2f}..{hi:.2f}: the noise model does "
-                             "not fit this flight, the smoother's sigma are not to be trusted"
+                             f"not fit this flight (the innovations spread {spread:.2f} x what the filter assumes), "
+                             "the smoother's sigma are off by about that factor"
                              + nis_mean_cause(side, channel_nis or {}, whiteness or {}, f_cut_hz)))
     return found, cut
 

@@ -48,8 +48,9 @@ def test_without_the_channel_facts_the_message_is_the_plain_one():
     t = np.arange(400) * 0.02
     none = {m: np.zeros(t.size, bool) for m in NAMES}
     (f,) = smoother_findings(t, none, np.zeros(t.size, bool), 3.4, (5.66, 6.34), "seg00")[0]
-    assert f.detail == ("mean NIS 3.40 below its band 5.66..6.34: the noise model does not fit this flight, "
-                        "the smoother's sigma are not to be trusted")
+    assert f.detail == ("mean NIS 3.40 below its band 5.66..6.34: the noise model does not fit this flight (the "
+                        "innovations spread 0.75 x what the filter assumes), the smoother's sigma are off by about "
+                        "that factor")
 
 
 def test_a_mean_nis_finding_names_a_stated_chain_scale():
