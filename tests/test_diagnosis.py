@@ -18,6 +18,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+import scipy.stats
 
 from aerosid.diagnosis import (MIN_WINDOW_CONSISTENCY, P_MAX, Candidate, default_candidates, diagnose,
                                smooth_derivative)
@@ -462,6 +463,28 @@ def test_the_angle_error_check_can_lower_the_ranking_score_but_never_raise_it(re
     assert replace(e, eiv_fraction=float("nan")).score == pytest.approx(f)
     for ev in d.effects:
         assert ev.score <= ev.partial_f_corrected or not math.isfinite(ev.partial_f_corrected)
+
+
+def test_the_simex_check_counts_the_extrapolations_own_error_as_the_identification_does():
+    """The diagnosis' SIMEX-corrected estimate is tested with the sigma the identification reports
+    for one (eiv.SimexResult.std_error): the naive sigma scaled by the correction, combined with the
+    larger of the extrapolants' spread and a share of the correction.  With the naive sigma alone,
+    a beta*abs(beta) the angle errors made passed on seed-rlv at 50 Hz (estimate 7.04 +- 1.40,
+    SIMEX 5.54: p 1e-4); with its extrapolation error it does not."""
+    from aerosid.diagnosis.core import simex_corrected, simex_fraction, simex_spread
+    from aerosid.diagnosis.rule import SIMEX_LAMBDAS
+    from aerosid.identification.eiv import SimexResult
+
+    lam = np.array((0.0, *SIMEX_LAMBDAS))
+    curve = tuple(7.04 * np.array([1.0, 1.11, 1.12]))  # rises, then levels off (seed 9 at 50 Hz)
+    eiv, spread = simex_fraction(curve), simex_spread(curve)
+    ref = SimexResult.from_curve(lam, np.asarray(curve)[:, None])
+    assert 7.04 * (1 - eiv) == pytest.approx(ref.corrected[0]) and spread == pytest.approx(ref.spread[0])
+    sigma = float(ref.std_error(np.array([1.40]), correction_share=0.6)[0])
+    est_s, p = simex_corrected(7.04, 1.40, eiv, 150.0, spread=spread, share=0.6)
+    assert p == pytest.approx(2 * scipy.stats.t.sf(est_s / sigma, 150.0))
+    assert sigma > 1.40 and not p < P_MAX
+    assert simex_corrected(7.04, 1.40, eiv, 150.0)[1] < P_MAX  # the naive sigma alone passed it
 
 
 def test_a_term_whose_simex_estimate_flips_sign_is_an_angle_error_artefact(reference_flight, vehicle, monkeypatch):

@@ -47,6 +47,7 @@ after removing what the base model explains, correlate by |r| >= 0.9).
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 from typing import Callable, Sequence
 
 import numpy as np
@@ -59,10 +60,10 @@ from aerosid.diagnosis.candidates import Candidate, default_candidates, derived_
 from aerosid.diagnosis.lookalikes import heldout_sse as _heldout_sse, scaled_lstsq as _scaled_lstsq
 from aerosid.diagnosis.lookalikes import windows_index as _windows_index
 from aerosid.modelling.expressions import evaluate
-from aerosid.identification.eiv_fit import angle_cutoff_hz, angle_eiv_sigma
+from aerosid.identification.eiv_fit import angle_cutoff_hz, angle_eiv_sigma, correction_share
 from aerosid.identification.identify import identity_channels, mach_window_mask
 from aerosid.identification.band import segment_keys
-from aerosid.identification.eiv import simex_frames
+from aerosid.identification.eiv import SimexResult, extrapolate, extrapolation_spread, simex_frames
 from aerosid.modelling.models import ChannelModel, default_models, vehicle_signals
 from aerosid.identification.regression import LinearFit, fit_linear, residual_autocovariance
 
@@ -202,7 +203,7 @@ def diagnose(flight_data: pd.DataFrame, vehicle, models: dict[str, ChannelModel]
     fs = 1.0 / float(np.median(dts)) if dts.size else 1.0
     win = _windows_index(n, n_windows)
     noise = _angle_noise(fd, vehicle, angle_sigma_rad)
-    simex = _simex_signals(fd, vehicle, *noise, signals) if noise is not None else []
+    simex = _simex_signals(fd, vehicle, *noise, signals) if noise is not None else SimexDraws({}, 0.0)
     n_flights = max(int(fd["flight"].astype(str).nunique()) if "flight" in fd.columns else 1, 1)
     on_flights = "on this flight" if n_flights == 1 else f"on these {n_flights} pooled flights"
 
@@ -265,8 +266,10 @@ def diagnose(flight_data: pd.DataFrame, vehicle, models: dict[str, ChannelModel]
             p_plain = float(scipy.stats.f.sf(f_plain, 1, max(n - p_a, 1)))
             est, se = float(fa.estimate[j]), float(fa.std_error[j])
             sse_a = _heldout_sse(Xa.to_numpy(float), y, win)
-            eiv = simex_fraction(simex, model, c.regressor, y, est, simex_cache)
-            est_simex, p_simex = simex_corrected(est, se, eiv, fa.dof_eff)
+            curve = simex_curve(simex, model, c.regressor, y, est, simex_cache)
+            est_simex, p_simex = simex_corrected(est, se, simex_fraction(curve), fa.dof_eff,
+                                                 spread=simex_spread(curve), share=simex.correction_share)
+            eiv = simex_fraction(curve)
             d = sse_b - sse_a
             d = d[np.isfinite(d)]
             tot = float(np.sum(np.abs(d)))
@@ -356,43 +359,76 @@ def _angle_noise(fd: pd.DataFrame, vehicle, angle_sigma_rad: float | None) -> tu
     return float(angle_sigma_rad), (angle_cutoff_hz(fd, vehicle) if vanes else None)
 
 
-def _simex_signals(fd: pd.DataFrame, vehicle, sigma, cutoff: float | None, signals: dict) -> dict:
-    """{lambda: [signals]}: extra noise of variance lambda sigma^2 on alpha and beta (alpha_r,
-    phi_r and the derivatives recomputed from them), SIMEX_REPLICATES per lambda in SIMEX_LAMBDAS,
-    drawn as the identification's SIMEX draws them (aerosid.identification.eiv.simex_frames:
-    antithetic pairs of common random numbers; deterministic, SIMEX_SEED); sigma, cutoff: as
-    :func:`_angle_noise` gives them.  signals: fd's own (their band order serves every noisy copy)."""
+@dataclass(frozen=True)
+class SimexDraws:
+    """The diagnosis' SIMEX draws of the signals, {lambda: [signals]}, and the share of a SIMEX
+    correction counted as its own 1-sigma (aerosid.identification.eiv_fit.correction_share: by the
+    angles' source, as the identification counts it).  False when there are none."""
+
+    frames: dict
+    correction_share: float
+
+    def __bool__(self) -> bool:
+        return bool(self.frames)
+
+
+def _simex_signals(fd: pd.DataFrame, vehicle, sigma, cutoff: float | None, signals: dict) -> SimexDraws:
+    """Extra noise of variance lambda sigma^2 on alpha and beta (alpha_r, phi_r and the derivatives
+    recomputed from them), SIMEX_REPLICATES per lambda in SIMEX_LAMBDAS, drawn as the
+    identification's SIMEX draws them (aerosid.identification.eiv.simex_frames: antithetic pairs of
+    common random numbers; deterministic, SIMEX_SEED); sigma, cutoff: as :func:`_angle_noise` gives
+    them.  signals: fd's own (their band order serves every noisy copy)."""
     out: dict = {lam: [] for lam in SIMEX_LAMBDAS}
     for lam, f in simex_frames(fd, sigma, cutoff, seed=SIMEX_SEED, lambdas=SIMEX_LAMBDAS,
                                replicates=SIMEX_REPLICATES):
         out[lam].append(derived_signals(vehicle_signals(f, vehicle, like=signals), vehicle.length_pitch_m,
                                         vehicle.length_lateral_m))
-    return out
+    return SimexDraws(out, correction_share(vehicle))
 
 
-def simex_corrected(est: float, se: float, eiv_fraction: float, dof: float) -> tuple[float, float]:
-    """(estimate corrected for the angle errors, its two-sided p with the uncorrected sigma):
-    one-sided in the estimate's own direction, so a SIMEX estimate of the opposite sign
-    (eiv_fraction > 1: angle errors made the whole term) has p = 1."""
+def simex_corrected(est: float, se: float, eiv_fraction: float, dof: float, *, spread: float = 0.0,
+                    share: float = 0.0) -> tuple[float, float]:
+    """(estimate corrected for the angle errors, its two-sided p): one-sided in the estimate's own
+    direction, so a SIMEX estimate of the opposite sign (eiv_fraction > 1: angle errors made the
+    whole term) has p = 1.  Its sigma is the identification's for a SIMEX-corrected estimate
+    (aerosid.identification.eiv.SimexResult.std_error): se scaled by the correction, combined with
+    the extrapolation's own error, the larger of `spread` (|quadratic - linear| extrapolant,
+    :func:`simex_spread`) and `share` x the correction.  spread = share = 0: se alone."""
     est_simex = est * (1.0 - eiv_fraction) if math.isfinite(eiv_fraction) else est
-    p = (float(2.0 * scipy.stats.t.sf(max(math.copysign(1.0, est) * est_simex, 0.0) / se, dof))
-         if se > 0 else float("nan"))
+    sigma = float(SimexResult(np.array([est_simex]), np.array([spread]), np.array([est]))
+                  .std_error(np.array([se]), correction_share=share)[0])
+    p = (float(2.0 * scipy.stats.t.sf(max(math.copysign(1.0, est) * est_simex, 0.0) / sigma, dof))
+         if sigma > 0 else float("nan"))
     return est_simex, p
 
 
-def simex_fraction(simex: dict, model: ChannelModel, regressor, y: np.ndarray, est: float,
-                    cache: dict | None = None) -> float:
-    """SIMEX (Cook & Stefanski 1994): refit with extra angle noise of variance lambda sigma^2
-    (lambda = 1, 2), extrapolate the estimate quadratically to lambda = -1 (no angle error)
-    and return the share of the estimate the angle errors account for, 1 - theta(-1)/theta(0).
-    ~1: the term exists only because the angles are noisy; <= 0: a real, attenuated effect.
-    regressor: signals -> the added column."""
-    if not simex or not (math.isfinite(est) and est != 0.0):
+def simex_fraction(curve: tuple[float, ...]) -> float:
+    """The share of the estimate the angle errors account for, 1 - theta(-1)/theta(0): the SIMEX
+    curve (:func:`simex_curve`) extrapolated quadratically to lambda = -1, no angle error
+    (aerosid.identification.eiv.extrapolate).  ~1: the term exists only because the angles are
+    noisy; <= 0: a real, attenuated effect; NaN without a curve."""
+    if not curve:
         return float("nan")
+    return float(1.0 - extrapolate(np.array((0.0, *SIMEX_LAMBDAS)), np.asarray(curve, float)) / curve[0])
+
+
+def simex_spread(curve: tuple[float, ...]) -> float:
+    """How much the corrected estimate depends on the extrapolant: |quadratic - linear| at
+    lambda = -1 (aerosid.identification.eiv.extrapolation_spread); 0 without a curve."""
+    return extrapolation_spread(np.array((0.0, *SIMEX_LAMBDAS)), np.asarray(curve, float)) if curve else 0.0
+
+
+def simex_curve(simex: SimexDraws, model: ChannelModel, regressor, y: np.ndarray, est: float,
+                cache: dict | None = None) -> tuple[float, ...]:
+    """SIMEX (Cook & Stefanski 1994): the added term refitted with extra angle noise of variance
+    lambda sigma^2, (theta(0) = est, mean theta(lambda) for lambda in SIMEX_LAMBDAS); () when it
+    cannot be computed.  regressor: signals -> the added column."""
+    if not simex or not (math.isfinite(est) and est != 0.0):
+        return ()
     means = []
     for lam in SIMEX_LAMBDAS:
         th = []
-        for i, sig in enumerate(simex[lam]):
+        for i, sig in enumerate(simex.frames[lam]):
             key = (model.channel, lam, i)
             if cache is None or key not in cache:
                 base = _regressor_matrix(model, sig)
@@ -406,12 +442,9 @@ def simex_fraction(simex: dict, model: ChannelModel, regressor, y: np.ndarray, e
         # dropped whole, so the terms odd in the noise still cancel in the rest
         pairs = [(a_, b_) for a_, b_ in zip(th[0::2], th[1::2]) if math.isfinite(a_) and math.isfinite(b_)]
         if not pairs:
-            return float("nan")
+            return ()
         means.append(float(np.mean(pairs)))
-    lam = np.array((0.0, *SIMEX_LAMBDAS))
-    coef = np.polyfit(lam, np.array([est, *means]), 2 if len(SIMEX_LAMBDAS) >= 2 else 1)
-    theta_0 = float(np.polyval(coef, -1.0))
-    return float(1.0 - theta_0 / est)
+    return (float(est), *means)
 
 
 def _not_testable(c: Candidate, why: str, base: LinearFit, r2_col: float = float("nan")) -> dict:

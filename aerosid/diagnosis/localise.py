@@ -227,15 +227,16 @@ def _perturbed(signals: dict, noise, t: np.ndarray, groups: np.ndarray) -> dict 
     return out
 
 
-def _simex_check(c: _Channel, expr: str, r: dict, simex: dict | None, cache: dict,
+def _simex_check(c: _Channel, expr: str, r: dict, simex, cache: dict,
                  given: tuple[tuple[str, str], ...] = ()) -> dict:
     """The catalogue's errors-in-variables check of an added term: refits with extra angle
-    noise (aerosid.diagnosis.core.simex_fraction), the estimate extrapolated to no angle
-    error and its p with the uncorrected sigma; {} without SIMEX draws.  given: (coefficient,
+    noise (aerosid.diagnosis.core.simex_curve), the estimate extrapolated to no angle error and
+    its p with the sigma of a SIMEX-corrected estimate (core.simex_corrected); {} without SIMEX
+    draws (simex: aerosid.diagnosis.core.SimexDraws).  given: (coefficient,
     expression) of the columns the term was tested beside (a schedule's main effect)."""
     if not simex:
         return {}
-    from aerosid.diagnosis.core import simex_fraction, simex_corrected
+    from aerosid.diagnosis.core import simex_corrected, simex_curve, simex_fraction, simex_spread
     from aerosid.modelling.models import parse_term
 
     est = r["estimate"]
@@ -243,12 +244,14 @@ def _simex_check(c: _Channel, expr: str, r: dict, simex: dict | None, cache: dic
     for name, g in given:
         model = model.with_term(parse_term(f"{name} = {g}", c.ch))
     # the cache holds the SIMEX draws' designs of the channel's own model: not of this one
-    eiv = simex_fraction(simex, model, lambda sig: evaluate(expr, sig, c.n), c.y, est, None if given else cache)
-    est_s, p_s = simex_corrected(est, r["std_error"], eiv, float(r["fit"].dof_eff))
+    curve = simex_curve(simex, model, lambda sig: evaluate(expr, sig, c.n), c.y, est, None if given else cache)
+    eiv = simex_fraction(curve)
+    est_s, p_s = simex_corrected(est, r["std_error"], eiv, float(r["fit"].dof_eff), spread=simex_spread(curve),
+                                 share=simex.correction_share)
     return {"eiv_fraction": eiv, "estimate_simex": est_s, "p_value_simex": p_s}
 
 
-def _shape_findings(c: _Channel, mach_ref: float, perturbed: dict | None, simex: dict | None = None,
+def _shape_findings(c: _Channel, mach_ref: float, perturbed: dict | None, simex=None,
                     cache: dict | None = None) -> list[Finding]:
     out = []
     model_vars = sorted(set().union(*(signal_names(t.expression, c.signals) for t in c.model.terms)) - {"t"})
@@ -397,7 +400,7 @@ def _shadows(c: _Channel, findings: list[Finding]) -> list[Finding]:
 # --------------------------------------------------------------------------- entry point
 def localise(signals: dict, y_by_channel: dict, models: dict, t: np.ndarray, groups: np.ndarray, win: np.ndarray,
              mach_reference: float, angle_noise=0.0,
-             simex: dict | None = None) -> dict[str, tuple[Finding, ...]]:
+             simex=None) -> dict[str, tuple[Finding, ...]]:
     """Localisation findings per channel (significant first, then by |t|): every
     significant one and the strongest others up to MAX_PER_CHANNEL.
 
@@ -406,7 +409,7 @@ def localise(signals: dict, y_by_channel: dict, models: dict, t: np.ndarray, gro
     angle_noise: the recovered angles' error (for the errors-in-variables guard of the shapes: a
     shape the angle errors make by themselves is not significant): a white 1-sigma [rad], or
     (sigma, cutoff_hz) as aerosid.identification.eiv.angle_noise takes them, or None;
-    simex: the diagnosis' SIMEX draws of the signals ({lambda: [signals]}, aerosid.diagnosis.core):
+    simex: the diagnosis' SIMEX draws of the signals (aerosid.diagnosis.core.SimexDraws):
     a shape the angle errors could bend is significant only if its SIMEX-corrected estimate is."""
     from aerosid.diagnosis.trends import _lag_findings, _trend_findings
 

@@ -42,7 +42,8 @@ SPECTRUM_BANDS_HZ = ((0.0, 0.1), (0.1, 0.5), (0.5, 2.0), (2.0, 10.0), (10.0, mat
 RULE_TEXT = (f"significant = identifiable and corrected p < {P_MAX:g} (t^2 of the added term with the "
              f"coloured-residual sigma) and held-out window consistency >= {MIN_WINDOW_CONSISTENCY:.0%} "
              f"and explains >= {MIN_VARIANCE_SHARE:.0%} of the residual variance and lowers the PSE and is not an "
-             f"errors-in-variables artefact (the SIMEX-corrected estimate also has p < {P_MAX:g}); "
+             f"errors-in-variables artefact (the SIMEX-corrected estimate also has p < {P_MAX:g} with the "
+             "extrapolation's own error in its sigma); "
              "ranked significant first, then by the corrected partial F net of the share angle errors could make (SIMEX)")
 
 

@@ -26,7 +26,7 @@ from aerosid.modelling.expressions import evaluate, signal_names
 ANGLE_SIGNALS = frozenset({"alpha", "beta", "alpha_r", "phi_r", "alpha_dot_hat", "beta_dot_hat"})
 
 
-def _trend_findings(c: _Channel, mach_ref: float, t: np.ndarray, simex: dict | None = None,
+def _trend_findings(c: _Channel, mach_ref: float, t: np.ndarray, simex=None,
                     cache: dict | None = None) -> list[Finding]:
     """Per model term (not the intercept): its coefficient against the flight condition (t, Mach,
     q-bar: the best of the three, the others listed where they move together) and, as a second
@@ -51,7 +51,7 @@ def _trend_findings(c: _Channel, mach_ref: float, t: np.ndarray, simex: dict | N
 
 
 def _trend_finding(c: _Channel, i: int, term, variables: list[str], mach_ref: float, t: np.ndarray,
-                   in_model: set, simex: dict | None = None, cache: dict | None = None) -> Finding | None:
+                   in_model: set, simex=None, cache: dict | None = None) -> Finding | None:
     """The best variable's trend of term i.  A schedule on alpha is tested with alpha's own
     linear term beside it when the channel's model has none (an interaction with its main
     effect): the term's signal times alpha holds the signal's record offset times alpha, which
