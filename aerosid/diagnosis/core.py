@@ -267,9 +267,9 @@ def diagnose(flight_data: pd.DataFrame, vehicle, models: dict[str, ChannelModel]
             est, se = float(fa.estimate[j]), float(fa.std_error[j])
             sse_a = _heldout_sse(Xa.to_numpy(float), y, win)
             curve = simex_curve(simex, model, c.regressor, y, est, simex_cache)
-            est_simex, p_simex = simex_corrected(est, se, simex_fraction(curve), fa.dof_eff,
-                                                 spread=simex_spread(curve), share=simex.correction_share)
             eiv = simex_fraction(curve)
+            est_simex, p_simex = simex_corrected(est, se, eiv, fa.dof_eff, spread=simex_spread(curve),
+                                                 share=simex.correction_share)
             d = sse_b - sse_a
             d = d[np.isfinite(d)]
             tot = float(np.sum(np.abs(d)))
