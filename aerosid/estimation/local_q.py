@@ -101,19 +101,27 @@ def channels_out(innovation_sq: np.ndarray, a: int, b: int, prob: float = COMPAN
     return [j for _, j in sorted(out, reverse=True)]
 
 
-def controls_moving(controls: np.ndarray | None, a: int, b: int, lead: int) -> bool | None:
-    """Whether a control moves by CONTROL_SHARE of its segment range within a-lead..b (None: no controls)."""
+def moving_controls(controls: np.ndarray | None, a: int, b: int, lead: int) -> list[int] | None:
+    """The columns of `controls` that move by CONTROL_SHARE of their segment range within
+    a-lead..b (None: no controls)."""
     if controls is None or controls.size == 0:
         return None
     u = np.asarray(controls, float)
     span = u[max(0, a - lead):b]
+    out = []
     for j in range(u.shape[1]):
         full = np.nanmax(u[:, j]) - np.nanmin(u[:, j]) if np.isfinite(u[:, j]).any() else 0.0
         if not full > 1e-9 or not np.isfinite(span[:, j]).any():
             continue
         if np.nanmax(span[:, j]) - np.nanmin(span[:, j]) >= CONTROL_SHARE * full:
-            return True
-    return False
+            out.append(j)
+    return out
+
+
+def controls_moving(controls: np.ndarray | None, a: int, b: int, lead: int) -> bool | None:
+    """Whether a control moves by CONTROL_SHARE of its segment range within a-lead..b (None: no controls)."""
+    moving = moving_controls(controls, a, b, lead)
+    return None if moving is None else bool(moving)
 
 
 def classify(result, controls: np.ndarray | None = None) -> list[LocalEvent]:

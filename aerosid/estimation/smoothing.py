@@ -14,7 +14,7 @@ import pandas as pd
 
 from aerosid.estimation import EBMOptions, EBMResult
 from aerosid.estimation.adaptive import smooth_flight_adaptive
-from aerosid.estimation.findings import smoother_findings
+from aerosid.estimation.findings import sample_interval, smoother_findings
 from aerosid.preprocess import usable_mask
 from aerosid.vehicles.vehicle import Vehicle
 from schemas.smoothed import RATE_DERIVATIVE_COLUMNS, STATE_COLUMNS
@@ -102,6 +102,33 @@ def _with_stated_chain_scale(findings: list, settings: dict) -> list:
     return [replace(f, detail=f.detail + hint) if f.kind == "nis_mean" else f for f in findings]
 
 
+def _with_manoeuvre_hint(findings: list, t_s: np.ndarray, controls: np.ndarray | None, names: list[str]) -> list:
+    """A `gated` finding says which controls moved over its span (aerosid.estimation.local_q's
+    test): one channel out reads as a sensor fault and is cut from every channel's regression, but
+    when a surface moved it may be a manoeuvre the filter could not follow in that channel alone
+    (JSBSim F4N seed 1 logged at 50 Hz: a_x gated 30.6-32.4 s through the rudder doublet, the cut
+    took the doublet and C_n,beta came out not determined; at 100 Hz nothing was gated)."""
+    if controls is None or not findings:
+        return findings
+    from aerosid.estimation.local_q import CONTROL_LEAD_S, CONTROL_SHARE, moving_controls
+
+    t = np.asarray(t_s, float)
+    lead = int(round(CONTROL_LEAD_S / sample_interval(t))) if t.size > 1 else 0
+    out = []
+    for f in findings:
+        if f.kind == "gated":
+            a, b = int(np.searchsorted(t, f.t0_s)), int(np.searchsorted(t, f.t1_s, side="right"))
+            moved = [names[j] for j in moving_controls(controls, a, b, lead) or []]
+            if moved:
+                f = replace(f, detail=f.detail + (
+                    f"; {', '.join(moved)} moved during it or in the {CONTROL_LEAD_S:g} s before (by at least "
+                    f"{CONTROL_SHARE:.0%} of its range): if the sensor is sound this is a manoeuvre the filter could "
+                    f"not follow in {f.channel} alone, and the cut takes that manoeuvre from every channel's "
+                    "regression"))
+        out.append(f)
+    return out
+
+
 def smooth_segment_frame(rows: pd.DataFrame, vehicle: Vehicle, options: dict | None = None,
                          segment_id: str = "seg00") -> SmoothedSegmentResult:
     """Run the EKF + MBF smoother over one segment of a preprocessed frame;
@@ -148,6 +175,8 @@ def smooth_segment_frame(rows: pd.DataFrame, vehicle: Vehicle, options: dict | N
                                           dict(zip(res.meas_names, map(float, res.whiteness()))),
                                           opts.f_max_hz)
     findings = _with_stated_chain_scale(findings, {**vehicle.estimation, **(options or {})})
+    findings = _with_manoeuvre_hint(findings, t, rows[ctl].to_numpy(dtype=float) if ctl else None,
+                                    [c.removesuffix("_clean") for c in ctl])
     data["suspect"] = suspect
     frame = pd.DataFrame(data)
     frame["segment"] = frame["segment"].astype(str)

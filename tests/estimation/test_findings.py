@@ -72,6 +72,28 @@ def test_a_mean_nis_finding_names_a_stated_chain_scale():
     assert _with_stated_chain_scale(found, {"band_hz": 2.0}) == found
 
 
+def test_a_gated_finding_names_the_controls_that_moved_over_its_span():
+    """One channel gated reads as a sensor fault and is cut from every regression; when a surface
+    moved over the span (or within the lead before it) the finding says so, and which; a gated
+    span over still controls, and the other findings, are left as they were."""
+    from aerosid.estimation.smoothing import _with_manoeuvre_hint
+
+    t = np.arange(1000) * 0.02  # 20 s at 50 Hz
+    none = {m: np.zeros(t.size, bool) for m in NAMES}
+    gated = {**none, "ax": (t >= 12.0) & (t < 13.5)}
+    found = smoother_findings(t, gated, np.zeros(t.size, bool), 3.4, (5.66, 6.34), "seg00")[0]
+    controls = np.zeros((t.size, 2))
+    controls[:, 1] = np.where((t >= 11.0) & (t < 12.5), 0.03, np.where((t >= 12.5) & (t < 14.0), -0.03, 0.0))
+    hinted = _with_manoeuvre_hint(found, t, controls, ["d1_rad", "d4_rad"])
+    g = next(f for f in hinted if f.kind == "gated")
+    assert "d4_rad moved during it" in g.detail and "d1_rad" not in g.detail and "in ax alone" in g.detail
+    assert [f for f in hinted if f.kind != "gated"] == [f for f in found if f.kind != "gated"]
+    still = np.zeros((t.size, 2))
+    still[(t >= 2.0) & (t < 3.0), 1] = 0.03  # a doublet long before the span, beyond the lead
+    assert _with_manoeuvre_hint(found, t, still, ["d1_rad", "d4_rad"]) == found
+    assert _with_manoeuvre_hint(found, t, None, []) == found
+
+
 def test_inside_the_band_there_is_no_finding_and_no_channel_no_cause():
     assert _mean_nis_finding(6.0, (0.07,) * 6, (30,) * 6) == []
     assert nis_mean_cause("below", {"q": 0.9}, {"q": 30.0}, 4.0) == ""
