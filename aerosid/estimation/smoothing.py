@@ -15,6 +15,7 @@ import pandas as pd
 from aerosid.estimation import EBMOptions, EBMResult
 from aerosid.estimation.adaptive import smooth_flight_adaptive
 from aerosid.estimation.findings import sample_interval, smoother_findings
+from aerosid.estimation.local_q import CONTROL_LEAD_S, CONTROL_SHARE, moving_controls
 from aerosid.preprocess import usable_mask
 from aerosid.vehicles.vehicle import Vehicle
 from schemas.smoothed import RATE_DERIVATIVE_COLUMNS, STATE_COLUMNS
@@ -110,8 +111,6 @@ def _with_manoeuvre_hint(findings: list, t_s: np.ndarray, controls: np.ndarray |
     took the doublet and C_n,beta came out not determined; at 100 Hz nothing was gated)."""
     if controls is None or not findings:
         return findings
-    from aerosid.estimation.local_q import CONTROL_LEAD_S, CONTROL_SHARE, moving_controls
-
     t = np.asarray(t_s, float)
     lead = int(round(CONTROL_LEAD_S / sample_interval(t))) if t.size > 1 else 0
     out = []
