@@ -266,10 +266,7 @@ def diagnose(flight_data: pd.DataFrame, vehicle, models: dict[str, ChannelModel]
             p_plain = float(scipy.stats.f.sf(f_plain, 1, max(n - p_a, 1)))
             est, se = float(fa.estimate[j]), float(fa.std_error[j])
             sse_a = _heldout_sse(Xa.to_numpy(float), y, win)
-            curve = simex_curve(simex, model, c.regressor, y, est, simex_cache)
-            eiv = simex_fraction(curve)
-            est_simex, p_simex = simex_corrected(est, se, eiv, fa.dof_eff, spread=simex_spread(curve),
-                                                 share=simex.correction_share)
+            eiv, est_simex, p_simex = simex_check(simex, model, c.regressor, y, est, se, fa.dof_eff, simex_cache)
             d = sse_b - sse_a
             d = d[np.isfinite(d)]
             tot = float(np.sum(np.abs(d)))
@@ -384,6 +381,17 @@ def _simex_signals(fd: pd.DataFrame, vehicle, sigma, cutoff: float | None, signa
         out[lam].append(derived_signals(vehicle_signals(f, vehicle, like=signals), vehicle.length_pitch_m,
                                         vehicle.length_lateral_m))
     return SimexDraws(out, correction_share(vehicle))
+
+
+def simex_check(simex: SimexDraws, model: ChannelModel, regressor, y: np.ndarray, est: float, se: float,
+                dof: float, cache: dict | None = None) -> tuple[float, float, float]:
+    """The errors-in-variables check of one added term (the candidates' and the localisation's):
+    (eiv_fraction, SIMEX-corrected estimate, its p) from the SIMEX curve (:func:`simex_curve`),
+    with the identification's sigma for a corrected estimate (:func:`simex_corrected`)."""
+    curve = simex_curve(simex, model, regressor, y, est, cache)
+    eiv = simex_fraction(curve)
+    est_simex, p = simex_corrected(est, se, eiv, dof, spread=simex_spread(curve), share=simex.correction_share)
+    return eiv, est_simex, p
 
 
 def simex_corrected(est: float, se: float, eiv_fraction: float, dof: float, *, spread: float = 0.0,

@@ -230,13 +230,13 @@ def _perturbed(signals: dict, noise, t: np.ndarray, groups: np.ndarray) -> dict 
 def _simex_check(c: _Channel, expr: str, r: dict, simex, cache: dict,
                  given: tuple[tuple[str, str], ...] = ()) -> dict:
     """The catalogue's errors-in-variables check of an added term: refits with extra angle
-    noise (aerosid.diagnosis.core.simex_curve), the estimate extrapolated to no angle error and
-    its p with the sigma of a SIMEX-corrected estimate (core.simex_corrected); {} without SIMEX
+    noise (aerosid.diagnosis.core.simex_check), the estimate extrapolated to no angle error and
+    its p with the sigma of a SIMEX-corrected estimate; {} without SIMEX
     draws (simex: aerosid.diagnosis.core.SimexDraws).  given: (coefficient,
     expression) of the columns the term was tested beside (a schedule's main effect)."""
     if not simex:
         return {}
-    from aerosid.diagnosis.core import simex_corrected, simex_curve, simex_fraction, simex_spread
+    from aerosid.diagnosis.core import simex_check
     from aerosid.modelling.models import parse_term
 
     est = r["estimate"]
@@ -244,10 +244,8 @@ def _simex_check(c: _Channel, expr: str, r: dict, simex, cache: dict,
     for name, g in given:
         model = model.with_term(parse_term(f"{name} = {g}", c.ch))
     # the cache holds the SIMEX draws' designs of the channel's own model: not of this one
-    curve = simex_curve(simex, model, lambda sig: evaluate(expr, sig, c.n), c.y, est, None if given else cache)
-    eiv = simex_fraction(curve)
-    est_s, p_s = simex_corrected(est, r["std_error"], eiv, float(r["fit"].dof_eff), spread=simex_spread(curve),
-                                 share=simex.correction_share)
+    eiv, est_s, p_s = simex_check(simex, model, lambda sig: evaluate(expr, sig, c.n), c.y, est, r["std_error"],
+                                  float(r["fit"].dof_eff), None if given else cache)
     return {"eiv_fraction": eiv, "estimate_simex": est_s, "p_value_simex": p_s}
 
 
