@@ -72,6 +72,12 @@ class FlightData(pa.DataFrameModel):
     delta_y_wideband_rad: Optional[Series[float]] = _f("rad", "delta_y before the band's low-pass", nullable=True)
     delta_r_wideband_rad: Optional[Series[float]] = _f("rad", "delta_r before the band's low-pass", nullable=True)
     V_wideband_m_s: Optional[Series[float]] = _f("m/s", "airspeed before the band's low-pass", gt=0, nullable=True)
+    # rows whose force coefficient reads a sample condemned on the one sensor it alone reads
+    # (aerosid.estimation.findings.kept_sensors: a_x, and with vanes a_y, a_z), kept for the other
+    # channels; a fit of that channel leaves them out (aerosid.identification.identify.window_rows)
+    cut_CA: Optional[Series[bool]] = _f("-", "CA reads an a_x sample condemned by a finding: not in CA's fit")
+    cut_CY: Optional[Series[bool]] = _f("-", "CY reads an a_y sample condemned by a finding: not in CY's fit")
+    cut_CN: Optional[Series[bool]] = _f("-", "CN reads an a_z sample condemned by a finding: not in CN's fit")
 
     class Config:
         strict = False

@@ -47,6 +47,13 @@ class SmoothedSegment(pa.DataFrameModel):
     nis_smoother: Series[float] = pa.Field(nullable=True, metadata={"unit": "-"})
     suspect: Optional[Series[bool]] = pa.Field(metadata={
         "unit": "-", "description": "sample condemned by a finding (gated run, NIS excursion): cut from the regression"})
+    suspect_ax: Optional[Series[bool]] = pa.Field(metadata={
+        "unit": "-", "description": "gated run on ax, kept for the channels a_x does not feed (aerosid.estimation."
+                                   "findings.kept_sensors): cut only from C_A's fit"})
+    suspect_ay: Optional[Series[bool]] = pa.Field(metadata={
+        "unit": "-", "description": "gated run on ay, kept likewise (vanes only): cut only from C_Y's fit"})
+    suspect_az: Optional[Series[bool]] = pa.Field(metadata={
+        "unit": "-", "description": "gated run on az, kept likewise (vanes only): cut only from C_N's fit"})
     updated: Series[bool] = pa.Field(metadata={"description": "a measurement update happened at this sample"})
 
     class Config:

@@ -61,7 +61,7 @@ from aerosid.diagnosis.lookalikes import heldout_sse as _heldout_sse, scaled_lst
 from aerosid.diagnosis.lookalikes import windows_index as _windows_index
 from aerosid.modelling.expressions import evaluate
 from aerosid.identification.eiv_fit import angle_cutoff_hz, angle_eiv_sigma, correction_share
-from aerosid.identification.identify import identity_channels, mach_window_mask
+from aerosid.identification.identify import identity_channels, window_rows
 from aerosid.identification.band import segment_keys
 from aerosid.identification.eiv import SimexResult, extrapolate, extrapolation_spread, simex_frames
 from aerosid.modelling.models import ChannelModel, default_models, vehicle_signals
@@ -188,8 +188,7 @@ def diagnose(flight_data: pd.DataFrame, vehicle, models: dict[str, ChannelModel]
     if candidates is None:
         candidates = default_candidates(vehicle.mach_reference, vehicle.vehicle_class)
     fd = flight_data.sort_values(["flight", "t_s"], kind="stable").reset_index(drop=True)
-    mask = mach_window_mask(fd["mach"].to_numpy(float), vehicle.mach_reference, mach_half_width)
-    fd = fd.loc[mask].reset_index(drop=True)
+    fd = fd.loc[window_rows(fd, vehicle, mach_half_width, models)].reset_index(drop=True)
     n = len(fd)
     if n < max(50, 10 * n_windows):
         raise ValueError(f"only {n} samples inside Mach {vehicle.mach_reference} ± {mach_half_width}: "

@@ -16,7 +16,7 @@ import numpy as np
 import pandas as pd
 
 from aerosid.diagnosis.lookalikes import heldout_sse, windows_index
-from aerosid.identification.identify import mach_window_mask
+from aerosid.identification.identify import window_rows
 from aerosid.modelling.models import vehicle_signals
 
 __all__ = ["heldout_rms", "HELDOUT_WINDOWS"]
@@ -29,7 +29,7 @@ def heldout_rms(flight_data: pd.DataFrame, vehicle, models: dict, mach_half_widt
                 n_windows: int = HELDOUT_WINDOWS) -> dict[str, float]:
     """{channel: leave-one-window-out prediction RMS} of `models` on the flight data."""
     fd = flight_data.sort_values(["flight", "t_s"], kind="stable").reset_index(drop=True)
-    fd = fd.loc[mach_window_mask(fd["mach"].to_numpy(float), vehicle.mach_reference, mach_half_width)]
+    fd = fd.loc[window_rows(fd, vehicle, mach_half_width, models)]
     fd = fd.reset_index(drop=True)
     if len(fd) < 2 * n_windows:
         return {ch: float("nan") for ch in models}

@@ -50,6 +50,15 @@ MERGE_GAP_S = 2.0
 #: A windowed-NIS excursion this long is sustained: cut (shorter ones are reported) [s];
 #: the divergence test's own minimum run (EBMOptions.divergence_min_s).
 SUSTAINED_EXCURSION_S = 3.0
+#: The one coefficient channel an accelerometer feeds, by the vehicle's air-data source.  With
+#: vanes a_x, a_y, a_z feed only C_A, C_Y, C_N; with alpha and beta inverted from the force
+#: database a_y and a_z feed the angles, hence every channel, and a_x still only C_A.  The gyros
+#: feed every channel (the moments, and the accelerometers' transfer to the CG).
+SENSOR_CHANNEL = {"vanes": {"ax": "CA", "ay": "CY", "az": "CN"}, "database": {"ax": "CA"}}
+#: The smoothed frame's column of the samples condemned on such a sensor and kept for the rest.
+KEPT_SUSPECT_COLUMN = {"ax": "suspect_ax", "ay": "suspect_ay", "az": "suspect_az"}
+#: The flight data's column of the rows whose coefficient reads such a condemned sample.
+CUT_COLUMN = {"CA": "cut_CA", "CY": "cut_CY", "CN": "cut_CN"}
 #: Departure threshold in sigma of (measured - smoothed) after the common band.
 DEPARTURE_SIGMA = 6.0
 #: A departure must last this long to count [s].
@@ -79,6 +88,30 @@ class Finding:
 
     def as_dict(self) -> dict:
         return asdict(self)
+
+
+def kept_sensors(air_data_source: str, modelled) -> dict[str, str]:
+    """{sensor: channel} of the sensors whose condemned samples cost only their own channel,
+    because that channel is not among ``modelled`` (the channels a model fits): the flight data
+    keep those samples for the other channels and mark the channel's rows (CUT_COLUMN).  A
+    finding on any other sensor cuts its samples from every channel's regression."""
+    feeds = SENSOR_CHANNEL["vanes" if air_data_source == "vanes" else "database"]
+    return {s: ch for s, ch in feeds.items() if ch not in set(modelled)}
+
+
+def kept_note(sensor: str, channel: str) -> str:
+    """The sentence a finding on a kept sensor ends with."""
+    return (f"; kept for the regression: {sensor} feeds only {channel}, which no default model fits "
+            f"(a model of {channel} leaves these samples out)")
+
+
+def findings_mask(t_s: np.ndarray, findings) -> np.ndarray:
+    """The samples inside the time spans of ``findings`` (each a run of samples t0_s..t1_s)."""
+    t = np.asarray(t_s, float)
+    out = np.zeros(t.size, bool)
+    for f in findings:
+        out |= (t >= f.t0_s) & (t <= f.t1_s)
+    return out
 
 
 def sample_interval(t_s: np.ndarray) -> float:

@@ -14,8 +14,10 @@ import pandas as pd
 
 from aerosid.estimation import EBMOptions, EBMResult
 from aerosid.estimation.adaptive import smooth_flight_adaptive
-from aerosid.estimation.findings import sample_interval, smoother_findings
+from aerosid.estimation.findings import (KEPT_SUSPECT_COLUMN, findings_mask, kept_note, kept_sensors, sample_interval,
+                                         smoother_findings)
 from aerosid.estimation.local_q import CONTROL_LEAD_S, CONTROL_SHARE, moving_controls
+from aerosid.modelling.models import default_models
 from aerosid.preprocess import usable_mask
 from aerosid.vehicles.vehicle import Vehicle
 from schemas.smoothed import RATE_DERIVATIVE_COLUMNS, STATE_COLUMNS
@@ -54,11 +56,15 @@ class SmoothedSegmentResult:
 
     @property
     def lost(self) -> bool:
-        """More than half the segment is condemned (the ``suspect`` column), or any smoothed
+        """More than half the segment is condemned (the ``suspect`` columns), or any smoothed
         state is not finite (no Parquet of smoothed states may hold one): not worth keeping."""
         if not len(self.frame) or self.nonfinite().any():
             return True
-        return bool(self.frame["suspect"].mean() > MAX_SUSPECT_FRACTION)
+        condemned = self.frame["suspect"].to_numpy(bool).copy()
+        for col in KEPT_SUSPECT_COLUMN.values():  # a sensor's own cuts count here too
+            if col in self.frame:
+                condemned |= self.frame[col].to_numpy(bool)
+        return bool(condemned.mean() > MAX_SUSPECT_FRACTION)
 
     def divergence_note(self) -> str:
         """Where the filter's windowed NIS left its band (sample times) [s]."""
@@ -122,8 +128,8 @@ def _with_manoeuvre_hint(findings: list, t_s: np.ndarray, controls: np.ndarray |
                 f = replace(f, detail=f.detail + (
                     f"; {', '.join(moved)} moved during it or in the {CONTROL_LEAD_S:g} s before (by at least "
                     f"{CONTROL_SHARE:.0%} of its range): if the sensor is sound this is a manoeuvre the filter could "
-                    f"not follow in {f.channel} alone, and the cut takes that manoeuvre from every channel's "
-                    "regression"))
+                    f"not follow in {f.channel} alone"
+                    + (", and the cut takes that manoeuvre from every channel's regression" if f.cut else "")))
         out.append(f)
     return out
 
@@ -168,15 +174,25 @@ def smooth_segment_frame(rows: pd.DataFrame, vehicle: Vehicle, options: dict | N
         data[f"gated_{m}"] = res.gate_flags[:, j]
     excursion = np.zeros(len(t), bool)
     excursion[np.asarray(res.divergence_samples, dtype=int)] = True
-    findings, suspect = smoother_findings(t, {m: res.gate_flags[:, j] for j, m in enumerate(res.meas_names)},
-                                          excursion, res.mean_nis_filter, tuple(res.nis_band), segment_id,
-                                          dict(zip(res.meas_names, map(float, res.chan_nis_filter))),
-                                          dict(zip(res.meas_names, map(float, res.whiteness()))),
-                                          opts.f_max_hz)
+    findings, _ = smoother_findings(t, {m: res.gate_flags[:, j] for j, m in enumerate(res.meas_names)},
+                                    excursion, res.mean_nis_filter, tuple(res.nis_band), segment_id,
+                                    dict(zip(res.meas_names, map(float, res.chan_nis_filter))),
+                                    dict(zip(res.meas_names, map(float, res.whiteness()))),
+                                    opts.f_max_hz)
     findings = _with_stated_chain_scale(findings, {**vehicle.estimation, **(options or {})})
+    # a sensor that feeds only a channel no default model fits (aerosid.estimation.findings.
+    # kept_sensors: a_x, and with vanes a_y, a_z) costs only that channel: its gated runs are
+    # reported and marked for it, the other channels keep the samples (JSBSim F4N seed 1 at 50 Hz:
+    # a_x gated through the rudder doublet took the doublet from C_n's regression)
+    kept = kept_sensors(vehicle.air_data_source, default_models(vehicle))
+    findings = [replace(f, cut=False, detail=f.detail + kept_note(f.channel, kept[f.channel]))
+                if f.kind == "gated" and f.channel in kept else f for f in findings]
     findings = _with_manoeuvre_hint(findings, t, rows[ctl].to_numpy(dtype=float) if ctl else None,
                                     [c.removesuffix("_clean") for c in ctl])
-    data["suspect"] = suspect
+    data["suspect"] = findings_mask(t, [f for f in findings if f.cut])
+    for sensor in kept:
+        data[KEPT_SUSPECT_COLUMN[sensor]] = findings_mask(t, [f for f in findings
+                                                              if f.kind == "gated" and f.channel == sensor])
     frame = pd.DataFrame(data)
     frame["segment"] = frame["segment"].astype(str)
     return SmoothedSegmentResult(segment_id, frame, res, tuple(findings), adaptive.summary())

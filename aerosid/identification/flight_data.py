@@ -16,7 +16,8 @@ from aerosid.vehicles.aerodb import AeroDatabase
 from aerosid.vehicles.atmosphere import MEASURED, H_MAX_M, H_MIN_M, AirDataError, air_data, air_data_sources
 from aerosid.identification.flight_coefficients import flight_coefficients
 from aerosid.identification.derivatives import zero_phase_low_pass
-from aerosid.estimation.findings import DEPARTURE_MIN_S, DEPARTURE_SIGMA, Finding, dilate, span_findings
+from aerosid.estimation.findings import (CUT_COLUMN, DEPARTURE_MIN_S, DEPARTURE_SIGMA, KEPT_SUSPECT_COLUMN,
+                                         SENSOR_CHANNEL, Finding, dilate, kept_note, kept_sensors, span_findings)
 from aerosid.identification.band import (accel_at_cg, band_limited_signals, band_noise_gain, bridge_spikes,
                                          finite_runs, low_pass_runs, white_noise_sigma)
 from aerosid.identification.band_order import WIDEBAND_COLUMNS
@@ -25,12 +26,15 @@ from aerosid.identification.airdata_findings import airdata_findings
 from aerosid.identification.vanes import advance, angles_at_cg, vane_white_noise_rad
 from aerosid.identification.crb import R_COLUMNS
 from aerosid.identification.inversion import invert_alpha_beta, total_angles
+from aerosid.modelling.models import default_models
 from aerosid.vehicles.vehicle import Vehicle
 
 FIN_COLUMNS = ("d1_rad", "d2_rad", "d3_rad", "d4_rad")
 #: The margin cut around a condemned span: one band period, at most this [s].
 MAX_MARGIN_S = 1.0
 BAND_IMU = ("ax_m_s2", "ay_m_s2", "az_m_s2", "p_rad_s", "q_rad_s", "r_rad_s")
+#: The accelerometer each departure column of the smoother is compared with.
+DEPARTURE_SENSOR = {"X1_m_s2": "ax", "Y1_m_s2": "ay", "Z1_m_s2": "az"}
 
 
 class SegmentUnusable(ValueError):
@@ -127,6 +131,7 @@ def build_flight_data(smoothed: pd.DataFrame, measured: pd.DataFrame, vehicle: V
     band_hz = np.nan
     findings: list = []
     timing = None
+    marked = {}
     if signals == "band":
         # measured air data and altitude are scale factors of the coefficients (through the
         # density and qbar), not regressors: left as measured, and a gap in them does not
@@ -135,7 +140,7 @@ def build_flight_data(smoothed: pd.DataFrame, measured: pd.DataFrame, vehicle: V
         scales_ok = np.all(np.isfinite(np.column_stack([clean[c] for c in scale_cols])), axis=1)
         filt_ok = np.all(np.isfinite(np.column_stack([v for c, v in clean.items() if c not in scale_cols])),
                          axis=1) & (clean["V_m_s"] > 0)
-        bl, used, findings = _band_signals(t, measured, smoothed, vehicle, filt_ok, segment)
+        bl, used, findings, marked = _band_signals(t, measured, smoothed, vehicle, filt_ok, segment)
         fs = 1.0 / float(np.median(np.diff(t)))
         raw = clean
         clean = {c: (v if c in scale_cols else bl.low_pass(v, fs)) for c, v in clean.items()}
@@ -214,6 +219,7 @@ def build_flight_data(smoothed: pd.DataFrame, measured: pd.DataFrame, vehicle: V
         "band_hz": np.full(len(V), band_hz),
         "eiv_sigma_alpha_rad": eiv_a, "eiv_sigma_beta_rad": eiv_b, **eiv_rates, **wide,
         **{c: s[c].to_numpy(float) for c in R_COLUMNS if c in s},  # the filter's R (Cramér-Rao bounds)
+        **{CUT_COLUMN[ch]: m[ok] for ch, m in marked.items()},
     })
     if not vanes and signals == "band" and edge.any():
         frame = frame.loc[~drop_rows].reset_index(drop=True)
@@ -251,7 +257,9 @@ def _band_signals(t, measured: pd.DataFrame, smoothed: pd.DataFrame, vehicle: Ve
     """The band-limited signals of a segment with the smoother's condemned samples (the
     ``suspect`` column) and the spans where the smoothed signals depart from their
     measurement cut out, each with a margin of one band period.  Returns the signals, the
-    rows kept and the findings (aerosid.estimation.findings)."""
+    rows kept, the findings (aerosid.estimation.findings) and {channel: rows whose coefficient
+    reads a condemned sample of a sensor that feeds that channel alone} (CUT_COLUMN: the sensors
+    of aerosid.estimation.findings.kept_sensors, whose samples the other channels keep)."""
     imu = np.column_stack([measured[f"{c}_clean"].to_numpy(dtype=float) for c in BAND_IMU])
     # spikes the preprocessing left (it leaves 5-7 sigma ones to the filter) would go through
     # the derivative and the band into a band period of C_m: bridge them as the preprocessing
@@ -279,6 +287,11 @@ def _band_signals(t, measured: pd.DataFrame, smoothed: pd.DataFrame, vehicle: Ve
     bl = first
     margin = int(np.ceil(min(1.0 / bl.band_hz, MAX_MARGIN_S) * fs))
     suspect = smoothed["suspect"].to_numpy(bool) if "suspect" in smoothed else np.zeros(len(t), bool)
+    kept = kept_sensors(vehicle.air_data_source, default_models(vehicle))
+    marked = {ch: np.zeros(len(t), bool) for ch in CUT_COLUMN}
+    for sensor, col in KEPT_SUSPECT_COLUMN.items():  # the smoothing stage kept these for the other channels
+        if col in smoothed:
+            marked[SENSOR_CHANNEL["vanes"][sensor]] |= smoothed[col].to_numpy(bool)
     keep = ok & ~dilate(suspect, margin)
     if suspect.any():
         bl = signals(keep)
@@ -304,11 +317,16 @@ def _band_signals(t, measured: pd.DataFrame, smoothed: pd.DataFrame, vehicle: Ve
             sigma = np.maximum(np.hypot(gain * white, sig_sm), typical)
             with np.errstate(invalid="ignore"):
                 off = np.abs(diff) > DEPARTURE_SIGMA * sigma
+            sensor = DEPARTURE_SENSOR.get(col)
+            own = sensor in kept
             f, hit = span_findings("departure", segment, col, t, off & bl.used, int(np.ceil(DEPARTURE_MIN_S * fs)),
-                                   True, f"the smoothed {col} departs from its band-limited measurement by more "
-                                   f"than {DEPARTURE_SIGMA:g} sigma")
+                                   not own, f"the smoothed {col} departs from its band-limited measurement by more "
+                                   f"than {DEPARTURE_SIGMA:g} sigma" + (kept_note(sensor, kept[sensor]) if own else ""))
             findings += f
-            gone |= hit
+            if own:
+                marked[kept[sensor]] |= hit
+            else:
+                gone |= hit
         if gone.any():
             keep &= ~dilate(gone, margin)
             bl = signals(keep)
@@ -316,7 +334,7 @@ def _band_signals(t, measured: pd.DataFrame, smoothed: pd.DataFrame, vehicle: Ve
         raise SegmentUnusable(f"segment {segment}: no run of {int(np.ceil(0.5 * fs / bl.band_hz))} consecutive samples "
                          f"with every IMU channel, control, V and h available and not condemned (t = {_span(t)}): "
                          "nothing to low-pass for the regression")
-    return bl, bl.used, findings
+    return bl, bl.used, findings, {ch: dilate(m, margin) for ch, m in marked.items()}
 
 
 def _inverted_angles(fc, s: pd.DataFrame, delta_p, delta_y, vehicle: Vehicle, db: AeroDatabase, segment: str,

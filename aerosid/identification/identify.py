@@ -12,6 +12,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 import pandas as pd
 
+from aerosid.estimation.findings import CUT_COLUMN
 from aerosid.modelling.aeromodel import AeroModel
 from aerosid.identification.crb import identification_bounds
 from aerosid.identification.eiv_fit import (angle_eiv_sigma, angle_rate_free_channels, control_eiv_sigma,
@@ -165,6 +166,17 @@ def mach_window_mask(mach: np.ndarray, reference: float, half_width: float | Non
     return np.abs(mach - reference) <= half_width
 
 
+def window_rows(fd: pd.DataFrame, vehicle, half_width: float | None, channels) -> np.ndarray:
+    """The flight-data rows a fit of ``channels`` (names, or a dict keyed by them) reads: inside
+    the Mach window, and not marked (CUT_COLUMN) as reading a sample condemned on a sensor that
+    feeds one of those channels alone (the flight data keep such rows for the other channels)."""
+    rows = mach_window_mask(fd["mach"].to_numpy(float), vehicle.mach_reference, half_width)
+    for ch in channels:
+        if CUT_COLUMN.get(ch) in fd.columns:
+            rows &= ~fd[CUT_COLUMN[ch]].to_numpy(bool)
+    return rows
+
+
 #: The rates' part of SIMEX by default ("auto") only in the channels whose model reads no angle
 #: rate (eiv_fit.angle_rate_free_channels: the lateral-directional ones).  Right in isolation (it
 #: moves C_m_alpha toward the true-rates answer on F4N, OV10 and pa28, bench/results/gyro_simex.md),
@@ -231,7 +243,7 @@ def identify(flight_data: pd.DataFrame, vehicle: Vehicle, models: dict[str, Chan
         raise ValueError(f"gyro_eiv={gyro_eiv!r}: True, False or 'auto'")
     models = models or default_models(vehicle)
     fd = flight_data.sort_values(["flight", "t_s"], kind="stable").reset_index(drop=True)
-    mask = mach_window_mask(fd["mach"].to_numpy(), vehicle.mach_reference, mach_half_width)
+    mask = window_rows(fd, vehicle, mach_half_width, models)
     span = (f"the flight data's {len(fd)} samples span Mach {fd['mach'].min():.3g}..{fd['mach'].max():.3g}"
             if len(fd) else "the flight data is empty")
     fd = fd.loc[mask].reset_index(drop=True)

@@ -145,10 +145,10 @@ def test_a_cut_span_costs_its_samples_not_the_segments_band():
     ok = np.ones(t.size, bool)
     vehicle = load_vehicle("c172x")
     smoothed["suspect"] = False
-    whole, _, _ = _band_signals(t, measured, smoothed, vehicle, ok, "seg00")
+    whole, _, _, _ = _band_signals(t, measured, smoothed, vehicle, ok, "seg00")
     # two condemned spans at the manoeuvre's ends: the longest run left holds the doublet only
     smoothed["suspect"] = ((t > 8.5) & (t < 8.7)) | ((t > 11.5) & (t < 11.7))
-    cut, keep, _ = _band_signals(t, measured, smoothed, vehicle, ok, "seg00")
+    cut, keep, _, _ = _band_signals(t, measured, smoothed, vehicle, ok, "seg00")
     assert whole.band_hz > 2.0 and whole.band_source == "flight"
     assert cut.band_hz == whole.band_hz and cut.band_source == "flight"
     assert not keep[(t > 8.5) & (t < 8.7)].any() and keep[(t > 15) & (t < 30)].all()
@@ -156,3 +156,43 @@ def test_a_cut_span_costs_its_samples_not_the_segments_band():
     longest = (t > 12.2) & (t < 39.9)  # what the edge used to be computed on
     assert signal_band_edge_hz(measured.loc[longest, ["p_rad_s_clean", "q_rad_s_clean", "r_rad_s_clean"]]
                                .to_numpy(), dt) < 1.0
+
+
+def test_a_span_condemned_on_a_sensor_that_feeds_one_channel_is_kept_for_the_others():
+    """a_x feeds only C_A, which no default model fits (kept_sensors; with vanes a_y and a_z feed
+    only C_Y and C_N).  Its condemned span (the smoother's suspect_ax) is marked for C_A with the
+    band margin and splits no run; the same span condemned for every channel (suspect) is cut."""
+    import pandas as pd
+
+    from aerosid.estimation.findings import kept_sensors
+    from aerosid.identification.flight_data import BAND_IMU, MAX_MARGIN_S, _band_signals
+    from aerosid.vehicles.vehicle import load_vehicle
+
+    vehicle = load_vehicle("c172x")
+    assert kept_sensors(vehicle.air_data_source, ("CN", "Cm", "Cl", "Cn")) == {"ax": "CA", "ay": "CY"}
+    assert kept_sensors(vehicle.air_data_source, ("CN", "Cm", "CY", "Cl", "Cn")) == {"ax": "CA"}
+    assert kept_sensors("database", ("CN", "Cm", "CY")) == {"ax": "CA"}
+    assert kept_sensors("database", ("CA",)) == {}
+    rng = np.random.default_rng(3)
+    t = np.arange(3000) * 0.01
+    q = 0.1 * np.sin(2 * np.pi * 0.8 * t)
+    true = {"ax_m_s2": 0 * t, "ay_m_s2": 0 * t, "az_m_s2": -9.81 + 0 * t, "p_rad_s": 0.5 * q, "q_rad_s": q,
+            "r_rad_s": 0.2 * q}
+    measured = pd.DataFrame({f"{c}_clean": true[c] + rng.normal(0, 0.002, t.size) for c in BAND_IMU})
+    smoothed = pd.DataFrame({c: true[c] for c in ("p_rad_s", "q_rad_s", "r_rad_s")})
+    for c, k in (("X1_m_s2", "ax_m_s2"), ("Y1_m_s2", "ay_m_s2"), ("Z1_m_s2", "az_m_s2")):
+        smoothed[c] = true[k]
+    span = (t > 12.0) & (t < 13.0)
+    ok = np.ones(t.size, bool)
+    smoothed["suspect"] = False
+    _, whole, _, _ = _band_signals(t, measured, smoothed, vehicle, ok, "seg00")
+    smoothed["suspect_ax"] = span
+    bl, keep, _, marked = _band_signals(t, measured, smoothed, vehicle, ok, "seg00")
+    assert keep[span].all() and np.array_equal(keep, whole)
+    pad = min(1.0 / bl.band_hz, MAX_MARGIN_S) + 0.01
+    margin = (t > 12.0 - pad) & (t < 13.0 + pad)
+    assert marked["CA"][span].all() and not marked["CA"][~margin].any()
+    assert not marked["CY"].any() and not marked["CN"].any()
+    smoothed["suspect"], smoothed["suspect_ax"] = span, False
+    _, keep, _, marked = _band_signals(t, measured, smoothed, vehicle, ok, "seg00")
+    assert not keep[span].any() and not any(m.any() for m in marked.values())

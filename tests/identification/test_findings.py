@@ -39,6 +39,37 @@ def test_a_sensor_step_is_a_gated_span_cut_whole_and_the_rest_is_used(reference_
         assert abs(tab.loc[name, "estimate"] - ref.loc[name, "estimate"]) <= 2 * ref.loc[name, "std_error"]
 
 
+def test_a_gated_span_on_a_sensor_that_feeds_no_fitted_channel_costs_only_that_channel(reference_flight,
+                                                                                       reference_run):
+    """a_x feeds only C_A, which no default model fits: its gated run is reported, the other
+    channels keep its samples, and a model of C_A leaves them out (JSBSim F4N at 50 Hz: a_x gated
+    through the rudder doublet once took the doublet from C_n's regression)."""
+    from aerosid.estimation.findings import CUT_COLUMN
+    from aerosid.identification.identify import identify
+    from aerosid.modelling.models import ChannelModel, default_models, parse_terms
+
+    tel = reference_flight.telemetry.copy()
+    t = tel["t_s"].to_numpy()
+    step = (t > 30.0) & (t < 31.5)
+    tel.loc[step, "ax_m_s2"] += 25.0  # the same bias jump as above, on the axial accelerometer
+    run = _run(tel)
+    gated = [Finding(**f) for f in run.findings if f["kind"] == "gated" and f["channel"] == "ax"]
+    assert gated, [Finding(**f).summary() for f in run.findings]
+    assert not any(g.cut for g in gated) and all("feeds only CA" in g.detail for g in gated)
+    assert any(g.t0_s <= 30.05 and g.t1_s >= 31.45 for g in gated)
+    assert not any(f["cut"] and f["t0_s"] <= 31.5 and f["t1_s"] >= 30.0 for f in run.findings), run.findings
+    fd = run.flight_data
+    assert _kept(run, 30.0, 31.5) == _kept(reference_run, 30.0, 31.5) > 0  # the other channels keep them
+    inside = (fd["t_s"] > 30.05) & (fd["t_s"] < 31.45)
+    assert fd.loc[inside, CUT_COLUMN["CA"]].all() and fd[CUT_COLUMN["CA"]].mean() < 0.1
+    assert not fd[CUT_COLUMN["CN"]].any() and not fd[CUT_COLUMN["CY"]].any()
+    vehicle = load_vehicle("seed-rlv")
+    models = {**default_models(vehicle), "CA": ChannelModel("CA", parse_terms(["CA_0 = 1", "CA_alpha = alpha"], "CA"))}
+    with_ca = identify(fd, vehicle, models=models, bias_pairs=0)
+    without = identify(fd, vehicle, bias_pairs=0)
+    assert without.n_samples - with_ca.n_samples == int(fd[CUT_COLUMN["CA"]].sum())
+
+
 def test_an_excursion_out_of_the_database_at_the_end_is_cut_and_named(reference_flight, reference_run):
     tel = reference_flight.telemetry.copy()
     t = tel["t_s"].to_numpy()
