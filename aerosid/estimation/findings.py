@@ -55,7 +55,7 @@ SUSTAINED_EXCURSION_S = 3.0
 #: database a_y and a_z feed the angles, hence every channel, and a_x still only C_A.  The gyros
 #: feed every channel (the moments, and the accelerometers' transfer to the CG).
 SENSOR_CHANNEL = {"vanes": {"ax": "CA", "ay": "CY", "az": "CN"}, "database": {"ax": "CA"}}
-#: The smoothed frame's column of the samples condemned on such a sensor and kept for the rest.
+#: The smoothed frame's column of the samples condemned on such a sensor and kept for the others.
 KEPT_SUSPECT_COLUMN = {"ax": "suspect_ax", "ay": "suspect_ay", "az": "suspect_az"}
 #: The flight data's column of the rows whose coefficient reads such a condemned sample.
 CUT_COLUMN = {"CA": "cut_CA", "CY": "cut_CY", "CN": "cut_CN"}
@@ -90,19 +90,18 @@ class Finding:
         return asdict(self)
 
 
-def kept_sensors(air_data_source: str, modelled) -> dict[str, str]:
-    """{sensor: channel} of the sensors whose condemned samples cost only their own channel,
-    because that channel is not among ``modelled`` (the channels a model fits): the flight data
-    keep those samples for the other channels and mark the channel's rows (CUT_COLUMN).  A
-    finding on any other sensor cuts its samples from every channel's regression."""
-    feeds = SENSOR_CHANNEL["vanes" if air_data_source == "vanes" else "database"]
-    return {s: ch for s, ch in feeds.items() if ch not in set(modelled)}
+def kept_sensors(air_data_source: str) -> dict[str, str]:
+    """{sensor: channel} of the sensors whose condemned samples cost only the one channel they
+    feed (SENSOR_CHANNEL): the flight data keep those samples for the other channels and mark
+    that channel's rows (CUT_COLUMN), which its fit leaves out.  A finding on any other sensor
+    cuts its samples from every channel's regression."""
+    return dict(SENSOR_CHANNEL["vanes" if air_data_source == "vanes" else "database"])
 
 
 def kept_note(sensor: str, channel: str) -> str:
     """The sentence a finding on a kept sensor ends with."""
-    return (f"; kept for the regression: {sensor} feeds only {channel}, which no default model fits "
-            f"(a model of {channel} leaves these samples out)")
+    return (f"; kept for the other channels: {sensor} feeds only {channel}, whose fit leaves these samples "
+            f"out{' (no default model fits it)' if channel == 'CA' else ''}")
 
 
 def findings_mask(t_s: np.ndarray, findings) -> np.ndarray:

@@ -17,7 +17,6 @@ from aerosid.estimation.adaptive import smooth_flight_adaptive
 from aerosid.estimation.findings import (KEPT_SUSPECT_COLUMN, findings_mask, kept_note, kept_sensors, sample_interval,
                                          smoother_findings)
 from aerosid.estimation.local_q import CONTROL_LEAD_S, CONTROL_SHARE, moving_controls
-from aerosid.modelling.models import default_models
 from aerosid.preprocess import usable_mask
 from aerosid.vehicles.vehicle import Vehicle
 from schemas.smoothed import RATE_DERIVATIVE_COLUMNS, STATE_COLUMNS
@@ -180,11 +179,11 @@ def smooth_segment_frame(rows: pd.DataFrame, vehicle: Vehicle, options: dict | N
                                     dict(zip(res.meas_names, map(float, res.whiteness()))),
                                     opts.f_max_hz)
     findings = _with_stated_chain_scale(findings, {**vehicle.estimation, **(options or {})})
-    # a sensor that feeds only a channel no default model fits (aerosid.estimation.findings.
-    # kept_sensors: a_x, and with vanes a_y, a_z) costs only that channel: its gated runs are
-    # reported and marked for it, the other channels keep the samples (JSBSim F4N seed 1 at 50 Hz:
-    # a_x gated through the rudder doublet took the doublet from C_n's regression)
-    kept = kept_sensors(vehicle.air_data_source, default_models(vehicle))
+    # a sensor that feeds one channel alone (aerosid.estimation.findings.kept_sensors: a_x, and
+    # with vanes a_y, a_z) costs only that channel: its gated runs are reported and marked for it,
+    # the other channels keep the samples (JSBSim F4N seed 1 at 50 Hz: a_x gated through the rudder
+    # doublet took the doublet from C_n's regression)
+    kept = kept_sensors(vehicle.air_data_source)
     findings = [replace(f, cut=False, detail=f.detail + kept_note(f.channel, kept[f.channel]))
                 if f.kind == "gated" and f.channel in kept else f for f in findings]
     findings = _with_manoeuvre_hint(findings, t, rows[ctl].to_numpy(dtype=float) if ctl else None,

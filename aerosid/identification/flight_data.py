@@ -26,7 +26,6 @@ from aerosid.identification.airdata_findings import airdata_findings
 from aerosid.identification.vanes import advance, angles_at_cg, vane_white_noise_rad
 from aerosid.identification.crb import R_COLUMNS
 from aerosid.identification.inversion import invert_alpha_beta, total_angles
-from aerosid.modelling.models import default_models
 from aerosid.vehicles.vehicle import Vehicle
 
 FIN_COLUMNS = ("d1_rad", "d2_rad", "d3_rad", "d4_rad")
@@ -287,7 +286,7 @@ def _band_signals(t, measured: pd.DataFrame, smoothed: pd.DataFrame, vehicle: Ve
     bl = first
     margin = int(np.ceil(min(1.0 / bl.band_hz, MAX_MARGIN_S) * fs))
     suspect = smoothed["suspect"].to_numpy(bool) if "suspect" in smoothed else np.zeros(len(t), bool)
-    kept = kept_sensors(vehicle.air_data_source, default_models(vehicle))
+    kept = kept_sensors(vehicle.air_data_source)
     marked = {ch: np.zeros(len(t), bool) for ch in CUT_COLUMN}
     for sensor, col in KEPT_SUSPECT_COLUMN.items():  # the smoothing stage kept these for the other channels
         if col in smoothed:

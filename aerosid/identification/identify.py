@@ -243,6 +243,11 @@ def identify(flight_data: pd.DataFrame, vehicle: Vehicle, models: dict[str, Chan
         raise ValueError(f"gyro_eiv={gyro_eiv!r}: True, False or 'auto'")
     models = models or default_models(vehicle)
     fd = flight_data.sort_values(["flight", "t_s"], kind="stable").reset_index(drop=True)
+    groups = channel_groups(fd, vehicle, mach_half_width, models)
+    if len(groups) > 1:  # a finding condemned rows of one channel only: each group on its own rows
+        plain = fd.drop(columns=[c for c in CUT_COLUMN.values() if c in fd.columns])
+        return _merged([identify(plain.loc[rows], vehicle, {ch: models[ch] for ch in chs}, mach_half_width, cov,
+                                 gyro_eiv, bias_pairs, instrumental, control_eiv) for rows, chs in groups], models)
     mask = window_rows(fd, vehicle, mach_half_width, models)
     span = (f"the flight data's {len(fd)} samples span Mach {fd['mach'].min():.3g}..{fd['mach'].max():.3g}"
             if len(fd) else "the flight data is empty")
@@ -282,6 +287,27 @@ def identify(flight_data: pd.DataFrame, vehicle: Vehicle, models: dict[str, Chan
     crb = identification_bounds(fd, vehicle, models, fits, identities)
     return Identification(fits, dict(models), refs, len(fd), window, identities, crb_std=crb.std,
                           wrong_sign=wrong_sign, bias_pairs=bias_pairs, envelope=vehicle.envelope)
+
+
+def channel_groups(fd: pd.DataFrame, vehicle, half_width: float | None, models) -> list[tuple[np.ndarray, list]]:
+    """[(rows, channels)]: the channels of ``models`` grouped by the rows their fit reads
+    (window_rows), in the models' order; one group unless a finding condemned a sensor that
+    feeds one channel alone (aerosid.estimation.findings.kept_sensors)."""
+    groups: dict[bytes, tuple[np.ndarray, list]] = {}
+    for ch in models:
+        rows = window_rows(fd, vehicle, half_width, [ch])
+        groups.setdefault(rows.tobytes(), (rows, []))[1].append(ch)
+    return list(groups.values())
+
+
+def _merged(parts: list[Identification], models: dict) -> Identification:
+    """One Identification of the channel groups' (each fitted on its own rows): the fits in the
+    models' order; n_samples and the Mach window those of the largest group."""
+    fits = {ch: p.fits[ch] for ch in models for p in parts if ch in p.fits}
+    main = max(parts, key=lambda p: p.n_samples)
+    merged = lambda name: {k: v for p in parts for k, v in getattr(p, name).items()}  # noqa: E731
+    return replace(main, fits=fits, models=dict(models), identities=tuple(ch for p in parts for ch in p.identities),
+                   crb_std=merged("crb_std"), wrong_sign=merged("wrong_sign"))
 
 
 def _band_limited(fd: pd.DataFrame) -> bool:

@@ -159,9 +159,10 @@ def test_a_cut_span_costs_its_samples_not_the_segments_band():
 
 
 def test_a_span_condemned_on_a_sensor_that_feeds_one_channel_is_kept_for_the_others():
-    """a_x feeds only C_A, which no default model fits (kept_sensors; with vanes a_y and a_z feed
-    only C_Y and C_N).  Its condemned span (the smoother's suspect_ax) is marked for C_A with the
-    band margin and splits no run; the same span condemned for every channel (suspect) is cut."""
+    """With vanes a_z feeds only C_N (kept_sensors; a_x only C_A, a_y only C_Y; with angles
+    inverted from the force database a_y and a_z feed every channel).  Its condemned span (the
+    smoother's suspect_az) is marked for C_N with the band margin and splits no run; the same
+    span condemned for every channel (suspect) is cut."""
     import pandas as pd
 
     from aerosid.estimation.findings import kept_sensors
@@ -169,10 +170,8 @@ def test_a_span_condemned_on_a_sensor_that_feeds_one_channel_is_kept_for_the_oth
     from aerosid.vehicles.vehicle import load_vehicle
 
     vehicle = load_vehicle("c172x")
-    assert kept_sensors(vehicle.air_data_source, ("CN", "Cm", "Cl", "Cn")) == {"ax": "CA", "ay": "CY"}
-    assert kept_sensors(vehicle.air_data_source, ("CN", "Cm", "CY", "Cl", "Cn")) == {"ax": "CA"}
-    assert kept_sensors("database", ("CN", "Cm", "CY")) == {"ax": "CA"}
-    assert kept_sensors("database", ("CA",)) == {}
+    assert kept_sensors(vehicle.air_data_source) == {"ax": "CA", "ay": "CY", "az": "CN"}
+    assert kept_sensors("database") == {"ax": "CA"}
     rng = np.random.default_rng(3)
     t = np.arange(3000) * 0.01
     q = 0.1 * np.sin(2 * np.pi * 0.8 * t)
@@ -186,13 +185,13 @@ def test_a_span_condemned_on_a_sensor_that_feeds_one_channel_is_kept_for_the_oth
     ok = np.ones(t.size, bool)
     smoothed["suspect"] = False
     _, whole, _, _ = _band_signals(t, measured, smoothed, vehicle, ok, "seg00")
-    smoothed["suspect_ax"] = span
+    smoothed["suspect_az"] = span
     bl, keep, _, marked = _band_signals(t, measured, smoothed, vehicle, ok, "seg00")
     assert keep[span].all() and np.array_equal(keep, whole)
     pad = min(1.0 / bl.band_hz, MAX_MARGIN_S) + 0.01
     margin = (t > 12.0 - pad) & (t < 13.0 + pad)
-    assert marked["CA"][span].all() and not marked["CA"][~margin].any()
-    assert not marked["CY"].any() and not marked["CN"].any()
-    smoothed["suspect"], smoothed["suspect_ax"] = span, False
+    assert marked["CN"][span].all() and not marked["CN"][~margin].any()
+    assert not marked["CY"].any() and not marked["CA"].any()
+    smoothed["suspect"], smoothed["suspect_az"] = span, False
     _, keep, _, marked = _band_signals(t, measured, smoothed, vehicle, ok, "seg00")
     assert not keep[span].any() and not any(m.any() for m in marked.values())

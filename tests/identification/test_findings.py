@@ -67,7 +67,11 @@ def test_a_gated_span_on_a_sensor_that_feeds_no_fitted_channel_costs_only_that_c
     models = {**default_models(vehicle), "CA": ChannelModel("CA", parse_terms(["CA_0 = 1", "CA_alpha = alpha"], "CA"))}
     with_ca = identify(fd, vehicle, models=models, bias_pairs=0)
     without = identify(fd, vehicle, bias_pairs=0)
-    assert without.n_samples - with_ca.n_samples == int(fd[CUT_COLUMN["CA"]].sum())
+    # C_A's fit leaves the marked rows out, every other channel's is the fit without a C_A model
+    assert with_ca.fits["Cm"].n_obs - with_ca.fits["CA"].n_obs == int(fd[CUT_COLUMN["CA"]].sum())
+    assert with_ca.n_samples == without.n_samples == without.fits["Cm"].n_obs
+    for ch in without.fits:
+        assert np.allclose(with_ca.fits[ch].estimate, without.fits[ch].estimate, rtol=1e-9, atol=0), ch
 
 
 def test_an_excursion_out_of_the_database_at_the_end_is_cut_and_named(reference_flight, reference_run):
