@@ -50,11 +50,13 @@ MERGE_GAP_S = 2.0
 #: A windowed-NIS excursion this long is sustained: cut (shorter ones are reported) [s];
 #: the divergence test's own minimum run (EBMOptions.divergence_min_s).
 SUSTAINED_EXCURSION_S = 3.0
-#: The one coefficient channel an accelerometer feeds, by the vehicle's air-data source.  With
-#: vanes a_x, a_y, a_z feed only C_A, C_Y, C_N; with alpha and beta inverted from the force
-#: database a_y and a_z feed the angles, hence every channel, and a_x still only C_A.  The gyros
-#: feed every channel (the moments, and the accelerometers' transfer to the CG).
-SENSOR_CHANNEL = {"vanes": {"ax": "CA", "ay": "CY", "az": "CN"}, "database": {"ax": "CA"}}
+#: The force coefficient each accelerometer makes.
+ACCEL_CHANNEL = {"ax": "CA", "ay": "CY", "az": "CN"}
+#: The accelerometers that feed that one channel alone, by the vehicle's air-data source.  With
+#: vanes all three; with alpha and beta inverted from the force database a_y and a_z feed the
+#: angles, hence every channel, and a_x still only C_A.  The gyros feed every channel (the
+#: moments, and the accelerometers' transfer to the CG).
+SENSOR_CHANNEL = {"vanes": dict(ACCEL_CHANNEL), "database": {"ax": "CA"}}
 #: The smoothed frame's column of the samples condemned on such a sensor and kept for the others.
 KEPT_SUSPECT_COLUMN = {"ax": "suspect_ax", "ay": "suspect_ay", "az": "suspect_az"}
 #: The flight data's column of the rows whose coefficient reads such a condemned sample.

@@ -16,8 +16,8 @@ from aerosid.vehicles.aerodb import AeroDatabase
 from aerosid.vehicles.atmosphere import MEASURED, H_MAX_M, H_MIN_M, AirDataError, air_data, air_data_sources
 from aerosid.identification.flight_coefficients import flight_coefficients
 from aerosid.identification.derivatives import zero_phase_low_pass
-from aerosid.estimation.findings import (CUT_COLUMN, DEPARTURE_MIN_S, DEPARTURE_SIGMA, KEPT_SUSPECT_COLUMN,
-                                         SENSOR_CHANNEL, Finding, dilate, kept_note, kept_sensors, span_findings)
+from aerosid.estimation.findings import (ACCEL_CHANNEL, CUT_COLUMN, DEPARTURE_MIN_S, DEPARTURE_SIGMA,
+                                         KEPT_SUSPECT_COLUMN, Finding, dilate, kept_note, kept_sensors, span_findings)
 from aerosid.identification.band import (accel_at_cg, band_limited_signals, band_noise_gain, bridge_spikes,
                                          finite_runs, low_pass_runs, white_noise_sigma)
 from aerosid.identification.band_order import WIDEBAND_COLUMNS
@@ -290,7 +290,7 @@ def _band_signals(t, measured: pd.DataFrame, smoothed: pd.DataFrame, vehicle: Ve
     marked = {ch: np.zeros(len(t), bool) for ch in CUT_COLUMN}
     for sensor, col in KEPT_SUSPECT_COLUMN.items():  # the smoothing stage kept these for the other channels
         if col in smoothed:
-            marked[SENSOR_CHANNEL["vanes"][sensor]] |= smoothed[col].to_numpy(bool)
+            marked[ACCEL_CHANNEL[sensor]] |= smoothed[col].to_numpy(bool)
     keep = ok & ~dilate(suspect, margin)
     if suspect.any():
         bl = signals(keep)
