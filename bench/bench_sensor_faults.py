@@ -82,13 +82,14 @@ def one(job: tuple) -> list[dict]:
     base = _estimates(clean)
     t0, t1 = fault_span(flight.telemetry)
     n_clean = len(clean.flight_data)
+    clean_found = "; ".join(f"{f['kind']} {f['channel']} {f['t0_s']:.1f}-{f['t1_s']:.1f} s" for f in clean.findings)
     for fault in faults:
         column, jump, smoothed_cols = FAULTS[fault]
         tel = flight.telemetry.copy()
         t = tel["t_s"].to_numpy(float)
         tel.loc[(t >= t0) & (t <= t1), column] += jump
         row = {"vehicle": vehicle_name, "seed": seed, "fault": fault, "t0_s": t0, "t1_s": t1,
-               "air_data": vehicle.air_data_source}
+               "air_data": vehicle.air_data_source, "clean_findings": clean_found}
         start = time.perf_counter()
         try:
             run = _run(tel, vehicle)
@@ -98,7 +99,8 @@ def one(job: tuple) -> list[dict]:
             continue
         row["time_s"] = time.perf_counter() - start
         found = list(run.findings)
-        on_sensor = [f for f in found if (f["channel"] == fault or f["channel"] in smoothed_cols)
+        on_sensor = [f for f in found if (f["channel"] == fault or f["channel"] in smoothed_cols
+                                          or fault in f["channel"].split("/"))
                      and f["t1_s"] >= t0 - 0.5 and f["t0_s"] <= t1 + 0.5]
         row["announced"] = bool(on_sensor)
         row["announced_as"] = "; ".join(f"{f['kind']} {f['channel']} {f['t0_s']:.1f}-{f['t1_s']:.1f} s "

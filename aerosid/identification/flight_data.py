@@ -131,6 +131,7 @@ def build_flight_data(smoothed: pd.DataFrame, measured: pd.DataFrame, vehicle: V
     findings: list = []
     timing = None
     marked = {}
+    drop_rows = None  # frame rows condemned after the band (database edge, kinematic mismatch)
     if signals == "band":
         # measured air data and altitude are scale factors of the coefficients (through the
         # density and qbar), not regressors: left as measured, and a gap in them does not
@@ -168,8 +169,11 @@ def build_flight_data(smoothed: pd.DataFrame, measured: pd.DataFrame, vehicle: V
         beta = clean[vehicle.beta_column][ok] - vehicle.beta_bias_rad
         alpha_r, phi_r = total_angles(alpha, beta)
         inv_J = np.zeros(len(alpha))
-        found, timing = airdata_findings(t, ok, clean, bl, vehicle, segment)
+        found, timing, mismatch = airdata_findings(t, ok, clean, bl, vehicle, segment, explained=marked["CN"])
         findings += found
+        if mismatch.any():
+            pad = int(np.ceil(min(0.5 / band_hz, MAX_MARGIN_S) * fs))
+            drop_rows = dilate(mismatch, pad)[ok]
     elif vanes:
         alpha, beta, alpha_r, phi_r = _vane_angles_low_passed(clean, ok, vehicle, t)
         inv_J = np.zeros(len(alpha))
@@ -220,11 +224,10 @@ def build_flight_data(smoothed: pd.DataFrame, measured: pd.DataFrame, vehicle: V
         **{c: s[c].to_numpy(float) for c in R_COLUMNS if c in s},  # the filter's R (Cramér-Rao bounds)
         **{CUT_COLUMN[ch]: m[ok] for ch, m in marked.items()},
     })
-    if not vanes and signals == "band" and edge.any():
+    if drop_rows is not None and drop_rows.any():
         frame = frame.loc[~drop_rows].reset_index(drop=True)
         if frame.empty:
-            raise ValueError(f"segment {segment}: alpha/beta at the force database's edge on every sample "
-                             f"({findings[-1].summary()})")
+            raise ValueError(f"segment {segment}: every sample condemned ({findings[-1].summary()})")
     frame.attrs["findings"] = [f.as_dict() for f in findings]
     frame.attrs["vane_timing"] = [timing] if timing else []
     return frame

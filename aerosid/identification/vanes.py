@@ -84,8 +84,8 @@ from aerosid.identification.band import finite_runs, white_noise_sigma
 from aerosid.identification.regression import fit_linear
 from aerosid.modelling.flight_path import gravity_alpha_dot, kinematic_alpha_dot_no_gravity
 
-__all__ = ["VaneDelay", "vane_delay", "advance", "angles_at_cg", "gyro_attitude", "DELAY_P_MAX", "MIN_RUN_S",
-           "INITIAL_S", "MAX_DELAY_S"]
+__all__ = ["VaneDelay", "vane_delay", "advance", "angles_at_cg", "gyro_attitude", "kinematic_alpha_rate",
+           "kinematic_mismatch_z", "DELAY_P_MAX", "MIN_RUN_S", "INITIAL_S", "MAX_DELAY_S"]
 
 #: A delay is reported when its two-sided p-value (coloured-residual sigma, normal) is below
 #: this, the significance level of the project's other findings (aerosid.diagnosis: P_MAX).
@@ -206,23 +206,17 @@ def gyro_attitude(t_s, p_rad_s, q_rad_s, r_rad_s, f0_m_s2) -> tuple[np.ndarray, 
     return theta, phi
 
 
-def vane_delay(t_s, alpha_vane_rad, beta_rad, p_rad_s, q_rad_s, r_rad_s, ax_cg_m_s2, ay_cg_m_s2, az_cg_m_s2,
-               V_m_s, *, applied_s: float = 0.0) -> VaneDelay | None:
-    """Estimate the vane alpha's delay behind the IMU's kinematics (module doc).
-
-    Every argument is on one segment's grid, NaN where unusable, and through the band path's
-    common low-pass: alpha_vane_rad (the vane angle less its bias), beta_rad, the rates
-    [rad/s], the CG specific forces [m/s^2], V [m/s]; applied_s: the delay the vanes were
-    already advanced by (reported only).  None when no run of MIN_RUN_S is left."""
+def kinematic_alpha_rate(t_s, alpha_vane_rad, beta_rad, p_rad_s, q_rad_s, r_rad_s, ax_cg_m_s2, ay_cg_m_s2,
+                         az_cg_m_s2, V_m_s) -> tuple[np.ndarray, np.ndarray] | None:
+    """(alpha-dot [rad/s] from the flight-path kinematics, K + G, the samples it holds on): the
+    rates, the CG specific forces and V, with the attitude integrated from the gyros from the
+    first usable sample on (started from the specific force of its first INITIAL_S seconds).
+    Arguments as :func:`vane_delay`'s; None when no sample is usable."""
     t = np.asarray(t_s, float)
-    if t.size < 16:
-        return None
-    a = np.asarray(alpha_vane_rad, float)
-    b = np.asarray(beta_rad, float)
+    a, b = np.asarray(alpha_vane_rad, float), np.asarray(beta_rad, float)
     p, q, r = (np.asarray(x, float) for x in (p_rad_s, q_rad_s, r_rad_s))
     fx, fy, fz = (np.asarray(x, float) for x in (ax_cg_m_s2, ay_cg_m_s2, az_cg_m_s2))
     V = np.asarray(V_m_s, float)
-    dt = float(np.median(np.diff(t)))
     usable = np.isfinite(a) & np.isfinite(b) & np.isfinite(p) & np.isfinite(q) & np.isfinite(r) \
         & np.isfinite(fx) & np.isfinite(fy) & np.isfinite(fz) & np.isfinite(V) & (V > 0)
     first = np.flatnonzero(usable)
@@ -235,6 +229,50 @@ def vane_delay(t_s, alpha_vane_rad, beta_rad, p_rad_s, q_rad_s, r_rad_s, ax_cg_m
     theta[i0:], phi[i0:] = gyro_attitude(t[i0:], p[i0:], q[i0:], r[i0:],
                                          (fx[head].mean(), fy[head].mean(), fz[head].mean()))
     rate = kinematic_alpha_dot_no_gravity(a, b, p, q, r, fx, fz, V) + gravity_alpha_dot(a, b, theta, phi, V)
+    return rate, usable & np.isfinite(rate)
+
+
+def kinematic_mismatch_z(t_s, alpha_vane_rad, rate_rad_s, usable, band_hz: float, delay_s: float = 0.0,
+                         gain: float = 1.0) -> np.ndarray:
+    """|d alpha_vane/dt - gain x kinematic alpha-dot(t - delay_s)| per sample, each run's median
+    taken out and averaged over one band period, in robust sigma (1.4826 MAD over the segment);
+    NaN off the usable runs.  A gyro step b [rad/s] or an a_z step d [m/s^2] shows as b, d/V
+    for its duration, which the vane does not follow."""
+    t = np.asarray(t_s, float)
+    a, rate = np.asarray(alpha_vane_rad, float), np.asarray(rate_rad_s, float)
+    z = np.full(t.size, np.nan)
+    if t.size < 3 or not band_hz > 0:
+        return z
+    dt = float(np.median(np.diff(t)))
+    w = max(1, int(round(1.0 / (band_hz * dt))))
+    for s in finite_runs(np.asarray(usable, bool)):
+        if s.stop - s.start < 2 * w:
+            continue
+        ts = t[s]
+        m = np.gradient(a[s], ts) - gain * np.interp(ts - delay_s, ts, rate[s])
+        z[s] = np.convolve(m - np.median(m), np.ones(w) / w, mode="same")
+    scale = 1.4826 * float(np.nanmedian(np.abs(z - np.nanmedian(z)))) if np.isfinite(z).any() else 0.0
+    return np.abs(z - np.nanmedian(z)) / scale if scale > 0 else np.full(t.size, np.nan)
+
+
+def vane_delay(t_s, alpha_vane_rad, beta_rad, p_rad_s, q_rad_s, r_rad_s, ax_cg_m_s2, ay_cg_m_s2, az_cg_m_s2,
+               V_m_s, *, applied_s: float = 0.0) -> VaneDelay | None:
+    """Estimate the vane alpha's delay behind the IMU's kinematics (module doc).
+
+    Every argument is on one segment's grid, NaN where unusable, and through the band path's
+    common low-pass: alpha_vane_rad (the vane angle less its bias), beta_rad, the rates
+    [rad/s], the CG specific forces [m/s^2], V [m/s]; applied_s: the delay the vanes were
+    already advanced by (reported only).  None when no run of MIN_RUN_S is left."""
+    t = np.asarray(t_s, float)
+    if t.size < 16:
+        return None
+    kin = kinematic_alpha_rate(t, alpha_vane_rad, beta_rad, p_rad_s, q_rad_s, r_rad_s, ax_cg_m_s2, ay_cg_m_s2,
+                               az_cg_m_s2, V_m_s)
+    if kin is None:
+        return None
+    rate, usable = kin
+    a = np.asarray(alpha_vane_rad, float)
+    dt = float(np.median(np.diff(t)))
     runs = [s for s in finite_runs(usable) if t[s.stop - 1] - t[s.start] >= MIN_RUN_S]
     if not runs:
         return None

@@ -321,3 +321,31 @@ def test_an_airspeed_the_kinematics_put_far_from_the_true_one_is_reported():
     found = _airspeed_finding(_airspeed_scale(t, fast, ok, vehicle), t, vehicle, "seg00")
     assert found is not None and found.kind == "airspeed_scale" and found.channel == "V_m_s"
     assert "ground speed" in found.detail and "every coefficient 0.6" in found.detail, found.detail
+
+
+def test_a_pitch_gyro_step_the_vane_does_not_follow_stands_out_of_the_kinematic_mismatch():
+    """On exact kinematics plus vane noise, a 1.5 s step of 0.03 rad/s on q (what the filter
+    follows as a manoeuvre) stands out of kinematic_mismatch_z over its span, above the finding's
+    threshold, and nothing else reaches it; a delayed vane with its delay given is as clean."""
+    from aerosid.identification.airdata_findings import KINEMATIC_MISMATCH_Z
+    from aerosid.identification.derivatives import zero_phase_low_pass
+    from aerosid.identification.vanes import kinematic_alpha_rate, kinematic_mismatch_z
+
+    t, alpha, sig = kinematic_flight(fs_hz=100.0, duration_s=30.0)
+    rng = np.random.default_rng(4)
+    band = 2.0
+    vane = zero_phase_low_pass(alpha + rng.normal(0.0, 0.0015, t.size), 100.0, band)
+    step = (t > 14.0) & (t < 15.5)
+    for q_shift, delay in ((0.0, 0.0), (0.03, 0.0), (0.0, 0.025)):
+        s = {k: zero_phase_low_pass(v, 100.0, band) if k != "V_m_s" else v  # the band path filters all alike
+             for k, v in {**sig, "q_rad_s": sig["q_rad_s"] + q_shift * step}.items()}
+        a = late(t, vane, delay) if delay else vane
+        rate, usable = kinematic_alpha_rate(t, a, **s)
+        z = kinematic_mismatch_z(t, a, rate, usable, band, delay_s=delay)
+        inside = (t > 14.3) & (t < 15.2)
+        outside = (t < 13.0) | (t > 16.5)
+        if q_shift:
+            assert np.nanmin(z[inside]) > 1.5 * KINEMATIC_MISMATCH_Z
+        else:
+            assert np.nanmax(z[inside]) < KINEMATIC_MISMATCH_Z / 2
+        assert np.nanmax(z[outside & (t > 1.5) & (t < 28.5)]) < KINEMATIC_MISMATCH_Z
