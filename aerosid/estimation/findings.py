@@ -29,7 +29,9 @@ regression (with a margin) and the rest of the segment is kept:
 
 The flight data add ``airdata_delay`` (reported): the vane alpha lags the IMU's kinematics
 by a sample or more (aerosid.identification.vanes); ``airspeed_scale`` (reported): the pitch
-kinematics put V_m_s beyond what a true airspeed gives (aerosid.identification.airdata_findings).
+kinematics put V_m_s beyond what a true airspeed gives (aerosid.identification.airdata_findings);
+``kinematic_mismatch`` (cut from every channel): the vane's rate and the flight-path kinematics'
+alpha-dot disagree for a moment -- a pitch-gyro or a_z step the filter followed as a manoeuvre.
 
 The preprocessing adds ``time_jitter``, ``frozen``, ``sentinel`` and ``out_of_range`` (segment
 "preprocess"): timestamps off the grid and sensor faults, whose samples it treats as missing
