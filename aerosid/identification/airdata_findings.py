@@ -95,7 +95,6 @@ def _timing_and_mismatch(signals: tuple, vehicle: Vehicle, band_hz: float, expla
     t = signals[0]
     none = np.zeros(len(t), bool)
     kin = None if vehicle.turbulent_air else kinematic_alpha_rate(*signals)
-
     pad = int(round(1.0 / (band_hz * float(np.median(np.diff(t)))))) if len(t) > 1 and band_hz > 0 else 0
 
     def without(mask):  # the delay's fit on the runs between the spans (one band period on each side)
@@ -104,7 +103,7 @@ def _timing_and_mismatch(signals: tuple, vehicle: Vehicle, band_hz: float, expla
 
     if kin is None:
         return without(none), [], none
-    first, hit = _kinematic_mismatch(t, signals[1], kin, band_hz, 0.0, 1.0, explained, segment)
+    _, hit = _kinematic_mismatch(t, signals[1], kin, band_hz, 0.0, 1.0, explained, segment)
     vd = without(hit)
     if vd is None or not vd.follows:
         return (without(none) if hit.any() else vd), [], none
