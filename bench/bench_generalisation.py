@@ -68,7 +68,6 @@ import tempfile
 import time
 import traceback
 import warnings
-from concurrent.futures import ProcessPoolExecutor
 from datetime import date
 from pathlib import Path
 
@@ -77,7 +76,7 @@ import pandas as pd
 
 sys.path.insert(0, str(Path(__file__).parent))
 from bench_accuracy import parse_seeds  # noqa: E402  (the seed-range syntax of the benches)
-from machine import cpu_model, loadavg  # noqa: E402  (bench/machine.py)
+from machine import cpu_model, loadavg, run_jobs  # noqa: E402  (bench/machine.py)
 import generalisation_avg as averaged  # noqa: E402  (the flight-averaged truth)
 
 COEFFICIENTS = {  # bench name -> truth / estimate name
@@ -374,11 +373,7 @@ def truth_only(args) -> None:
     seeds = set(parse_seeds(args.seeds))
     jobs = [(v, int(s)) for v, s in zip(df["vehicle"], df["seed"]) if v in vehicles and int(s) in seeds]
     t0 = time.perf_counter()
-    if args.jobs > 1:
-        with ProcessPoolExecutor(args.jobs) as pool:
-            results = list(pool.map(averaged.truth_only_job, jobs))
-    else:
-        results = [averaged.truth_only_job(j) for j in jobs]
+    results = run_jobs(averaged.truth_only_job, jobs, args.jobs)
     merged, bad = averaged.merge(df, results, list(COEFFICIENTS), BARRED, SILENT_SIGMA, SILENT_PCT)
     if bad:
         raise SystemExit("the at-trim truth recomputed differs from the CSV's (not the same simulation):\n"
@@ -418,11 +413,7 @@ def main() -> None:
     label = args.label or ("full" if len(seeds) >= 10 else "smoke")
     jobs = [(v, s, args.decimate) for v in vehicles for s in seeds]
     load0, t0 = loadavg(), time.perf_counter()
-    if args.jobs > 1:
-        with ProcessPoolExecutor(args.jobs) as pool:
-            rows = list(pool.map(one, jobs))
-    else:
-        rows = [one(j) for j in jobs]
+    rows = run_jobs(one, jobs, args.jobs)
     wall = time.perf_counter() - t0
     df = pd.DataFrame(rows)
     out = Path(__file__).parent / "results"

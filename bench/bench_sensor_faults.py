@@ -15,8 +15,9 @@ cut costs most):
 * ``ax``: +AX_JUMP_M_S2 on the axial accelerometer (feeds only C_A, which no default model fits);
 * ``q``: +Q_JUMP_RAD_S on the pitch gyro (feeds every channel).
 
-Per faulted run: *announced* -- a finding on the faulted sensor (gated, or a departure of the
-matching smoothed signal) overlapping the fault; *status* -- the run has findings (it does not
+Per faulted run: *announced* -- a finding on the faulted sensor (gated, a departure of the
+matching smoothed signal, or a kinematic_mismatch, whose channel ``q/az/alpha`` names it)
+overlapping the fault or within 0.5 s of it; *status* -- the run has findings (it does not
 print "ok"); *rows lost* -- flight-data rows against the clean run's; and per coefficient the
 shift from the clean run's estimate in the clean run's sigma.  A *silent* faulted run: nothing
 announced on that sensor and some barred coefficient moved by more than SILENT_SHIFT clean sigma.
@@ -31,7 +32,6 @@ import sys
 import tempfile
 import time
 import warnings
-from concurrent.futures import ProcessPoolExecutor
 from datetime import date
 from pathlib import Path
 
@@ -41,7 +41,7 @@ import pandas as pd
 sys.path.insert(0, str(Path(__file__).parent))
 from bench_accuracy import parse_seeds  # noqa: E402
 from bench_generalisation import BARRED, COEFFICIENTS, estimate_of, simulate, truth_of  # noqa: E402
-from machine import cpu_model, loadavg  # noqa: E402
+from machine import cpu_model, loadavg, run_jobs  # noqa: E402
 
 FAULT_S = 1.5
 AZ_JUMP_M_S2 = 2.0
@@ -54,7 +54,8 @@ DEFAULT_VEHICLES = "c172x,pa28,J3Cub,c182"
 
 
 def fault_span(telemetry: pd.DataFrame) -> tuple[float, float]:
-    """FAULT_S seconds centred on the largest |q - median q| (1 s running median first)."""
+    """FAULT_S seconds centred on the largest |q - median q| (q through a 9-sample running median
+    first, so a single noisy sample cannot place it)."""
     t = telemetry["t_s"].to_numpy(float)
     q = pd.Series(telemetry["q_rad_s"].to_numpy(float)).rolling(9, center=True, min_periods=1).median().to_numpy()
     k = int(np.nanargmax(np.abs(q - np.nanmedian(q))))
@@ -164,11 +165,7 @@ def main() -> None:
         ap.error(f"--faults: unknown {unknown}; choose from {', '.join(FAULTS)}")
     jobs = [(v, s, faults) for v in args.vehicles.split(",") for s in parse_seeds(args.seeds)]
     load0, start = loadavg(), time.perf_counter()
-    if args.jobs > 1:
-        with ProcessPoolExecutor(args.jobs) as ex:
-            results = list(ex.map(one, jobs))
-    else:
-        results = [one(j) for j in jobs]
+    results = run_jobs(one, jobs, args.jobs)
     df = pd.DataFrame([r for rows in results for r in rows])
     out = Path(__file__).parent / "results"
     df.to_csv(out / f"{args.out}_runs.csv", index=False)

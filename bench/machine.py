@@ -1,7 +1,8 @@
-"""What machine a benchmark ran on (recorded beside every result)."""
+"""What machine a benchmark ran on (recorded beside every result), and how its jobs share it."""
 from __future__ import annotations
 
 import platform
+from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 
@@ -20,3 +21,12 @@ def loadavg() -> str:
         return " ".join(Path("/proc/loadavg").read_text().split()[:3])
     except OSError:
         return "n/a"
+
+
+def run_jobs(fn, jobs: list, processes: int = 1) -> list:
+    """[fn(job) for job in jobs], in that order; in `processes` worker processes when more than one
+    (the machine is shared: the benches default to one)."""
+    if processes > 1:
+        with ProcessPoolExecutor(processes) as pool:
+            return list(pool.map(fn, jobs))
+    return [fn(j) for j in jobs]
