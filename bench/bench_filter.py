@@ -96,7 +96,8 @@ def main(argv=None) -> int:
                 used=np.empty((N, 6), bool), gated=np.empty((N, 6), bool), ckpt=np.empty((nseg, NP, NP)),
                 stats=np.zeros((5, 6)), innov=np.empty((N, 6)))
     Qc, qm = np.zeros((6, NP, NP)), np.ones((0, 6))  # stationary process noise
-    t_fwd, _ = _best(lambda: _fast.forward(zc, valid, x0p, P0p, model.params, Qp, Qc, qm, R, gate, True, np.ones(0, np.bool_), seg,
+    t_fwd, _ = _best(lambda: _fast.forward(zc, valid, x0p, P0p, model.params, Qp, Qc, qm, R, gate, True, np.ones(0, np.bool_),
+                                           np.zeros(6, np.int64), seg,
                                            bufs["xf"], bufs["sf"], bufs["nis"], bufs["dof"], bufs["used"],
                                            bufs["gated"], bufs["ckpt"], bufs["stats"], bufs["innov"]))
 

@@ -66,12 +66,14 @@ def _step_q(Qd, Qc, qm, k, Qk):
 
 
 @njit(cache=True)
-def forward(z, cand, x0, P0, prm, Qd, Qc, qm, rdiag, gate_thr, do_gate, gate_on, seg,
+def forward(z, cand, x0, P0, prm, Qd, Qc, qm, rdiag, gate_thr, do_gate, gate_on, hold, seg,
             xf, sf, nis, dof, used, gated, ckpt, stats, innov):
     """Forward EKF over all samples.  x0 (24,), P0, Qd (24,24) padded; Qc (6,24,24) the
     chains' shares of Qd and qm (N,6) their multipliers on the transition into sample k
     (time-varying process noise, :func:`_step_q`; all ones or no rows: Qd itself); gate_on (N,)
-    bool, the samples where the gate applies when do_gate (no rows: everywhere).  Writes xf, sf
+    bool, the samples where the gate applies when do_gate (no rows: everywhere); hold (6,)
+    int: after this many consecutive gated samples a channel is taken once without its gate
+    (0: never; :func:`aerosid.estimation.ekf.gate_thresholds`).  Writes xf, sf
     (N,21) (filtered state and sigma), nis (NaN if no update), dof, used, gated,
     innov (N,6) the standardised conditional innovation squared v^2/s of every channel
     tested, used or gated (NaN if not a candidate), stats[4] (per-channel sum of v^2/s)
@@ -99,6 +101,8 @@ def forward(z, cand, x0, P0, prm, Qd, Qc, qm, rdiag, gate_thr, do_gate, gate_on,
     us = np.zeros(NM, dtype=np.bool_)
     gs = np.zeros(NM, dtype=np.bool_)
     Qk = np.empty((NP, NP))
+    thr_k = np.empty(NM)
+    runs = np.zeros(NM, dtype=np.int64)
     bad = 0
     for k in range(N):
         if k > 0:
@@ -112,12 +116,18 @@ def forward(z, cand, x0, P0, prm, Qd, Qc, qm, rdiag, gate_thr, do_gate, gate_on,
             Pn = tmpP
         _measure(x, prm, hx, H)
         gate_k = do_gate and (gate_on.shape[0] == 0 or gate_on[k])
-        nk, dk = _update(x, P, z[k], cand[k], rdiag, gate_thr, gate_k, hx, H, K, v, s, us, gs, u, dx)
+        for j in range(NM):
+            thr_k[j] = np.inf if (hold[j] > 0 and runs[j] >= hold[j]) else gate_thr
+        nk, dk = _update(x, P, z[k], cand[k], rdiag, thr_k, gate_k, hx, H, K, v, s, us, gs, u, dx)
         nis[k] = nk if dk > 0 else np.nan
         dof[k] = dk
         for j in range(NM):
             used[k, j] = us[j]
             gated[k, j] = gs[j]
+            if gs[j]:
+                runs[j] += 1
+            elif us[j]:
+                runs[j] = 0
             innov[k, j] = v[j] * v[j] / s[j] if (us[j] or gs[j]) else np.nan
             if us[j]:
                 stats[4, j] += v[j] * v[j] / s[j]
@@ -182,6 +192,7 @@ def backward(z, used, x0, P0, prm, Qd, Qc, qm, rdiag, seg, xf, ckpt,
     nz = np.empty(7, dtype=np.int64)
     us = np.zeros(NM, dtype=np.bool_)
     gs = np.zeros(NM, dtype=np.bool_)
+    no_gate = np.zeros(NM)  # the replay takes the forward pass's decisions (used[k]): no gate
     inz = np.zeros(NP, dtype=np.bool_)
     Jr = np.zeros((3, NP))
     y = np.empty(NP)
@@ -216,7 +227,7 @@ def backward(z, used, x0, P0, prm, Qd, Qc, qm, rdiag, seg, xf, ckpt,
                     for b in range(NP):
                         Pi[a, b] = P[a, b]
             _measure(x, prm, hx, Hb[i])
-            _update(x, Pi, z[k], used[k], rdiag, 0.0, False, hx, Hb[i], Kb[i], vb[i], sb[i], us, gs, u, dx)
+            _update(x, Pi, z[k], used[k], rdiag, no_gate, False, hx, Hb[i], Kb[i], vb[i], sb[i], us, gs, u, dx)
         # ---- backward sweep over the segment
         for k in range(k1 - 1, k0 - 1, -1):
             i = k - k0
@@ -352,11 +363,11 @@ def backward(z, used, x0, P0, prm, Qd, Qc, qm, rdiag, seg, xf, ckpt,
 
 
 @njit(cache=True)
-def run(z, cand, x0, P0, prm, Qd, Qc, qm, rdiag, gate_thr, do_gate, gate_on, seg,
+def run(z, cand, x0, P0, prm, Qd, Qc, qm, rdiag, gate_thr, do_gate, gate_on, hold, seg,
         xf, sf, nis, dof, used, gated, ckpt,
         xs, ss, nis_s, aa, aa_sig, stats, Pb, Kb, Hb, vb, sb, Fb, innov):
     """forward() then backward(); returns forward()'s count of bad variances."""
-    bad = forward(z, cand, x0, P0, prm, Qd, Qc, qm, rdiag, gate_thr, do_gate, gate_on, seg,
+    bad = forward(z, cand, x0, P0, prm, Qd, Qc, qm, rdiag, gate_thr, do_gate, gate_on, hold, seg,
                   xf, sf, nis, dof, used, gated, ckpt, stats, innov)
     backward(z, used, x0, P0, prm, Qd, Qc, qm, rdiag, seg, xf, ckpt,
              xs, ss, nis_s, aa, aa_sig, stats, Pb, Kb, Hb, vb, sb, Fb)

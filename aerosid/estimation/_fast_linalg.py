@@ -224,7 +224,8 @@ def _update(x, P, zk, cand, rdiag, gate_thr, do_gate, hx, H, K, v, s, used, gate
 
     H (6,24) holds the Jacobian at the prior x (from _measure), hx = h(x).  K (6,24),
     v (6,), s (6,) receive gain, conditional innovation and its variance of each
-    used channel; used/gated (6,) bool are written.
+    used channel; used/gated (6,) bool are written.  gate_thr (6,): each channel's
+    chi-square(1) limit when do_gate (inf: that channel is not gated).
     """
     for i in range(NP):
         dx[i] = 0.0
@@ -266,7 +267,7 @@ def _update(x, P, zk, cand, rdiag, gate_thr, do_gate, hx, H, K, v, s, used, gate
                         + (h4 * P4[b] + h5 * P5[b] + h6 * P6[b]))
             sj = rdiag[j] + ((h0 * u[0] + h1 * u[1] + h2 * u[2])
                              + (h3 * u[ca] + h4 * u[12] + h5 * u[15] + h6 * u[18]))
-        if do_gate and vj * vj > gate_thr * sj:
+        if do_gate and vj * vj > gate_thr[j] * sj:
             gated[j] = True
             v[j] = vj  # the rejected innovation, for the caller's diagnostics (not used again)
             s[j] = sj

@@ -65,13 +65,13 @@ class FilterBreakdown(ArithmeticError):
 
 def run_filter_smoother(z, cand, x0, P0, model: PlantModel, Qd, R_diag, gate_threshold=np.inf,
                         use_numba: bool = True, segment_length: int = 64, q_local=None,
-                        q_shares=None, gate_off=None) -> CoreRun:
+                        q_shares=None, gate_off=None, gate_hold=None) -> CoreRun:
     """One EKF + MBF pass (_run_filter_smoother); a numerical breakdown of the covariance
     raises FilterBreakdown naming the sample interval, not the kernel's bare ZeroDivisionError
     (c182 thinned to 5 Hz: "division by zero")."""
     try:
         return _run_filter_smoother(z, cand, x0, P0, model, Qd, R_diag, gate_threshold, use_numba, segment_length,
-                                    q_local, q_shares, gate_off)
+                                    q_local, q_shares, gate_off, gate_hold)
     except (ZeroDivisionError, np.linalg.LinAlgError) as exc:
         coarse = (f" A record sampled below {1 / COARSE_DT_S:g} Hz gives the filter few samples per period of the "
                   "vehicle's motion; a faster record may run." if model.dt_s > COARSE_DT_S else "")
@@ -82,12 +82,14 @@ def run_filter_smoother(z, cand, x0, P0, model: PlantModel, Qd, R_diag, gate_thr
 
 def _run_filter_smoother(z, cand, x0, P0, model: PlantModel, Qd, R_diag, gate_threshold=np.inf,
                          use_numba: bool = True, segment_length: int = 64, q_local=None,
-                         q_shares=None, gate_off=None) -> CoreRun:
+                         q_shares=None, gate_off=None, gate_hold=None) -> CoreRun:
     """One EKF + MBF pass.  z (N,6), cand (N,6) bool (channels allowed), x0/P0 prior at
     sample 0, Qd (21,21), R_diag (6,), gate_threshold (chi2(1) per channel, inf = off);
     q_local (N,6) chain multipliers per transition with q_shares (6,21,21) the chains'
     shares of Qd (:func:`chain_shares`), or None: stationary (module doc); gate_off (N,)
-    bool: samples where the gate is lifted (None: nowhere)."""
+    bool: samples where the gate is lifted (None: nowhere); gate_hold (6,) int: the most
+    consecutive samples a channel is gated before it is taken once without its gate (0 or
+    None: no limit; :func:`aerosid.estimation.ekf.run_reference`)."""
     z = np.ascontiguousarray(z, dtype=np.float64)
     cand = np.ascontiguousarray(cand, dtype=np.bool_) & np.isfinite(z)
     zz = np.where(cand, z, 0.0)
@@ -103,10 +105,13 @@ def _run_filter_smoother(z, cand, x0, P0, model: PlantModel, Qd, R_diag, gate_th
     lifted = None if gate_off is None else np.ascontiguousarray(gate_off, dtype=np.bool_)
     if lifted is not None and lifted.shape != (N,):
         raise ValueError(f"gate_off must be ({N},) bool; got shape {lifted.shape}")
+    hold = np.zeros(N_MEAS, np.int64) if gate_hold is None else np.ascontiguousarray(gate_hold, dtype=np.int64)
+    if hold.shape != (N_MEAS,) or np.any(hold < 0):
+        raise ValueError(f"gate_hold must be ({N_MEAS},) non-negative integers; got {gate_hold!r}")
     if not use_numba:
         Qk = Qd + np.einsum("kc,cij->kij", qm - 1.0, Qc) if local else Qd
         thr = gate_threshold if lifted is None else np.where(lifted, np.inf, gate_threshold)
-        return _core_from_reference(run_reference(zz, cand, x0, P0, model, Qk, R_diag, thr),
+        return _core_from_reference(run_reference(zz, cand, x0, P0, model, Qk, R_diag, thr, hold),
                                     zz, model, R_diag)
     seg = int(segment_length)
     nseg = (N + seg - 1) // seg
@@ -144,7 +149,7 @@ def _run_filter_smoother(z, cand, x0, P0, model: PlantModel, Qd, R_diag, gate_th
     do_gate = bool(np.isfinite(thr))
     bad = _fast.run(zz, cand, x0p, P0p, model.params, Qdp, Qcp, qk, R_diag,
                     thr if do_gate else 0.0, do_gate,
-                    np.ones(0, np.bool_) if lifted is None else ~lifted, seg, xf, sf, nis, dof, used, gated, ckpt,
+                    np.ones(0, np.bool_) if lifted is None else ~lifted, hold, seg, xf, sf, nis, dof, used, gated, ckpt,
                     xs, ss, nis_s, aa, aas, stats, Pb, Kb, Hb, vb, sb, Fb, innov)
     with np.errstate(invalid="ignore", divide="ignore"):
         em_R = (stats[0] + stats[1]) / stats[2]

@@ -18,7 +18,9 @@ whitened innovation).  A channel with e_j^2 / s_j > gate_threshold is flagged
 and not used; it does not disturb the test of the channels after it.
 Under a correct model each statistic is chi-square with 1 dof, so the default
 threshold chi2.isf(1e-6, 1) = 23.9 (4.9 sigma) flags about one good channel-sample
-in 10^6.
+in 10^6.  A gate can hold a channel out for a limited number of consecutive samples
+(``gate_hold``); the next sample of that channel is taken without the test (see
+:class:`aerosid.estimation.pipeline.EBMOptions`, gyro_gate_hold_s, for why).
 """
 from __future__ import annotations
 
@@ -76,9 +78,11 @@ def ekf_predict(x: np.ndarray, P: np.ndarray, model: PlantModel, Qd: np.ndarray)
 def gate_channels(v: np.ndarray, S: np.ndarray, candidates: np.ndarray, threshold: float):
     """Sequential conditional innovation gate (module doc).
 
-    v (6,), S (6,6) full-vector innovation and covariance; candidates (6,) bool.
+    v (6,), S (6,6) full-vector innovation and covariance; candidates (6,) bool;
+    threshold a number or (6,) per channel (inf: that channel is not gated).
     Returns (accepted (6,) bool, gated (6,) bool).
     """
+    thr = np.broadcast_to(np.asarray(threshold, dtype=float), (N_MEAS,))
     accepted = np.zeros(N_MEAS, dtype=bool)
     gated = np.zeros(N_MEAS, dtype=bool)
     acc_idx: list[int] = []
@@ -88,7 +92,7 @@ def gate_channels(v: np.ndarray, S: np.ndarray, candidates: np.ndarray, threshol
         idx = acc_idx + [j]
         Lc = cholesky(S[np.ix_(idx, idx)], lower=True)
         e = solve_triangular(Lc, v[idx], lower=True)
-        if np.isfinite(threshold) and e[-1] ** 2 > threshold:
+        if np.isfinite(thr[j]) and e[-1] ** 2 > thr[j]:
             gated[j] = True
         else:
             accepted[j] = True
@@ -97,13 +101,13 @@ def gate_channels(v: np.ndarray, S: np.ndarray, candidates: np.ndarray, threshol
 
 
 def ekf_update(x: np.ndarray, P: np.ndarray, z: np.ndarray, valid: np.ndarray,
-               model: PlantModel, R_diag: np.ndarray, gate_threshold: float = np.inf) -> EKFUpdate:
+               model: PlantModel, R_diag: np.ndarray, gate_threshold=np.inf) -> EKFUpdate:
     """Measurement update with the valid, non-gated channels.
 
     z (6,): measurements ax, ay, az [m/s^2], p, q, r [rad/s]; valid (6,) bool
     (a NaN measurement counts as invalid); R_diag (6,): noise variances
-    [(m/s^2)^2, (rad/s)^2]; gate_threshold: per-channel chi-square(1) limit
-    (np.inf = no gate).  Joseph form, K from a Cholesky solve (never inv(S)).
+    [(m/s^2)^2, (rad/s)^2]; gate_threshold: chi-square(1) limit, one for every channel
+    or (6,) per channel (np.inf = no gate).  Joseph form, K from a Cholesky solve (never inv(S)).
     """
     z = np.asarray(z, dtype=float)
     cand = np.asarray(valid, dtype=bool) & np.isfinite(z)
@@ -232,12 +236,15 @@ class ReferenceRun:
                 f"{np.nanmean(self.nis_filter):.3f}, smoother {np.nanmean(self.nis_smoother):.3f}")
 
 
-def run_reference(z, valid, x0, P0, model: PlantModel, Qd, R_diag, gate_threshold=np.inf) -> ReferenceRun:
+def run_reference(z, valid, x0, P0, model: PlantModel, Qd, R_diag, gate_threshold=np.inf,
+                  gate_hold=None) -> ReferenceRun:
     """Filter + MBF smoother over all samples with the numpy functions above.
 
     x0, P0 are the prior at sample 0 (x(0|-1), P(0|-1)); Qd (21,21), or (N,21,21) for a
     time-varying process noise (Qd[k]: the transition into sample k); gate_threshold a number
-    or (N,) per sample (inf: no gate there).  Smoother NIS at k is
+    or (N,) per sample (inf: no gate there); gate_hold (6,) int or None: after this many
+    consecutive gated samples a channel's next sample is taken without the gate (0: no
+    limit; module doc).  Smoother NIS at k is
     sum_j e_j^2 / Var(e_j) with e = z - h(x(k|N)) and Var(e) = diag(R D R)
     (see :class:`aerosid.estimation.pipeline.EBMResult`).
     """
@@ -252,17 +259,20 @@ def run_reference(z, valid, x0, P0, model: PlantModel, Qd, R_diag, gate_threshol
     used = np.zeros((N, N_MEAS), dtype=bool)
     gated = np.zeros((N, N_MEAS), dtype=bool)
     ups = []
+    hold = np.zeros(N_MEAS, int) if gate_hold is None else np.asarray(gate_hold, int)
+    runs = np.zeros(N_MEAS, int)  # consecutive gated samples per channel
     x, P = np.asarray(x0, float).copy(), np.asarray(P0, float).copy()
     for k in range(N):
         if k > 0:
             x, P, Phi[k] = ekf_predict(x, P, model, Qd[k] if np.ndim(Qd) == 3 else Qd)
-        up = ekf_update(x, P, z[k], valid[k], model, R_diag,
-                        gate_threshold[k] if np.ndim(gate_threshold) else gate_threshold)
+        thr = gate_threshold[k] if np.ndim(gate_threshold) else gate_threshold
+        up = ekf_update(x, P, z[k], valid[k], model, R_diag, np.where((hold > 0) & (runs >= hold), np.inf, thr))
         ups.append(up)
         x, P = up.x, up.P
         xf[k], Pf[k] = x, P
         nis[k], dof[k] = up.nis, up.dof
         used[k], gated[k] = up.used, up.gated
+        runs = np.where(up.gated, runs + 1, np.where(up.used, 0, runs))
     sm = mbf_smooth(xf, Pf, Phi, [u.H if u.dof else None for u in ups], [u.v for u in ups],
                     [u.S for u in ups], [u.K for u in ups])
     nis_s = np.full(N, np.nan)

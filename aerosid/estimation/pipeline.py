@@ -67,7 +67,17 @@ class EBMOptions:
     attenuated (on seed-rlv: M1 gain 0.93, L1 0.73-0.84, biasing C_m and C_l
     slopes by -5 % and -20 %).  A vehicle file may set its own (seed-rlv:
     (1, 1, 1, 1000, 3, 3), calibrated on simulated flights, docs/estimation.md);
-    q_scale, r_scale: initial scalings (r_scale: one factor or one per channel).
+    q_scale, r_scale: initial scalings (r_scale: one factor or one per channel);
+    gyro_gate_hold_s [s]: the longest run of consecutive samples the gate may hold a
+    gyro (p, q, r) out; the next sample is taken without the test (None: no limit).
+    A gyro measures its state directly and nothing else in the plant does: gated, the
+    rate is the moment chain's extrapolation, the accelerometers' lever-arm terms pull
+    that chain along, and within tenths of a second in a manoeuvre the state has left
+    for good (unseen pa28 seed 0, a +0.03 rad/s pitch-gyro step at q = 0.16 rad/s: M1 to
+    5 rad/s^2, q to 1.45 rad/s 0.34 s after the gate shut, q then gated to the end of
+    the flight, a_x and p after it, the segment lost).  The gate stays for spikes; a gyro
+    step the filter then follows is the kinematic_mismatch finding's to report
+    (aerosid.identification.airdata_findings).
     """
 
     f_max_hz: float = 4.0
@@ -87,6 +97,7 @@ class EBMOptions:
     q_chain_scale: tuple = (1.0, 1.0, 1.0, 1.0, 1.0, 1.0)
     q_scale: float = 1.0
     r_scale: float = 1.0
+    gyro_gate_hold_s: float | None = 0.1
 
 
 @dataclass(frozen=True)
@@ -329,6 +340,8 @@ def smooth_flight(t_s, z, valid, inertia_kg_m2, sensor_offset_m, z_filled=None,
     x0, P0, _ = initial_state(t_s, z, cand, model, sig_disp, l3_var=ms3)
 
     gate = chi2.isf(opt.gate_probability, 1) if opt.gate_probability else np.inf
+    n_hold = 0 if opt.gyro_gate_hold_s is None else max(1, int(round(opt.gyro_gate_hold_s / dt)))
+    hold = np.array([0, 0, 0, n_hold, n_hold, n_hold], np.int64)  # accelerometers: no limit
     q_scale = float(opt.q_scale)
     r_fac = np.broadcast_to(np.asarray(opt.r_scale, dtype=float), (N_MEAS,)).copy()  # one, or per channel
     history = []
@@ -339,7 +352,7 @@ def smooth_flight(t_s, z, valid, inertia_kg_m2, sensor_offset_m, z_filled=None,
         Qd = discrete_process_noise(q_chain0 * qs, model)
         shares = None if q_local is None else chain_shares(q_chain0 * qs, model)
         return run_filter_smoother(z, cand, x0, P0, model, Qd, R0 * rf, gate, opt.use_numba,
-                                   opt.segment_length, q_local, shares, gate_off), Qd
+                                   opt.segment_length, q_local, shares, gate_off, hold), Qd
 
     n_iter = max(1, int(opt.max_tuning_iterations)) if opt.auto_tune else 1
     good = None  # the last iteration whose smoother output is finite

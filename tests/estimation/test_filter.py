@@ -213,6 +213,61 @@ def test_gate_flags_outliers_and_flagged_samples_are_not_used(problem):
     assert abs(nog.x_filter[250, 3] - sf.x_true[250, 3]) > 3 * abs(run.x_filter[250, 3] - sf.x_true[250, 3])
 
 
+def _longest_run(flags):
+    best = n = 0
+    for f in flags:
+        n = n + 1 if f else 0
+        best = max(best, n)
+    return best
+
+
+@pytest.fixture(scope="module")
+def gyro_step(short_flight):
+    """The short flight with a +40 sigma (1.4 rad/s) step on the q gyro over samples 150..249."""
+    sf = short_flight
+    z = sf.z.copy()
+    z[150:250, 4] += 40 * np.sqrt(R_DIAG[4])
+    x0 = sf.x_true[0] + 0.01
+    P0 = np.diag(np.r_[[1e-3] * 3, [1.0, 10.0, 100.0] * 3, [0.1, 1.0, 10.0] * 3])
+    return sf, z, np.ones_like(z, bool), discrete_process_noise(Q_CHAIN, sf.model), x0, P0
+
+
+def test_a_gyro_gated_without_a_limit_locks_the_filter_out_and_a_hold_lets_it_back(gyro_step):
+    """Gated, the q gyro's state is the M chain's extrapolation: it runs off and the gate then
+    rejects q for good, to the end of the record.  With gate_hold, q is gated for at most
+    that many samples in a row, taken once, and the filter follows the measurement again."""
+    sf, z, valid, Qd, x0, P0 = gyro_step
+    q_true = sf.x_true[:, 1]
+    free = run_filter_smoother(z, valid, x0, P0, sf.model, Qd, R_DIAG, 23.93)
+    assert free.gated[-1, 4] and free.gated[150:, 4].mean() > 0.95        # locked out to the end
+    assert np.max(np.abs(free.x_smooth[260:, 1] - q_true[260:])) > 10.0  # the state has run off
+    held = run_filter_smoother(z, valid, x0, P0, sf.model, Qd, R_DIAG, 23.93, gate_hold=[0, 0, 0, 5, 5, 5])
+    assert _longest_run(held.gated[:, 4]) == 5 and not held.gated[300:, 4].any()
+    assert np.max(np.abs(held.x_smooth[260:, 1] - q_true[260:])) < 20 * np.sqrt(R_DIAG[4])
+    # the hold is per channel: an a_z step is rejected for longer than a gyro hold allows
+    za = z.copy()
+    za[:, 4] = sf.z[:, 4]
+    za[150:250, 2] += 30 * np.sqrt(R_DIAG[2])
+    acc = run_filter_smoother(za, valid, x0, P0, sf.model, Qd, R_DIAG, 23.93, gate_hold=[0, 0, 0, 5, 5, 5])
+    assert _longest_run(acc.gated[:, 2]) > 20
+    acc = run_filter_smoother(za, valid, x0, P0, sf.model, Qd, R_DIAG, 23.93, gate_hold=[5] * 6)
+    assert _longest_run(acc.gated[:, 2]) == 5
+
+
+def test_the_gate_hold_compiled_equals_the_reference(gyro_step):
+    sf, z, valid, Qd, x0, P0 = gyro_step
+    hold = [0, 0, 0, 5, 5, 5]
+    a = run_filter_smoother(z, valid, x0, P0, sf.model, Qd, R_DIAG, 23.93, segment_length=16, gate_hold=hold)
+    b = run_filter_smoother(z, valid, x0, P0, sf.model, Qd, R_DIAG, 23.93, use_numba=False, gate_hold=hold)
+    assert a.gated[:, 4].sum() > 5
+    np.testing.assert_array_equal(a.gated, b.gated)
+    np.testing.assert_array_equal(a.used, b.used)
+    for f in ("x_filter", "sigma_filter", "x_smooth", "sigma_smooth"):
+        assert col_rel_err(getattr(a, f), getattr(b, f)) < 1e-8, f
+    with pytest.raises(ValueError, match="gate_hold"):
+        run_filter_smoother(z, valid, x0, P0, sf.model, Qd, R_DIAG, 23.93, gate_hold=[5, 5])
+
+
 def test_smoothed_sigma_not_above_filtered_and_segment_length_invariance(problem):
     sf, z, valid, Qd, x0, P0 = problem
     a = run_filter_smoother(z, valid, x0, P0, sf.model, Qd, R_DIAG, 23.93, segment_length=64)

@@ -12,6 +12,7 @@ from aerosid.estimation.findings import smoother_findings
 from aerosid.estimation.init import initial_state
 from aerosid.estimation.local_q import channels_out, classify, controls_moving
 from aerosid.estimation.model import IX_ACC, IX_ANG, N_STATE, PlantModel, measure_many, rate_rhs
+from aerosid.estimation.pipeline import EBMOptions
 from aerosid.estimation.synthetic import RLV_INERTIA, RLV_OFFSET, SEED_NOISE_SIGMA
 
 Q_CHAIN = np.array([4e5, 4e5, 8e5, 2e4, 2e4, 2e4])
@@ -63,7 +64,7 @@ def test_kernel_with_ones_on_every_step_equals_no_rows(flight):
                 np.empty((seg, NP, NP)), np.zeros((seg, 6, NP)), np.zeros((seg, 6, NP)), np.zeros((seg, 6)),
                 np.ones((seg, 6)), np.zeros((seg, 3, 12)), np.empty((N, 6))]
         _fast.run(np.ascontiguousarray(z), valid, x0p, P0p, flight.model.params, Qdp, Qc, qm, R_DIAG, 23.93, True,
-                  np.ones(0, np.bool_), seg, *bufs)
+                  np.ones(0, np.bool_), np.zeros(6, np.int64), seg, *bufs)
         outs.append(bufs)
     for i in (0, 1, 2, 3, 4, 5, 7, 8, 9, 10, 11, 12, 19):  # the outputs (not checkpoints, work buffers)
         np.testing.assert_array_equal(outs[0][i], outs[1][i], err_msg=str(i))
@@ -140,9 +141,9 @@ def _burst_flight(a_n=8.0, a_y=8.0, az_step=0.0, seed=1):
     return t, z, x, 0.1 * burst(t)[:, None]
 
 
-def _smooth(t, z, rudder, local_q):
+def _smooth(t, z, rudder, local_q, options=None):
     return smooth_flight_adaptive(t, z, np.ones_like(z, bool), RLV_INERTIA, RLV_OFFSET, controls=rudder,
-                                  local_q=local_q)
+                                  local_q=local_q, options=options)
 
 
 @pytest.fixture(scope="module")
@@ -153,7 +154,10 @@ def burst():
 def test_a_short_sharp_manoeuvre_is_gated_without_the_local_q_and_followed_with_it(burst):
     t, z, x, rudder = burst
     near = (t > BURST_T - 1.5) & (t < BURST_T + 1.5)
-    stat = _smooth(t, z, rudder, local_q=False)
+    # the stationary filter with a gate that may hold the r gyro out for as long as it rejects it
+    # (with the default gyro_gate_hold_s, r is taken again after 0.1 s and the filter catches up:
+    # the side force's error is then 0.34, the local raise's 0.37, but the burst is still condemned)
+    stat = _smooth(t, z, rudder, local_q=False, options=EBMOptions(gyro_gate_hold_s=None))
     assert stat.result.gate_flags[near][:, [1, 5]].any()  # ay / r rejected at the burst ...
     assert not stat.result.gate_flags[~near].any()        # ... and only there
     assert len(stat.result.divergence_samples) > 0
