@@ -2,7 +2,7 @@
 themselves, and cost only what they touch").
 
     python bench/bench_sensor_faults.py [--vehicles c172x,pa28,J3Cub,c182] [--seeds 0-1] [--jobs 2]
-        [--out sensor_faults]
+        [--out sensor_faults] [--decimate K]
     -> bench/results/<out>.md and bench/results/<out>_runs.csv
 
 The findings' own tests inject faults into seed-rlv's flight.  Here each flight of the
@@ -21,10 +21,12 @@ overlapping the fault or within 0.5 s of it; *status* -- the run has findings (i
 print "ok"); *rows lost* -- flight-data rows against the clean run's; and per coefficient the
 shift from the clean run's estimate in the clean run's sigma.  A *silent* faulted run: nothing
 announced on that sensor and some barred coefficient moved by more than SILENT_SHIFT clean sigma.
+--decimate K: the flights logged at 100/K Hz (every K-th sample), the faults injected after.
 """
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import math
 import os
 import platform
@@ -40,7 +42,7 @@ import pandas as pd
 
 sys.path.insert(0, str(Path(__file__).parent))
 from bench_accuracy import parse_seeds  # noqa: E402
-from bench_generalisation import BARRED, COEFFICIENTS, estimate_of, simulate, truth_of  # noqa: E402
+from bench_generalisation import BARRED, COEFFICIENTS, decimated, estimate_of, simulate, truth_of  # noqa: E402
 from machine import cpu_model, loadavg, run_jobs  # noqa: E402
 
 FAULT_S = 1.5
@@ -75,10 +77,12 @@ def _run(telemetry, vehicle):
 
 
 def one(job: tuple) -> list[dict]:
-    vehicle_name, seed, faults = job
+    vehicle_name, seed, faults, factor = job
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         flight, vehicle = simulate(vehicle_name, seed, Path(tmp))
+    if factor > 1:  # logged at 1/factor of the rate (bench_generalisation.decimated), faulted after
+        flight = dataclasses.replace(flight, telemetry=decimated(flight.telemetry, factor))
     clean = _run(flight.telemetry, vehicle)
     base = _estimates(clean)
     t0, t1 = fault_span(flight.telemetry)
@@ -132,7 +136,8 @@ def report(df: pd.DataFrame, args, load, wall_s: float) -> str:
              f"load average {load[0]} (start) / {load[1]} (end); {args.jobs} process(es), wall time "
              f"{wall_s / 60:.1f} min.", "",
              f"`python bench/bench_sensor_faults.py --vehicles {args.vehicles} --seeds {args.seeds} "
-             f"--faults {args.faults} --jobs {args.jobs} --out {args.out}`", "",
+             f"--faults {args.faults} --jobs {args.jobs} --out {args.out}"
+             + (f" --decimate {args.decimate}" if args.decimate > 1 else "") + "`", "",
              f"Definitions: bench/bench_sensor_faults.py (docstring). Faults: a bias jump for {FAULT_S:g} s centred on "
              f"the largest pitch rate: a_z +{AZ_JUMP_M_S2:g} m/s^2, a_x +{AX_JUMP_M_S2:g} m/s^2, q "
              f"+{Q_JUMP_RAD_S:g} rad/s. Shift: (faulted - clean estimate) / clean sigma.", "",
@@ -158,12 +163,13 @@ def main() -> None:
     ap.add_argument("--jobs", type=int, default=1)
     ap.add_argument("--faults", default=",".join(FAULTS), help=f"comma-separated of {', '.join(FAULTS)}")
     ap.add_argument("--out", default="sensor_faults")
+    ap.add_argument("--decimate", type=int, default=1, help="log every K-th sample (100 Hz / K)")
     args = ap.parse_args()
     faults = tuple(args.faults.split(","))
     unknown = [f for f in faults if f not in FAULTS]
     if unknown:
         ap.error(f"--faults: unknown {unknown}; choose from {', '.join(FAULTS)}")
-    jobs = [(v, s, faults) for v in args.vehicles.split(",") for s in parse_seeds(args.seeds)]
+    jobs = [(v, s, faults, args.decimate) for v in args.vehicles.split(",") for s in parse_seeds(args.seeds)]
     load0, start = loadavg(), time.perf_counter()
     results = run_jobs(one, jobs, args.jobs)
     df = pd.DataFrame([r for rows in results for r in rows])

@@ -144,6 +144,7 @@ TABLES: dict[str, dict[str, Key] | None] = {
         "divergence_max_fraction": Key("number", 0.0, 1.0, positive=True),
         "q_scale_bounds": vec(2, 0.0, 1e9, positive=True), "q_chain_scale": vec(6, 0.0, 1e9, positive=True),
         "q_scale": pos(1e9), "r_scale": pos(1e9), "band_hz": pos(1e4),
+        "gyro_gate_hold_s": pos(1e4, "the longest run of samples the innovation gate may hold a gyro out [s]"),
         "pitch_damping_split": Key("switch", -10.0, 10.0, length=2,
                                    doc="[centre, 1-sigma] of C_m,alpha_dot / (C_m,q + C_m,alpha_dot); false: no prior"),
         "turbulent_air": Key("bool", doc="the flight was flown in turbulent air: instrumental-variable fit, the "
