@@ -73,7 +73,7 @@ def forward(z, cand, x0, P0, prm, Qd, Qc, qm, rdiag, gate_thr, do_gate, gate_on,
     (time-varying process noise, :func:`_step_q`; all ones or no rows: Qd itself); gate_on (N,)
     bool, the samples where the gate applies when do_gate (no rows: everywhere); hold (6,)
     int: after this many consecutive gated samples a channel is taken once without its gate
-    (0: never; :func:`aerosid.estimation.ekf.gate_thresholds`).  Writes xf, sf
+    (0: never; :func:`aerosid.estimation.ekf.run_reference`).  Writes xf, sf
     (N,21) (filtered state and sigma), nis (NaN if no update), dof, used, gated,
     innov (N,6) the standardised conditional innovation squared v^2/s of every channel
     tested, used or gated (NaN if not a candidate), stats[4] (per-channel sum of v^2/s)
