@@ -61,14 +61,11 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import math
-import os
-import platform
 import sys
 import tempfile
 import time
 import traceback
 import warnings
-from datetime import date
 from pathlib import Path
 
 import numpy as np
@@ -76,7 +73,7 @@ import pandas as pd
 
 sys.path.insert(0, str(Path(__file__).parent))
 from bench_accuracy import parse_seeds  # noqa: E402  (the seed-range syntax of the benches)
-from machine import cpu_model, loadavg, run_jobs  # noqa: E402  (bench/machine.py)
+from machine import loadavg, run_jobs, run_line  # noqa: E402  (bench/machine.py)
 import generalisation_avg as averaged  # noqa: E402  (the flight-averaged truth)
 
 COEFFICIENTS = {  # bench name -> truth / estimate name
@@ -242,9 +239,7 @@ def one(job: tuple) -> dict:
 
 def report(df: pd.DataFrame, seeds: list[int], label: str, load: tuple[str, str], jobs: int, wall_s: float) -> str:
     lines = [f"# Generalisation bench ({label}): {len(seeds)} seed(s) per vehicle, default settings", "",
-             f"{date.today()}, Python {platform.python_version()}, machine: {cpu_model()}, {os.cpu_count()} cores, "
-             f"load average {load[0]} (start) / {load[1]} (end); {jobs} process(es), wall time {wall_s / 60:.1f} min; "
-             f"seeds {seeds[0]}..{seeds[-1]}.", "",
+             run_line(load, jobs, wall_s) + f"; seeds {seeds[0]}..{seeds[-1]}.", "",
              "Flights and definitions: bench/bench_generalisation.py (docstring).  Errors in % of the truth "
              "(mean / RMS / worst over the completed runs); coverage = share of ALL runs whose 95 % interval (1.96 "
              "reported sigma) holds the truth; oracle = the default model fitted to the noise-free truth (the best "

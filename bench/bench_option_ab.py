@@ -18,13 +18,10 @@ from __future__ import annotations
 import argparse
 import json
 import math
-import os
-import platform
 import sys
 import tempfile
 import time
 import warnings
-from datetime import date
 from pathlib import Path
 
 import pandas as pd
@@ -32,7 +29,7 @@ import pandas as pd
 sys.path.insert(0, str(Path(__file__).parent))
 from bench_accuracy import parse_seeds  # noqa: E402
 from bench_generalisation import BARRED, COEFFICIENTS, estimate_of, simulate, truth_of  # noqa: E402
-from machine import cpu_model, loadavg, run_jobs  # noqa: E402
+from machine import loadavg, run_jobs, run_line  # noqa: E402
 
 
 def _run(telemetry, vehicle, options: dict):
@@ -80,9 +77,7 @@ def one(job: tuple) -> dict:
 
 def report(df: pd.DataFrame, args, load, wall_s: float) -> str:
     lines = [f"# A default changed, flight by flight ({args.out})", "",
-             f"{date.today().isoformat()}, Python {platform.python_version()}, machine: {cpu_model()}, "
-             f"{os.cpu_count()} cores, load average {load[0]} (start) / {load[1]} (end); {args.jobs} process(es), "
-             f"wall time {wall_s / 60:.1f} min.", "",
+             run_line(load, args.jobs, wall_s) + ".", "",
              f"`python bench/bench_option_ab.py {' '.join(sys.argv[1:])}`", "",
              f"A: the smoothing options {', '.join(args.set)}; B: the shipped defaults. Shift: |B - A| / sigma(A) "
              "of a barred coefficient. Error columns: mean |error| [%] over the vehicle's flights that both runs "

@@ -28,13 +28,10 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import math
-import os
-import platform
 import sys
 import tempfile
 import time
 import warnings
-from datetime import date
 from pathlib import Path
 
 import numpy as np
@@ -43,7 +40,7 @@ import pandas as pd
 sys.path.insert(0, str(Path(__file__).parent))
 from bench_accuracy import parse_seeds  # noqa: E402
 from bench_generalisation import BARRED, COEFFICIENTS, decimated, estimate_of, simulate, truth_of  # noqa: E402
-from machine import cpu_model, loadavg, run_jobs  # noqa: E402
+from machine import loadavg, run_jobs, run_line  # noqa: E402
 
 FAULT_S = 1.5
 AZ_JUMP_M_S2 = 2.0
@@ -132,9 +129,7 @@ def one(job: tuple) -> list[dict]:
 
 def report(df: pd.DataFrame, args, load, wall_s: float) -> str:
     lines = [f"# Sensor faults on the generalisation bench's aircraft ({args.out})", "",
-             f"{date.today()}, Python {platform.python_version()}, machine: {cpu_model()}, {os.cpu_count()} cores, "
-             f"load average {load[0]} (start) / {load[1]} (end); {args.jobs} process(es), wall time "
-             f"{wall_s / 60:.1f} min.", "",
+             run_line(load, args.jobs, wall_s) + ".", "",
              f"`python bench/bench_sensor_faults.py --vehicles {args.vehicles} --seeds {args.seeds} "
              f"--faults {args.faults} --jobs {args.jobs} --out {args.out}"
              + (f" --decimate {args.decimate}" if args.decimate > 1 else "") + "`", "",

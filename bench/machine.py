@@ -1,8 +1,10 @@
 """What machine a benchmark ran on (recorded beside every result), and how its jobs share it."""
 from __future__ import annotations
 
+import os
 import platform
 from concurrent.futures import ProcessPoolExecutor
+from datetime import date
 from pathlib import Path
 
 
@@ -30,3 +32,11 @@ def run_jobs(fn, jobs: list, processes: int = 1) -> list:
         with ProcessPoolExecutor(processes) as pool:
             return list(pool.map(fn, jobs))
     return [fn(j) for j in jobs]
+
+
+def run_line(load: tuple[str, str], jobs: int, wall_s: float) -> str:
+    """The line every bench record opens with: date, Python, machine, its load at the start and the
+    end, the worker processes and the wall time (no closing full stop)."""
+    return (f"{date.today().isoformat()}, Python {platform.python_version()}, machine: {cpu_model()}, "
+            f"{os.cpu_count()} cores, load average {load[0]} (start) / {load[1]} (end); {jobs} process(es), "
+            f"wall time {wall_s / 60:.1f} min")
