@@ -192,6 +192,36 @@ def test_a_single_channel_sensor_step_is_still_gated_and_not_followed():
     assert step_events and all(not ev.manoeuvre and ev.channels[0] == "az" for ev in step_events)
 
 
+def _events_of(innovation_sq, flagged):
+    from types import SimpleNamespace
+
+    n = innovation_sq.shape[0]
+    res = SimpleNamespace(t_s=np.arange(n) * 0.01, innovation_sq=innovation_sq, gate_flags=np.zeros((n, 6), bool),
+                          divergence_samples=np.asarray(flagged), meas_names=("ax", "ay", "az", "p", "q", "r"))
+    return classify(res, None)
+
+
+def test_the_companion_channels_are_tested_over_the_span_the_raise_covers():
+    """An event of one flagged sample (a windowed-NIS excursion) inside a roll manoeuvre: p is out
+    around it, a_y only moderately but for the whole second around it -- over the sample alone a_y
+    is not significant, over the event +- MARGIN_S it is (unseen minisgs seed 0's doublet).
+    And the reverse: a sensor step whose other channels are elevated only at its edge samples is not
+    a manoeuvre once the test sees the quiet second around it (c182 seed 0's q step)."""
+    rng = np.random.default_rng(3)
+    v = rng.chisquare(1, (1000, 6))
+    v[470:530, 3] = rng.chisquare(1, 60) * 6.0  # p six times its level over the roll
+    v[500, 3] = 40.0                       # and far out at the flagged sample
+    v[420:580, 1] = rng.chisquare(1, 160) * 3.0  # a_y three times its level around it
+    v[500, 1] = 3.0
+    (ev,) = _events_of(v, [500])
+    assert ev.manoeuvre and set(ev.channels) == {"p", "ay"}
+    w = rng.chisquare(1, (1000, 6))
+    w[500:506, 4] = 60.0                   # a q step's edge: six samples far out
+    w[500:506, 2] = 6.0                    # a_z elevated at those samples only
+    (ev,) = _events_of(w, list(range(500, 506)))
+    assert ev.channels == ("q",) and not ev.manoeuvre
+
+
 def test_companion_and_control_tests():
     rng = np.random.default_rng(0)
     v = rng.chisquare(1, (400, 6))
