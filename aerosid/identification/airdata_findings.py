@@ -18,7 +18,7 @@ import math
 import numpy as np
 import pandas as pd
 
-from aerosid.estimation.findings import Finding, dilate, span_findings
+from aerosid.estimation.findings import Finding, dilate, sample_interval, span_findings
 from aerosid.identification.vanes import MAX_DELAY_S, kinematic_alpha_rate, kinematic_mismatch_z, vane_delay
 from aerosid.vehicles.vehicle import Vehicle
 
@@ -95,7 +95,7 @@ def _timing_and_mismatch(signals: tuple, vehicle: Vehicle, band_hz: float, expla
     t = signals[0]
     none = np.zeros(len(t), bool)
     kin = None if vehicle.turbulent_air else kinematic_alpha_rate(*signals)
-    pad = int(round(1.0 / (band_hz * float(np.median(np.diff(t)))))) if len(t) > 1 and band_hz > 0 else 0
+    pad = int(round(1.0 / (band_hz * sample_interval(t)))) if len(t) > 1 and band_hz > 0 else 0
 
     def without(mask):  # the delay's fit on the runs between the spans (one band period on each side)
         cut = dilate(mask, pad)
@@ -124,7 +124,7 @@ def _kinematic_mismatch(t, alpha, kin: tuple, band_hz: float, delay_s: float, ga
         off = z > KINEMATIC_MISMATCH_Z
     if explained is not None:
         off &= ~np.asarray(explained, bool)
-    dt = float(np.median(np.diff(t))) if len(t) > 1 else 1.0
+    dt = sample_interval(t)
     return span_findings("kinematic_mismatch", segment, "q/az/alpha", t, off,
                          int(np.ceil(KINEMATIC_MISMATCH_MIN_S / dt)), True,
                          f"the vane alpha's rate and the flight-path kinematics' alpha-dot (q, a_z, V) disagree by "
