@@ -31,6 +31,10 @@ which is LP(f(x_wide)) up to the difference between the flight data's own low-pa
 LP(x_wide) (none for the vanes, the inversion's for inverted angles).  d is identically zero for
 a term linear in the signals (alpha, delta_p/2, a rate) and tiny for one through V (q_hat).
 
+Where the flight data's x and LP(x_wide) differ (inverted angles) and the term is ill-conditioned
+(cos 4 phi_r near alpha_r = 0), f(x) - f(LP(x_wide)) is no longer small: those rows take
+LP(f(x_wide)) alone (:func:`guarded_column`).
+
 x_wide is first put through the same low-pass at WIDE_BAND_FACTOR x the band edge: the signals'
 own content is inside the band, and above it a wide-band column is sensor noise, which a
 non-linear term would rectify into a bias (E|beta + n| > |beta| near the kink).
@@ -80,6 +84,16 @@ ENABLED = True
 WIDE_BAND_FACTOR = 3.0
 #: Flight data whose wide-band signals are kept (a small LRU: SIMEX's frames share one).
 _CACHE_SIZE = 4
+#: The bracket guard (guarded_column): a row's b = f(x) - f(LP(x_wide)) is gross beyond this many
+#: robust sigmas of b ...
+BRACKET_MAD = 5.0
+#: ... and beyond this share of the term's spread (std of LP(f(x_wide))): the row's column is then
+#: LP(f(x_wide)).  The share keeps the guard off a term whose b is only noise (q_hat through V).
+BRACKET_SPREAD = 0.1
+#: Fewest rows with a band-order correction for the guard to act.
+MIN_GUARD_ROWS = 32
+#: |d| below this share of the column is rounding: the term is linear in the signals.
+LINEAR_TOLERANCE = 1e-9
 #: Corrections kept per flight data (an LRU: the model's terms are asked for again and again, the
 #: localisation's ~400 trial terms once or twice each; a kept correction is one float per row, so
 #: keeping them all cost ~200 MB on a 60 000-row campaign).
@@ -137,13 +151,17 @@ class _Wide:
         return out
 
     def correction(self, expression: str, keep: bool = True) -> np.ndarray | None:
+        return self.parts(expression, keep)[0]
+
+    def parts(self, expression: str, keep: bool = True) -> tuple[np.ndarray | None, np.ndarray | None]:
+        """(d, f(LP(x_wide))) of the term on every row; (None, None) for a constant term."""
         from aerosid.modelling.expressions import ExpressionError, evaluate, signal_names
 
         with _CACHE_LOCK:
             if expression in self.corrections:
                 self.corrections.move_to_end(expression)
                 return self.corrections[expression]
-        d = None
+        d = f_low = None
         try:  # a signal the flight data do not have (one a caller added: no wide-band form) -> none
             names = signal_names(expression, self.wide)
         except ExpressionError:
@@ -156,13 +174,14 @@ class _Wide:
             d = self.low_pass(f_wide) - f_low
             d = np.where(self.inner & np.isfinite(d), d, 0.0)
             d.setflags(write=False)
+            f_low.setflags(write=False)
         if not keep:
-            return d
+            return d, f_low
         with _CACHE_LOCK:
-            self.corrections[expression] = d
+            self.corrections[expression] = (d, f_low)
             while len(self.corrections) > _CORRECTIONS_KEPT:
                 self.corrections.popitem(last=False)
-        return d
+        return d, f_low
 
 
 @dataclass(frozen=True)
@@ -179,9 +198,49 @@ class BandOrder:
         flight data (0 where it cannot be formed: the runs' edges, rows without wide-band values);
         None for a constant term.  keep=False: not kept among the flight data's corrections (a
         scan's trial terms, which would push the model's own terms out)."""
+        return self._wide().correction(expression, keep)
+
+    def column(self, expression: str, values: np.ndarray, rows: np.ndarray, keep: bool = True) -> np.ndarray:
+        """The term's column on flight-data rows ``rows``, given its values f(x) there: f(x) + d,
+        except where the bracket b = f(x) - f(LP(x_wide)) is a gross outlier (guarded_column)."""
+        d, f_low = self._wide().parts(expression, keep)
+        if d is None:
+            return values
+        return guarded_column(values, d[rows], f_low[rows])
+
+    def _wide(self) -> "_Wide":
         if "wide" not in self._state:
             self._state["wide"] = _wide_signals(self.fd, self.vehicle)
-        return self._state["wide"].correction(expression, keep)
+        return self._state["wide"]
+
+
+def guarded_column(values: np.ndarray, d: np.ndarray, f_low: np.ndarray) -> np.ndarray:
+    """f(x) + d, and LP(f(x_wide)) = f(LP(x_wide)) + d on the rows where the bracket
+    b = f(x) - f(LP(x_wide)) is a gross outlier: more than BRACKET_MAD robust sigmas (1.4826 MAD)
+    from its median and more than BRACKET_SPREAD of the term's own spread (std of LP(f(x_wide))).
+
+    f(x) + d = LP(f(x_wide)) + b: the band order holds while the flight data's x and LP(x_wide)
+    are close enough that b is the small difference of two nearby values of f.  Where f is
+    ill-conditioned b is O(1) instead: cos 4 phi_r near alpha_r = 0, where phi_r is undefined and
+    the inverted angles' x and LP(x_wide) (inverted from low-passed forces and from the
+    smoother's) differ by their noise.  On seed-rlv (no hidden effect, seeds 0-3) the column of
+    cos 4 phi_r left [-1, 1] on 635-918 of ~6800 rows and C_l,cos4phi came out 0.60-0.69 of its
+    truth in plain least squares; with the guard 0.81-0.87, C_l,0 1.16-1.18 -> 1.04-1.08
+    (bench/results/band_order_columns.md).  Only terms the band order changes (d not ~0); rows
+    with d = 0 (runs' edges) keep f(x)."""
+    out = values + d
+    inside = (d != 0.0) & np.isfinite(values) & np.isfinite(f_low)
+    if inside.sum() < MIN_GUARD_ROWS:
+        return out
+    band = f_low + d
+    if np.max(np.abs(d[inside])) <= LINEAR_TOLERANCE * max(float(np.max(np.abs(band[inside]))), 1e-300):
+        return out  # a term linear in the signals: d is rounding
+    b = values - f_low
+    med = float(np.median(b[inside]))
+    robust = 1.4826 * float(np.median(np.abs(b[inside] - med)))
+    limit = max(BRACKET_MAD * robust, BRACKET_SPREAD * float(np.std(band[inside])))
+    gross = inside & (np.abs(b - med) > limit)
+    return np.where(gross, band, out)
 
 
 def band_order(fd, vehicle) -> BandOrder | None:

@@ -191,3 +191,49 @@ def test_a_trial_term_not_kept_gives_the_same_column_and_keeps_the_model_terms(v
     assert np.array_equal(again, evaluate("abs(alpha - 0.1)", sig, keep_band_order=False))
     assert np.max(np.abs(again - np.abs(fd["alpha_rad"].to_numpy()[sig["_row"]] - 0.1))) > 1e-3  # corrected
     assert np.array_equal(kept, evaluate("alpha**2", sig)) and len(trials) == 100
+
+
+def test_the_guard_leaves_a_linear_term_and_ordinary_rows_as_they_were():
+    from aerosid.identification.band_order import guarded_column
+
+    rng = np.random.default_rng(3)
+    t = np.arange(2000) / 100.0
+    x = 0.05 * np.sin(2 * np.pi * 0.3 * t)
+    low = x + rng.normal(0, 1e-3, t.size)  # f(LP(x_wide)) differs from f(x) by the angles' noise
+    d_round = np.full(t.size, 1e-19)  # a linear term: d is rounding
+    np.testing.assert_array_equal(guarded_column(x, d_round, low), x + d_round)
+    # a non-linear term whose bracket is only noise, 0.3 % of the term's spread
+    d = 0.01 * np.cos(2 * np.pi * 0.1 * t)
+    noisy = low + rng.normal(0, 1e-4, t.size)
+    np.testing.assert_array_equal(guarded_column(noisy, d, low), noisy + d)
+
+
+def test_the_guard_takes_the_wide_band_column_where_the_bracket_is_gross():
+    from aerosid.identification.band_order import guarded_column
+
+    rng = np.random.default_rng(4)
+    t = np.arange(3000) / 100.0
+    low = np.cos(4 * 0.2 * np.sin(2 * np.pi * 0.2 * t))  # cos 4 phi_r, phi_r well defined
+    d = 0.02 * np.sin(2 * np.pi * 0.05 * t)
+    values = low + rng.normal(0, 0.003, t.size)
+    bad = np.arange(500, 3000, 250)  # alpha_r ~ 0: phi_r from noise, cos 4 phi_r anywhere in [-1, 1]
+    values[bad] = -np.sign(low[bad]) * 0.9
+    col = guarded_column(values, d, low)
+    np.testing.assert_allclose(col[bad], low[bad] + d[bad])
+    good = np.setdiff1d(np.arange(t.size), bad)
+    np.testing.assert_array_equal(col[good], values[good] + d[good])
+
+
+def test_on_the_reference_flight_cos_4_phi_r_stays_a_cosine(reference_run, vehicle):
+    """Inverted angles: the flight data's x (from low-passed forces) and LP(x_wide) (from the
+    smoother's) differ by their noise, and where alpha_r ~ 0 that is all of phi_r.  f(x) + d then
+    left cos 4 phi_r's range on ~10 % of the rows (up to 2.2); guarded, only by d's own size."""
+    from aerosid.identification.identify import mach_window_mask
+    from aerosid.modelling.expressions import evaluate
+
+    fd = reference_run.flight_data.sort_values(["flight", "t_s"], kind="stable")
+    fd = fd[mach_window_mask(fd["mach"].to_numpy(float), vehicle.mach_reference, 0.5)].reset_index(drop=True)
+    col = evaluate("cos(4*phi_r)", vehicle_signals(fd, vehicle), len(fd))
+    assert np.nanmax(np.abs(col)) < 1.1
+    unguarded = evaluate("cos(4*phi_r)", vehicle_signals(fd, vehicle, with_band_order=False), len(fd))
+    assert np.nanmax(np.abs(unguarded)) <= 1.0 + 1e-12  # f(x) itself is a cosine: the excess was the bracket's
