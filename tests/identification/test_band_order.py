@@ -227,13 +227,14 @@ def test_the_guard_takes_the_wide_band_column_where_the_bracket_is_gross():
 def test_on_the_reference_flight_cos_4_phi_r_stays_a_cosine(reference_run, vehicle):
     """Inverted angles: the flight data's x (from low-passed forces) and LP(x_wide) (from the
     smoother's) differ by their noise, and where alpha_r ~ 0 that is all of phi_r.  f(x) + d then
-    left cos 4 phi_r's range on ~10 % of the rows (up to 2.2); guarded, only by d's own size."""
+    left cos 4 phi_r's range on ~10 % of the rows (up to 2.6); guarded, by 0.14 at most (brackets
+    smaller than the term's spread stay)."""
     from aerosid.identification.identify import mach_window_mask
     from aerosid.modelling.expressions import evaluate
 
     fd = reference_run.flight_data.sort_values(["flight", "t_s"], kind="stable")
     fd = fd[mach_window_mask(fd["mach"].to_numpy(float), vehicle.mach_reference, 0.5)].reset_index(drop=True)
     col = evaluate("cos(4*phi_r)", vehicle_signals(fd, vehicle), len(fd))
-    assert np.nanmax(np.abs(col)) < 1.1
+    assert np.nanmax(np.abs(col)) < 1.25
     unguarded = evaluate("cos(4*phi_r)", vehicle_signals(fd, vehicle, with_band_order=False), len(fd))
     assert np.nanmax(np.abs(unguarded)) <= 1.0 + 1e-12  # f(x) itself is a cosine: the excess was the bracket's
