@@ -32,8 +32,8 @@ LP(x_wide) (none for the vanes, the inversion's for inverted angles).  d is iden
 a term linear in the signals (alpha, delta_p/2, a rate) and tiny for one through V (q_hat).
 
 Where the flight data's x and LP(x_wide) differ (inverted angles) and the term is ill-conditioned
-(cos 4 phi_r near alpha_r = 0), f(x) - f(LP(x_wide)) is no longer small: those rows take
-LP(f(x_wide)) alone (:func:`guarded_column`).
+(cos 4 phi_r near alpha_r = 0), f(x) - f(LP(x_wide)) is no longer small: a column that leaves the
+range of the term's values takes LP(f(x_wide)) alone (:func:`guarded_column`).
 
 x_wide is first put through the same low-pass at WIDE_BAND_FACTOR x the band edge: the signals'
 own content is inside the band, and above it a wide-band column is sensor noise, which a
@@ -84,15 +84,8 @@ ENABLED = True
 WIDE_BAND_FACTOR = 3.0
 #: Flight data whose wide-band signals are kept (a small LRU: SIMEX's frames share one).
 _CACHE_SIZE = 4
-#: The bracket guard (guarded_column): a row's b = f(x) - f(LP(x_wide)) is gross beyond this many
-#: robust sigmas of b ...
-BRACKET_MAD = 5.0
-#: ... and beyond this share of the term's spread (std of LP(f(x_wide))): the row's column is then
-#: LP(f(x_wide)).  The share keeps the guard off a term whose b is only noise: at 0.1 it also took
-#: rows of alpha*abs(alpha) and alpha*delta_p/2 (165-314 per flight) and turned seed-rlv
-#: control_alpha seed 1's unresolved look-alike into the wrong recommendation; at 1 those terms
-#: keep every row and cos 4 phi_r's gross rows (265-277 per flight) are still taken.
-BRACKET_SPREAD = 1.0
+#: The guard's range (guarded_column) is widened by this many robust sigmas of the bracket.
+RANGE_MARGIN = 5.0
 #: Fewest rows with a band-order correction for the guard to act.
 MIN_GUARD_ROWS = 32
 #: |d| below this share of the column is rounding: the term is linear in the signals.
@@ -218,19 +211,21 @@ class BandOrder:
 
 
 def guarded_column(values: np.ndarray, d: np.ndarray, f_low: np.ndarray) -> np.ndarray:
-    """f(x) + d, and LP(f(x_wide)) = f(LP(x_wide)) + d on the rows where the bracket
-    b = f(x) - f(LP(x_wide)) is a gross outlier: more than BRACKET_MAD robust sigmas (1.4826 MAD)
-    from its median and more than BRACKET_SPREAD x the term's own spread (std of LP(f(x_wide))).
+    """f(x) + d, and LP(f(x_wide)) = f(LP(x_wide)) + d on the rows where f(x) + d leaves the range
+    its two ingredients span over the rows ([min, max] of f(x) and of LP(f(x_wide)) together,
+    widened by RANGE_MARGIN robust sigmas of b, the bracket's own noise).
 
-    f(x) + d = LP(f(x_wide)) + b: the band order holds while the flight data's x and LP(x_wide)
-    are close enough that b is the small difference of two nearby values of f.  Where f is
-    ill-conditioned b is O(1) instead: cos 4 phi_r near alpha_r = 0, where phi_r is undefined and
-    the inverted angles' x and LP(x_wide) (inverted from low-passed forces and from the
-    smoother's) differ by their noise.  On seed-rlv (no hidden effect, seeds 0-3) the column of
-    cos 4 phi_r left [-1, 1] on 635-918 of ~6800 rows (bench/results/band_order_columns.md), and
-    through identify C_l,cos4phi came out 0.685 / 0.720 of its truth on seeds 0 / 1, 0.818 / 0.742
-    with the guard.  Only terms the band order changes (d not ~0); rows with d = 0 (runs' edges)
-    keep f(x)."""
+    f(x) + d = LP(f(x_wide)) + b, b = f(x) - f(LP(x_wide)): the band order holds while the flight
+    data's x and LP(x_wide) are close enough that b is the small difference of two nearby values
+    of f.  Where f is ill-conditioned b is O(1) instead: cos 4 phi_r near alpha_r = 0, where phi_r
+    is undefined and the inverted angles' x and LP(x_wide) (inverted from low-passed forces and
+    from the smoother's) differ by their noise.  On seed-rlv (no hidden effect, seeds 0-3) the
+    column of cos 4 phi_r left [-1, 1] on 635-918 of ~6800 rows, up to 2.6
+    (bench/results/band_order_columns.md); a column no value of the term reaches is the
+    bracket's, not the aircraft's.  A wider rule (every bracket beyond 5 robust sigma and the
+    term's spread) took rows of beta*abs(beta) where beta's noise is large, and with them the
+    power to find a real beta*abs(beta) (seed-rlv with one of 30 /rad: recommended 2/3 -> 0/3).
+    Only terms the band order changes (d not ~0); rows with d = 0 (runs' edges) keep f(x)."""
     out = values + d
     inside = (d != 0.0) & np.isfinite(values) & np.isfinite(f_low)
     if inside.sum() < MIN_GUARD_ROWS:
@@ -238,11 +233,11 @@ def guarded_column(values: np.ndarray, d: np.ndarray, f_low: np.ndarray) -> np.n
     band = f_low + d
     if np.max(np.abs(d[inside])) <= LINEAR_TOLERANCE * max(float(np.max(np.abs(band[inside]))), 1e-300):
         return out  # a term linear in the signals: d is rounding
-    b = values - f_low
-    med = float(np.median(b[inside]))
-    robust = 1.4826 * float(np.median(np.abs(b[inside] - med)))
-    limit = max(BRACKET_MAD * robust, BRACKET_SPREAD * float(np.std(band[inside])))
-    gross = inside & (np.abs(b - med) > limit)
+    b = values[inside] - f_low[inside]
+    margin = RANGE_MARGIN * 1.4826 * float(np.median(np.abs(b - np.median(b))))  # the bracket's own noise
+    lo = min(float(np.min(values[inside])), float(np.min(band[inside]))) - margin
+    hi = max(float(np.max(values[inside])), float(np.max(band[inside]))) + margin
+    gross = inside & ((out < lo) | (out > hi))
     return np.where(gross, band, out)
 
 

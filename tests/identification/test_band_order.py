@@ -208,27 +208,27 @@ def test_the_guard_leaves_a_linear_term_and_ordinary_rows_as_they_were():
     np.testing.assert_array_equal(guarded_column(noisy, d, low), noisy + d)
 
 
-def test_the_guard_takes_the_wide_band_column_where_the_bracket_is_gross():
+def test_the_guard_takes_the_wide_band_column_where_the_column_leaves_the_terms_range():
     from aerosid.identification.band_order import guarded_column
 
     rng = np.random.default_rng(4)
     t = np.arange(3000) / 100.0
-    low = np.cos(4 * 0.2 * np.sin(2 * np.pi * 0.2 * t))  # cos 4 phi_r, phi_r well defined
+    band = 0.75 + 0.2 * np.sin(2 * np.pi * 0.2 * t)  # LP(f(x_wide)) of cos 4 phi_r
     d = 0.02 * np.sin(2 * np.pi * 0.05 * t)
-    values = low + rng.normal(0, 0.003, t.size)
-    bad = np.arange(500, 3000, 250)  # alpha_r ~ 0: phi_r from noise, cos 4 phi_r anywhere in [-1, 1]
-    values[bad] = -np.sign(low[bad]) * 0.9
-    col = guarded_column(values, d, low)
-    np.testing.assert_allclose(col[bad], low[bad] + d[bad])
+    f_low = band - d
+    values = f_low + rng.normal(0, 0.003, t.size)  # f(x): the flight data's angles, noisy
+    bad = np.arange(500, 3000, 250)  # alpha_r ~ 0: phi_r from the noise of x and of LP(x_wide) apart
+    f_low[bad], values[bad] = -0.9, 0.95  # f(x) + d = 0.95 + (band + 0.9): beyond any cosine
+    col = guarded_column(values, band - f_low, f_low)
+    np.testing.assert_allclose(col[bad], band[bad])
     good = np.setdiff1d(np.arange(t.size), bad)
-    np.testing.assert_array_equal(col[good], values[good] + d[good])
+    np.testing.assert_allclose(col[good], values[good] + d[good], atol=1e-15)
 
 
 def test_on_the_reference_flight_cos_4_phi_r_stays_a_cosine(reference_run, vehicle):
     """Inverted angles: the flight data's x (from low-passed forces) and LP(x_wide) (from the
     smoother's) differ by their noise, and where alpha_r ~ 0 that is all of phi_r.  f(x) + d then
-    left cos 4 phi_r's range on ~10 % of the rows (up to 2.6); guarded, by 0.14 at most (brackets
-    smaller than the term's spread stay)."""
+    left cos 4 phi_r's range on ~10 % of the rows (up to 2.6); guarded, only by the bracket's noise."""
     from aerosid.identification.identify import mach_window_mask
     from aerosid.modelling.expressions import evaluate
 
