@@ -1,4 +1,4 @@
-"""The band order's column of cos 4 phi_r where alpha_r is small (measured; a lead, not a change).
+"""The band order's column of cos 4 phi_r where alpha_r is small, and its guard (measured).
 
 aerosid.identification.band_order forms a non-linear term f as f(x) + d, d = LP(f(x_w)) -
 f(LP(x_w)), x the flight data's low-passed angles and x_w the wide-band ones.  That equals
@@ -7,7 +7,9 @@ LP(f(x_w)) only where x = LP(x_w); for angles inverted from the force database t
 ill-conditioned the bracket b = f(x) - f(LP(x_w)) is O(1): cos 4 phi_r at alpha_r -> 0, where
 phi_r is undefined.  This bench counts how often the column leaves cos's range [-1, 1] on
 seed-rlv (no hidden effect) and fits the default roll model (plain least squares, Mach window,
-alpha_r with its own band order) with the column as it is and with three alternatives:
+alpha_r with its own band order) with the column as it was before 2026-11-30 (no guard), as shipped
+(guarded_column: a column outside the range f(x) and LP(f(x_w)) span takes LP(f(x_w))), and three
+alternatives:
 
 * LP(f(x_w)) where |b| is more than 5 MAD from its median (the rest as now);
 * LP(f(x_w)) on every row where the band order applies;
@@ -30,13 +32,14 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from machine import loadavg, run_line  # noqa: E402
 
 TRUTH = np.array([0.0004, 0.012, 0.0003, -0.017])  # Cl_0, Cl_alpha_r, Cl_cos4phi, Cl_delta_r (simulation.toml)
-VARIANTS = ("as now", "LP(f(x_w)) where |b| > 5 MAD", "LP(f(x_w)) everywhere", "LP(f(x_w)) + LP(b)")
+VARIANTS = ("no guard", "shipped guard (range)", "LP(f(x_w)) where |b| > 5 MAD", "LP(f(x_w)) everywhere",
+            "LP(f(x_w)) + LP(b)")
 
 
 def one(seed: int) -> dict:
     from aerosid.diagnosis.lookalikes import scaled_lstsq
     from aerosid.ebm import estimate_flight_data
-    from aerosid.identification.band_order import _wide_signals
+    from aerosid.identification.band_order import _wide_signals, guarded_column
     from aerosid.identification.identify import mach_window_mask
     from aerosid.modelling.expressions import evaluate
     from aerosid.modelling.models import vehicle_signals
@@ -63,8 +66,9 @@ def one(seed: int) -> dict:
     bi = b[W.inner]
     mad = 1.4826 * np.median(np.abs(bi - np.median(bi)))
     out = W.inner & (np.abs(b - np.median(bi)) > 5 * mad)
-    cols = {VARIANTS[0]: now, VARIANTS[1]: np.where(out, lpw, now), VARIANTS[2]: np.where(W.inner, lpw, fx),
-            VARIANTS[3]: np.where(W.inner, lpw + W.low_pass(np.where(np.isfinite(b), b, 0.0)), fx)}
+    cols = {VARIANTS[0]: now, VARIANTS[1]: guarded_column(fx, np.where(W.inner, lpw - flow, 0.0), flow),
+            VARIANTS[2]: np.where(out, lpw, now), VARIANTS[3]: np.where(W.inner, lpw, fx),
+            VARIANTS[4]: np.where(W.inner, lpw + W.low_pass(np.where(np.isfinite(b), b, 0.0)), fx)}
     ax, alow, alpw = parts("alpha_r")
     alpha_r = ax + np.where(W.inner, alpw - alow, 0.0)
     y = fd["Cl"].to_numpy(float)
@@ -88,7 +92,7 @@ def main() -> None:
     t0, load0 = time.time(), loadavg()
     with ProcessPoolExecutor(a.jobs) as ex:
         rows = list(ex.map(one, range(int(lo), int(hi or lo) + 1)))
-    L = ["# The band order's cos 4 phi_r column on seed-rlv (measured; a lead, not a change)", "",
+    L = ["# The band order's cos 4 phi_r column on seed-rlv, with and without the guard", "",
          run_line((load0, loadavg()), a.jobs, time.time() - t0)
          + f". `python bench/bench_band_order_columns.py --seeds {a.seeds} --jobs {a.jobs}`.", "",
          "Method: the module docstring. Estimates / truth of the default roll model, plain least squares.", "",
