@@ -23,13 +23,12 @@ from __future__ import annotations
 import argparse
 import sys
 import time
-from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from machine import loadavg, run_line  # noqa: E402
+from machine import loadavg, run_jobs, run_line, seed_range  # noqa: E402
 
 TRUTH = np.array([0.0004, 0.012, 0.0003, -0.017])  # Cl_0, Cl_alpha_r, Cl_cos4phi, Cl_delta_r (simulation.toml)
 VARIANTS = ("no guard", "shipped guard (range)", "LP(f(x_w)) where |b| > 5 MAD", "LP(f(x_w)) everywhere",
@@ -88,10 +87,8 @@ def main() -> None:
     ap.add_argument("--jobs", type=int, default=1)
     ap.add_argument("--out", default=str(Path(__file__).resolve().parent / "results" / "band_order_columns.md"))
     a = ap.parse_args()
-    lo, _, hi = a.seeds.partition("-")
     t0, load0 = time.time(), loadavg()
-    with ProcessPoolExecutor(a.jobs) as ex:
-        rows = list(ex.map(one, range(int(lo), int(hi or lo) + 1)))
+    rows = run_jobs(one, seed_range(a.seeds), a.jobs)
     L = ["# The band order's cos 4 phi_r column on seed-rlv, with and without the guard", "",
          run_line((load0, loadavg()), a.jobs, time.time() - t0)
          + f". `python bench/bench_band_order_columns.py --seeds {a.seeds} --jobs {a.jobs}`.", "",

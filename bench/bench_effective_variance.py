@@ -21,14 +21,13 @@ from __future__ import annotations
 import argparse
 import sys
 import time
-from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from machine import loadavg, run_line  # noqa: E402
+from machine import loadavg, run_jobs, run_line, seed_range  # noqa: E402
 
 TRUTH = {"Cl_0": 0.0004, "Cl_alpha_r": 0.012, "Cl_cos4phi": 0.0003, "Cl_delta_r": -0.017,
          "Cl_delta_p": -0.017 * 0.05}
@@ -136,12 +135,10 @@ def main() -> None:
     ap.add_argument("--jobs", type=int, default=1)
     ap.add_argument("--out", default=str(Path(__file__).resolve().parent / "results" / "effective_variance.md"))
     a = ap.parse_args()
-    lo, _, hi = a.seeds.partition("-")
-    seeds = list(range(int(lo), int(hi or lo) + 1))
+    seeds = seed_range(a.seeds)
     jobs = [("none", s) for s in seeds] + [("fin_misalignment", s) for s in seeds[:2]]
     t0, load0 = time.time(), loadavg()
-    with ProcessPoolExecutor(a.jobs) as ex:
-        rows = list(ex.map(one_flight, jobs))
+    rows = run_jobs(one_flight, jobs, a.jobs)
     L = ["# Effective-variance weights for the roll model's cos 4 phi_r (measured, not adopted)", "",
          run_line((load0, loadavg()), a.jobs, time.time() - t0)
          + f". `python bench/bench_effective_variance.py --seeds {a.seeds} --jobs {a.jobs}`.", "",

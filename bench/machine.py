@@ -40,3 +40,9 @@ def run_line(load: tuple[str, str], jobs: int, wall_s: float) -> str:
     return (f"{date.today().isoformat()}, Python {platform.python_version()}, machine: {cpu_model()}, "
             f"{os.cpu_count()} cores, load average {load[0]} (start) / {load[1]} (end); {jobs} process(es), "
             f"wall time {wall_s / 60:.1f} min")
+
+
+def seed_range(text: str) -> list[int]:
+    """"3" -> [3]; "0-4" -> [0, 1, 2, 3, 4] (a bench's --seeds)."""
+    lo, _, hi = text.partition("-")
+    return list(range(int(lo), int(hi or lo) + 1))
