@@ -198,7 +198,7 @@ class BandOrder:
 
     def column(self, expression: str, values: np.ndarray, rows: np.ndarray, keep: bool = True) -> np.ndarray:
         """The term's column on flight-data rows ``rows``, given its values f(x) there: f(x) + d,
-        except where the bracket b = f(x) - f(LP(x_wide)) is a gross outlier (guarded_column)."""
+        except where that leaves the range of the term's values (guarded_column)."""
         d, f_low = self._wide().parts(expression, keep)
         if d is None:
             return values

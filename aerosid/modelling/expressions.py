@@ -183,8 +183,8 @@ def evaluate(expression: str, values: Mapping[str, np.ndarray], length: int | No
 
     When ``values`` carry a band order and their rows (BAND_ORDER_KEY, ROW_KEY), the result is the
     column as the band path should form it, f(x) + LP(f(x_wide)) - f(LP(x_wide))
-    (aerosid.identification.band_order; LP(f(x_wide)) alone on the rows where f(x) departs grossly
-    from f(LP(x_wide)): guarded_column): a non-linear term low-passed after it is formed.
+    (aerosid.identification.band_order; LP(f(x_wide)) alone on the rows where that leaves the range
+    of the term's values: guarded_column): a non-linear term low-passed after it is formed.
     keep_band_order=False: that correction is not kept for the next call (a scan's trial terms)."""
     tree = parse(expression, frozenset(values))
     with np.errstate(all="ignore"):
