@@ -149,8 +149,9 @@ class _Wide:
     def correction(self, expression: str, keep: bool = True) -> np.ndarray | None:
         return self.parts(expression, keep)[0]
 
-    def parts(self, expression: str, keep: bool = True) -> tuple[np.ndarray | None, np.ndarray | None]:
-        """(d, f(LP(x_wide))) of the term on every row; (None, None) for a constant term."""
+    def parts(self, expression: str, keep: bool = True) -> tuple[np.ndarray | None, np.ndarray | None, bool]:
+        """(d, f(LP(x_wide)), linear) of the term on every row; (None, None, True) for a constant
+        term.  linear: d is rounding (a term linear in the signals), so the guard has nothing to do."""
         from aerosid.modelling.expressions import ExpressionError, evaluate, signal_names
 
         with _CACHE_LOCK:
@@ -158,6 +159,7 @@ class _Wide:
                 self.corrections.move_to_end(expression)
                 return self.corrections[expression]
         d = f_low = None
+        linear = True
         try:  # a signal the flight data do not have (one a caller added: no wide-band form) -> none
             names = signal_names(expression, self.wide)
         except ExpressionError:
@@ -171,13 +173,14 @@ class _Wide:
             d = np.where(self.inner & np.isfinite(d), d, 0.0)
             d.setflags(write=False)
             f_low.setflags(write=False)
+            linear = _is_rounding(d, f_low)
         if not keep:
-            return d, f_low
+            return d, f_low, linear
         with _CACHE_LOCK:
-            self.corrections[expression] = (d, f_low)
+            self.corrections[expression] = (d, f_low, linear)
             while len(self.corrections) > _CORRECTIONS_KEPT:
                 self.corrections.popitem(last=False)
-        return d, f_low
+        return d, f_low, linear
 
 
 @dataclass(frozen=True)
@@ -199,9 +202,11 @@ class BandOrder:
     def column(self, expression: str, values: np.ndarray, rows: np.ndarray, keep: bool = True) -> np.ndarray:
         """The term's column on flight-data rows ``rows``, given its values f(x) there: f(x) + d,
         except where that leaves the range of the term's values (guarded_column)."""
-        d, f_low = self._wide().parts(expression, keep)
+        d, f_low, linear = self._wide().parts(expression, keep)
         if d is None:
             return values
+        if linear:  # the guard's own test, made once per term (every SIMEX frame asks again)
+            return values + d[rows]
         return guarded_column(values, d[rows], f_low[rows])
 
     def _wide(self) -> "_Wide":
@@ -230,15 +235,25 @@ def guarded_column(values: np.ndarray, d: np.ndarray, f_low: np.ndarray) -> np.n
     inside = (d != 0.0) & np.isfinite(values) & np.isfinite(f_low)
     if inside.sum() < MIN_GUARD_ROWS:
         return out
+    if _is_rounding(d[inside], f_low[inside]):
+        return out  # a term linear in the signals
     band = f_low + d
-    if np.max(np.abs(d[inside])) <= LINEAR_TOLERANCE * max(float(np.max(np.abs(band[inside]))), 1e-300):
-        return out  # a term linear in the signals: d is rounding
     b = values[inside] - f_low[inside]
     margin = RANGE_MARGIN * 1.4826 * float(np.median(np.abs(b - np.median(b))))  # the bracket's own noise
     lo = min(float(np.min(values[inside])), float(np.min(band[inside]))) - margin
     hi = max(float(np.max(values[inside])), float(np.max(band[inside]))) + margin
     gross = inside & ((out < lo) | (out > hi))
     return np.where(gross, band, out)
+
+
+def _is_rounding(d: np.ndarray, f_low: np.ndarray) -> bool:
+    """d is rounding against the column LP(f(x_wide)) = f_low + d where d is not 0: the term is
+    linear in the signals."""
+    nz = d != 0.0
+    if not nz.any():
+        return True
+    band = np.abs(f_low[nz] + d[nz])
+    return bool(np.max(np.abs(d[nz])) <= LINEAR_TOLERANCE * max(float(np.nanmax(band)) if band.size else 0.0, 1e-300))
 
 
 def band_order(fd, vehicle) -> BandOrder | None:
